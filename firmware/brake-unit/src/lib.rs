@@ -1,0 +1,17 @@
+//! # hils-brake-unit: a simulated brake unit for software-in-the-loop runs
+//!
+//! `no_std` and allocation-free, so the board can close the loop without the rig
+//! (self-test mode). An EB command sets the cylinder pressure open-loop (load-weighing,
+//! [`eb_pressure`]); the pressure reaches the cylinders after a pneumatic dead time with
+//! first-order fill and vent lags; per-wheelset wheel slide protection ([`wsp`]) vents,
+//! holds and reapplies each cylinder in the style of EN 15595.
+#![no_std]
+#![forbid(unsafe_code)]
+
+pub mod closed_loop;
+pub mod unit;
+pub mod wsp;
+
+pub use closed_loop::{ClosedLoop, LoopError};
+pub use unit::{BrakeDemand, BrakeUnit, UnitConfig, UnitError, UnitOutputs, eb_pressure};
+pub use wsp::{Valve, WspTuning};

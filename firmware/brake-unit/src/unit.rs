@@ -1,0 +1,281 @@
+//! The simulated brake unit: brake demand (ECU), pneumatic delay and cylinder lags (BOU),
+//! and the WSP valves of the four wheelsets.
+
+use hils_plant::params::Params;
+use hils_plant::{Real, WHEELSETS};
+
+use crate::wsp::{ReferenceSpeed, Valve, WspChannel, WspConstants, WspTuning};
+
+/// Brake demand given to the unit.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub enum BrakeDemand {
+    /// Brakes released.
+    #[default]
+    Release,
+    /// Emergency brake: the open-loop EB pressure.
+    Emergency,
+    /// Service brake for a deceleration (m/s^2), pressure in proportion to EB's.
+    Service(f32),
+}
+
+/// Capacity of the dead-time delay line, in control cycles.
+pub const DELAY_CAPACITY: usize = 1024;
+
+/// Configuration of the unit (from [`Params`] and a WSP tuning).
+#[derive(Clone, Copy, Debug)]
+pub struct UnitConfig {
+    /// Plant step, s.
+    pub dt: f64,
+    /// Control cycle of the ECU/WSP, s (rounded to whole plant steps).
+    pub control_period: f64,
+    pub wsp: WspTuning,
+    /// Whether the WSP acts (off: valves always apply).
+    pub wsp_enabled: bool,
+}
+
+impl UnitConfig {
+    pub fn new(dt: f64) -> Self {
+        Self { dt, control_period: 1.0e-3, wsp: WspTuning::default(), wsp_enabled: true }
+    }
+}
+
+/// Why a unit cannot be built.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum UnitError {
+    /// The dead time needs more control cycles than the delay line holds.
+    DeadTimeTooLong { dead_time_s: f64, max_s: f64 },
+    /// The control period or plant step is not positive and finite.
+    BadPeriod,
+}
+
+impl core::fmt::Display for UnitError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            UnitError::DeadTimeTooLong { dead_time_s, max_s } => write!(
+                f,
+                "brake_unit.dead_time = {dead_time_s} s exceeds the delay line ({max_s} s)"
+            ),
+            UnitError::BadPeriod => f.write_str("control period and step must be positive"),
+        }
+    }
+}
+
+/// Open-loop (load-weighing) EB cylinder pressure, Pa: the pressure at which the four
+/// wheelsets' brake torques with the constant mu_d0 decelerate the vehicle, rotating
+/// inertia included, at `brake_unit.eb_deceleration` on a level track (reference file),
+/// through Eq (1): sum T_b = M_eff a r, T_b = mu_d0 (A_c P_c - K_r) r_c l_p N_d.
+/// Limited to the supply pressure.
+pub fn eb_pressure(p: &Params) -> f64 {
+    let torque_per_wheelset =
+        p.effective_mass() * p.brake_unit.eb_deceleration * p.vehicle.wheel_radius / 4.0;
+    let b = &p.brake;
+    let clamp =
+        torque_per_wheelset / (p.friction.mu_d0 * b.friction_radius * b.friction_faces as f64);
+    hils_plant::brake::pressure_for_clamp_force(b, clamp).min(b.supply_pressure)
+}
+
+/// One wheelset's cylinder: pressure state with fill and vent lags.
+#[derive(Clone, Copy, Debug, Default)]
+struct Cylinder<F> {
+    pressure: F,
+}
+
+/// The brake unit.
+#[derive(Clone, Debug)]
+pub struct BrakeUnit<F: Real> {
+    steps_per_cycle: u32,
+    cycle_s: f64,
+    step_in_cycle: u32,
+    /// Fill and vent factors 1 - exp(-dt/tau) per plant step.
+    fill_gain: F,
+    vent_gain: F,
+    eb_pressure: F,
+    eb_deceleration: F,
+    supply_pressure: F,
+    wsp_enabled: bool,
+    wsp_k: WspConstants<F>,
+    reference: ReferenceSpeed<F>,
+    channels: [WspChannel<F>; WHEELSETS],
+    cylinders: [Cylinder<F>; WHEELSETS],
+    /// Dead time as a delay line of (demand pressure, packed valve states) per control
+    /// cycle; `delay` cycles long.
+    delay_pressure: [F; DELAY_CAPACITY],
+    delay_valves: [u8; DELAY_CAPACITY],
+    delay: usize,
+    head: usize,
+    /// Demand and valves after the dead time (acting on the cylinders).
+    acting_pressure: F,
+    acting_valves: [Valve; WHEELSETS],
+    demand: BrakeDemand,
+    cycles: u32,
+    /// Control cycle of each wheelset's first vent command (None: never vented).
+    first_vent_cycle: [Option<u32>; WHEELSETS],
+}
+
+/// What the unit shows after a step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UnitOutputs<F> {
+    pub cylinder_pressure: [F; WHEELSETS],
+    /// Valve commands of the WSP. The valve acts at once; the cylinder feels it after
+    /// the pneumatic dead time.
+    pub valves: [Valve; WHEELSETS],
+    /// True while a wheelset's WSP valve vents (the `wsp1..4` column of a run log).
+    pub venting: [bool; WHEELSETS],
+    pub reference_speed: F,
+    pub demand_pressure: F,
+}
+
+impl<F: Real> BrakeUnit<F> {
+    pub fn new(params: &Params, config: &UnitConfig) -> Result<Self, UnitError> {
+        let dt = config.dt;
+        if !(dt > 0.0 && dt.is_finite() && config.control_period > 0.0) {
+            return Err(UnitError::BadPeriod);
+        }
+        let steps_per_cycle = ((config.control_period / dt) + 0.5).max(1.0) as u32;
+        let cycle = steps_per_cycle as f64 * dt;
+        let u = &params.brake_unit;
+        let delay = (u.dead_time / cycle + 0.5) as usize;
+        if delay >= DELAY_CAPACITY {
+            return Err(UnitError::DeadTimeTooLong {
+                dead_time_s: u.dead_time,
+                max_s: (DELAY_CAPACITY - 1) as f64 * cycle,
+            });
+        }
+        Ok(Self {
+            steps_per_cycle,
+            cycle_s: cycle,
+            step_in_cycle: 0,
+            fill_gain: F::of(1.0 - hils_plant::math::exp_f64(-dt / u.fill_time_constant)),
+            vent_gain: F::of(1.0 - hils_plant::math::exp_f64(-dt / u.vent_time_constant)),
+            eb_pressure: F::of(eb_pressure(params)),
+            eb_deceleration: F::of(u.eb_deceleration),
+            supply_pressure: F::of(params.brake.supply_pressure),
+            wsp_enabled: config.wsp_enabled,
+            wsp_k: WspConstants::new(&config.wsp, cycle),
+            reference: ReferenceSpeed::default(),
+            channels: [WspChannel::default(); WHEELSETS],
+            cylinders: [Cylinder::default(); WHEELSETS],
+            delay_pressure: [F::ZERO; DELAY_CAPACITY],
+            delay_valves: [0; DELAY_CAPACITY],
+            delay,
+            head: 0,
+            acting_pressure: F::ZERO,
+            acting_valves: [Valve::Apply; WHEELSETS],
+            demand: BrakeDemand::Release,
+            cycles: 0,
+            first_vent_cycle: [None; WHEELSETS],
+        })
+    }
+
+    /// Sets the brake demand (takes effect at the next control cycle, then after the dead time).
+    pub fn set_demand(&mut self, demand: BrakeDemand) {
+        self.demand = demand;
+    }
+
+    pub fn demand(&self) -> BrakeDemand {
+        self.demand
+    }
+
+    /// The open-loop EB pressure, Pa.
+    pub fn eb_pressure(&self) -> F {
+        self.eb_pressure
+    }
+
+    /// Control cycle length, s.
+    pub fn control_period(&self) -> f64 {
+        self.cycle_s
+    }
+
+    /// Time of each wheelset's first WSP vent command since the unit started, s.
+    pub fn first_vent_time(&self) -> [Option<f64>; WHEELSETS] {
+        let period = self.cycle_s;
+        self.first_vent_cycle.map(|c| c.map(|c| c as f64 * period))
+    }
+
+    /// Number of vent commands per wheelset so far.
+    pub fn vent_counts(&self) -> [u32; WHEELSETS] {
+        [0, 1, 2, 3].map(|j| self.channels[j].vent_count)
+    }
+
+    fn demand_pressure(&self) -> F {
+        match self.demand {
+            BrakeDemand::Release => F::ZERO,
+            BrakeDemand::Emergency => self.eb_pressure,
+            BrakeDemand::Service(decel) => {
+                let d = F::of(decel as f64);
+                let d = if d.is_finite() { d.clamp_to(F::ZERO, self.eb_deceleration) } else { F::ZERO };
+                (self.eb_pressure * d / self.eb_deceleration).min(self.supply_pressure)
+            }
+        }
+    }
+
+    /// One control cycle: reference speed, WSP, delay line.
+    fn control(&mut self, wheel_speeds: &[F; WHEELSETS]) {
+        self.reference.update(&self.wsp_k, wheel_speeds);
+        let mut packed = 0u8;
+        for j in 0..WHEELSETS {
+            let valve = if self.wsp_enabled {
+                self.channels[j].update(&self.wsp_k, wheel_speeds[j], &self.reference)
+            } else {
+                Valve::Apply
+            };
+            if valve == Valve::Vent && self.first_vent_cycle[j].is_none() {
+                self.first_vent_cycle[j] = Some(self.cycles);
+            }
+            packed |= (valve as u8) << (2 * j);
+        }
+        // Delay line: write now, read what was written `delay` cycles ago.
+        let demand = self.demand_pressure();
+        self.delay_pressure[self.head] = demand;
+        self.delay_valves[self.head] = packed;
+        let tail = (self.head + DELAY_CAPACITY - self.delay) % DELAY_CAPACITY;
+        self.acting_pressure = self.delay_pressure[tail];
+        let acting = self.delay_valves[tail];
+        for j in 0..WHEELSETS {
+            self.acting_valves[j] = Valve::from_bits(acting >> (2 * j));
+        }
+        self.head = (self.head + 1) % DELAY_CAPACITY;
+        self.cycles = self.cycles.wrapping_add(1);
+    }
+
+    /// Advances by one plant step given the wheel circumferential speeds r omega (m/s) the
+    /// axle speed sensors show. Returns the cylinder pressures for the plant.
+    pub fn step(&mut self, wheel_speeds: &[F; WHEELSETS]) -> UnitOutputs<F> {
+        if self.step_in_cycle == 0 {
+            let sane = wheel_speeds.map(|v| if v.is_finite() { v } else { F::ZERO });
+            self.control(&sane);
+        }
+        self.step_in_cycle += 1;
+        if self.step_in_cycle >= self.steps_per_cycle {
+            self.step_in_cycle = 0;
+        }
+        let mut out = UnitOutputs {
+            cylinder_pressure: [F::ZERO; WHEELSETS],
+            valves: [Valve::Apply; WHEELSETS],
+            venting: [false; WHEELSETS],
+            reference_speed: self.reference.speed,
+            demand_pressure: self.acting_pressure,
+        };
+        for j in 0..WHEELSETS {
+            let c = &mut self.cylinders[j];
+            match self.acting_valves[j] {
+                Valve::Apply => {
+                    // BOU relay: fill toward the demand with the fill lag, exhaust toward a
+                    // lower demand with the vent lag.
+                    let gain = if self.acting_pressure > c.pressure {
+                        self.fill_gain
+                    } else {
+                        self.vent_gain
+                    };
+                    c.pressure += (self.acting_pressure - c.pressure) * gain;
+                }
+                Valve::Hold => {}
+                Valve::Vent => c.pressure -= c.pressure * self.vent_gain,
+            }
+            out.cylinder_pressure[j] = c.pressure;
+            out.valves[j] = self.channels[j].valve;
+            out.venting[j] = self.channels[j].valve == Valve::Vent;
+        }
+        out
+    }
+}

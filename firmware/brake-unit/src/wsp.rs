@@ -1,0 +1,247 @@
+//! Wheel slide protection (WSP) in the style of EN 15595.
+//!
+//! # Logic (per wheelset, evaluated every control cycle, 1 ms by default)
+//!
+//! **Reference speed.** The unit sees only wheel speeds v_j = r omega_j (as from axle speed
+//! sensors). The vehicle reference speed v_ref follows the fastest wheel, but may fall no
+//! faster than [`WspTuning::ref_max_decel`] (a wheel that slides cannot drag it down)
+//! and rises at once when a wheel runs faster (a recovered wheel shows the true speed).
+//!
+//! **Slide detection.** For each wheel:
+//! * speed deficit dv = v_ref - v_j, threshold dv_th = max(`deficit_min`,
+//!   `deficit_ratio` v_ref);
+//! * wheel deceleration relative to the reference, a_rel = dv_j/dt - dv_ref/dt, from a
+//!   first-order filtered derivative.
+//! A wheel slides when dv > dv_th, or when dv > dv_th / 2 and it decelerates faster than
+//! the reference by more than `decel_threshold` (early detection of a runaway).
+//!
+//! **Valve states** (one dump valve per wheelset):
+//! * `Apply`: the cylinder follows the brake demand. Slide detected -> `Vent`.
+//! * `Vent`: the cylinder vents. When the wheel re-accelerates relative to the reference
+//!   (a_rel > `recover_accel`) and is no longer locked -> `Hold`.
+//! * `Hold`: the cylinder pressure is held. dv below `reapply_ratio` dv_th -> `Apply`;
+//!   the wheel decelerates again by more than `decel_threshold` while dv > dv_th/2 ->
+//!   `Vent`; held longer than `hold_max` -> `Apply`.
+//!
+//! **Bounds.** A wheel is *locked* while v_j < `lock_ratio` v_ref. A locked wheel always
+//! vents (no hold), so lock ends as soon as the vented pressure lets the adhesion spin it
+//! up: with the reference brake unit (dead time 50 ms, vent lag 150 ms) a lock lasts well
+//! under 0.4 s (the tests measure it). Continuous venting is limited to `vent_max`
+//! (EN 15595's WSP timer): after it the valve returns to `Apply` so that a faulty WSP
+//! cannot release a brake indefinitely. Below `min_speed` the WSP is inhibited (`Apply`).
+
+use hils_plant::Real;
+
+/// Valve state of one wheelset's WSP dump valve.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[repr(u8)]
+pub enum Valve {
+    #[default]
+    Apply = 0,
+    Hold = 1,
+    Vent = 2,
+}
+
+impl Valve {
+    pub fn from_bits(bits: u8) -> Valve {
+        match bits & 3 {
+            1 => Valve::Hold,
+            2 => Valve::Vent,
+            _ => Valve::Apply,
+        }
+    }
+}
+
+/// Thresholds of the WSP (SI units).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WspTuning {
+    /// Smallest speed-deficit threshold, m/s.
+    pub deficit_min: f64,
+    /// Speed-deficit threshold as a share of the reference speed.
+    pub deficit_ratio: f64,
+    /// Reapply when the deficit falls below this share of the threshold.
+    pub reapply_ratio: f64,
+    /// Wheel deceleration beyond the reference that counts as a runaway, m/s^2.
+    pub decel_threshold: f64,
+    /// Relative re-acceleration that ends venting, m/s^2.
+    pub recover_accel: f64,
+    /// A wheel below this share of the reference speed is locked.
+    pub lock_ratio: f64,
+    /// Longest continuous vent, s (EN 15595 WSP timer).
+    pub vent_max: f64,
+    /// Longest hold, s.
+    pub hold_max: f64,
+    /// WSP inhibited below this reference speed, m/s.
+    pub min_speed: f64,
+    /// Largest fall rate of the reference speed, m/s^2.
+    pub ref_max_decel: f64,
+    /// Time constant of the wheel-deceleration filter, s.
+    pub accel_filter: f64,
+}
+
+impl Default for WspTuning {
+    fn default() -> Self {
+        Self {
+            deficit_min: 0.8,
+            deficit_ratio: 0.06,
+            reapply_ratio: 0.5,
+            decel_threshold: 2.5,
+            recover_accel: 0.0,
+            lock_ratio: 0.5,
+            vent_max: 3.0,
+            hold_max: 1.0,
+            min_speed: 1.4,
+            ref_max_decel: 2.5,
+            accel_filter: 0.01,
+        }
+    }
+}
+
+/// Precomputed tuning in the unit's float type, for a control period `dt`.
+#[derive(Clone, Copy, Debug)]
+pub struct WspConstants<F> {
+    pub deficit_min: F,
+    pub deficit_ratio: F,
+    pub reapply_ratio: F,
+    pub decel_threshold: F,
+    pub recover_accel: F,
+    pub lock_ratio: F,
+    pub vent_max_cycles: u32,
+    pub hold_max_cycles: u32,
+    pub min_speed: F,
+    pub ref_fall_per_cycle: F,
+    pub inv_dt: F,
+    /// Filter gain dt / (tau + dt).
+    pub accel_gain: F,
+}
+
+impl<F: Real> WspConstants<F> {
+    pub fn new(t: &WspTuning, dt: f64) -> Self {
+        let cycles = |s: f64| (s / dt + 0.5) as u32;
+        Self {
+            deficit_min: F::of(t.deficit_min),
+            deficit_ratio: F::of(t.deficit_ratio),
+            reapply_ratio: F::of(t.reapply_ratio),
+            decel_threshold: F::of(t.decel_threshold),
+            recover_accel: F::of(t.recover_accel),
+            lock_ratio: F::of(t.lock_ratio),
+            vent_max_cycles: cycles(t.vent_max),
+            hold_max_cycles: cycles(t.hold_max),
+            min_speed: F::of(t.min_speed),
+            ref_fall_per_cycle: F::of(t.ref_max_decel * dt),
+            inv_dt: F::of(1.0 / dt),
+            accel_gain: F::of(dt / (t.accel_filter + dt)),
+        }
+    }
+}
+
+/// Reference speed estimate from the wheel speeds.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ReferenceSpeed<F> {
+    pub speed: F,
+    /// Filtered rate of change, m/s^2.
+    pub accel: F,
+    initialised: bool,
+}
+
+impl<F: Real> ReferenceSpeed<F> {
+    pub fn update(&mut self, k: &WspConstants<F>, wheel_speeds: &[F; 4]) {
+        let fastest = wheel_speeds.iter().fold(F::ZERO, |m, &v| m.max(v));
+        if !self.initialised {
+            self.speed = fastest;
+            self.initialised = true;
+            return;
+        }
+        let previous = self.speed;
+        let floor = previous - k.ref_fall_per_cycle;
+        self.speed = fastest.max(floor).max(F::ZERO);
+        let raw = (self.speed - previous) * k.inv_dt;
+        self.accel += (raw - self.accel) * k.accel_gain;
+    }
+}
+
+/// One wheelset's WSP channel.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct WspChannel<F> {
+    pub valve: Valve,
+    /// Filtered wheel acceleration, m/s^2.
+    pub accel: F,
+    last_speed: F,
+    initialised: bool,
+    /// Cycles spent in the current valve state.
+    cycles_in_state: u32,
+    /// Number of vent commands so far.
+    pub vent_count: u32,
+    /// Cycles left during which the channel may not vent (after the vent timer expired).
+    inhibit_cycles: u32,
+}
+
+impl<F: Real> WspChannel<F> {
+    /// One control cycle: updates the valve from wheel speed `v` and the reference.
+    pub fn update(&mut self, k: &WspConstants<F>, v: F, reference: &ReferenceSpeed<F>) -> Valve {
+        if !self.initialised {
+            self.last_speed = v;
+            self.initialised = true;
+        }
+        let raw = (v - self.last_speed) * k.inv_dt;
+        self.last_speed = v;
+        self.accel += (raw - self.accel) * k.accel_gain;
+
+        let v_ref = reference.speed;
+        let deficit = v_ref - v;
+        let threshold = k.deficit_min.max(k.deficit_ratio * v_ref);
+        let half = F::of(0.5) * threshold;
+        let rel_accel = self.accel - reference.accel;
+        let runaway = deficit > half && rel_accel < -k.decel_threshold;
+        let slide = deficit > threshold || runaway;
+        let locked = v < k.lock_ratio * v_ref;
+
+        let next = if !(v_ref > k.min_speed) || self.inhibit_cycles > 0 {
+            self.inhibit_cycles = self.inhibit_cycles.saturating_sub(1);
+            Valve::Apply
+        } else {
+            match self.valve {
+                Valve::Apply => {
+                    if slide {
+                        Valve::Vent
+                    } else {
+                        Valve::Apply
+                    }
+                }
+                Valve::Vent => {
+                    if self.cycles_in_state >= k.vent_max_cycles {
+                        // WSP timer: give the brake back, and do not vent again for
+                        // `hold_max`, so a slide that never clears cannot keep the brake off.
+                        self.inhibit_cycles = k.hold_max_cycles;
+                        Valve::Apply
+                    } else if rel_accel > k.recover_accel && !locked {
+                        Valve::Hold
+                    } else {
+                        Valve::Vent
+                    }
+                }
+                Valve::Hold => {
+                    if deficit < k.reapply_ratio * threshold
+                        || self.cycles_in_state >= k.hold_max_cycles
+                    {
+                        Valve::Apply
+                    } else if runaway || locked {
+                        Valve::Vent
+                    } else {
+                        Valve::Hold
+                    }
+                }
+            }
+        };
+        if next == self.valve {
+            self.cycles_in_state = self.cycles_in_state.saturating_add(1);
+        } else {
+            if next == Valve::Vent {
+                self.vent_count = self.vent_count.saturating_add(1);
+            }
+            self.cycles_in_state = 0;
+            self.valve = next;
+        }
+        next
+    }
+}

@@ -1,0 +1,62 @@
+//! Brake caliper, paper Eq (1): T_b = mu_d (A_c P_c - K_r) r_c l_p N_d.
+
+use crate::params::BrakeParams;
+use crate::real::Real;
+
+/// Precomputed caliper constants.
+#[derive(Clone, Copy, Debug)]
+pub struct Caliper<F> {
+    piston_area: F,
+    retaining_spring_force: F,
+    lever_ratio: F,
+    /// l_p N_d: friction radius times friction faces, m.
+    radius_faces: F,
+    friction_faces: F,
+    /// Largest physically possible pad force (cylinder at supply pressure) times 1.5:
+    /// inputs above it are clamped and flagged.
+    pub clamp_force_limit: F,
+    /// Supply pressure times 1.5: pressure inputs above it are clamped and flagged.
+    pub pressure_limit: F,
+}
+
+impl<F: Real> Caliper<F> {
+    pub fn new(p: &BrakeParams) -> Self {
+        let max_clamp = ((p.piston_area * p.supply_pressure - p.retaining_spring_force).max(0.0)
+            * p.lever_ratio)
+            .max(1.0);
+        Self {
+            piston_area: F::of(p.piston_area),
+            retaining_spring_force: F::of(p.retaining_spring_force),
+            lever_ratio: F::of(p.lever_ratio),
+            radius_faces: F::of(p.friction_radius * p.friction_faces as f64),
+            friction_faces: F::of(p.friction_faces as f64),
+            clamp_force_limit: F::of(1.5 * max_clamp),
+            pressure_limit: F::of(1.5 * p.supply_pressure),
+        }
+    }
+
+    /// Pad normal force per friction face from cylinder pressure:
+    /// f_clamp = max(0, A_c P_c - K_r) r_c (the bracket of Eq 1 times the lever ratio).
+    #[inline(always)]
+    pub fn clamp_force(&self, cylinder_pressure: F) -> F {
+        (self.piston_area * cylinder_pressure - self.retaining_spring_force).max(F::ZERO)
+            * self.lever_ratio
+    }
+
+    /// Eq (1): brake torque T_b = mu_d f_clamp l_p N_d, N m.
+    #[inline(always)]
+    pub fn torque(&self, mu_d: F, clamp_force: F) -> F {
+        mu_d * clamp_force * self.radius_faces
+    }
+
+    /// Tangential friction force at the friction radius summed over faces, T_b / l_p, N.
+    #[inline(always)]
+    pub fn friction_force(&self, mu_d: F, clamp_force: F) -> F {
+        mu_d * clamp_force * self.friction_faces
+    }
+}
+
+/// Cylinder pressure that gives a pad clamp force (inverse of [`Caliper::clamp_force`]), Pa.
+pub fn pressure_for_clamp_force(p: &BrakeParams, clamp_force: f64) -> f64 {
+    (clamp_force / p.lever_ratio + p.retaining_spring_force) / p.piston_area
+}

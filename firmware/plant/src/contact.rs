@@ -1,0 +1,107 @@
+//! Wheel-rail adhesion: Polach's simplified contact model, paper Eqs (9)-(12).
+
+use crate::params::{ContactParams, Rail};
+use crate::real::Real;
+
+/// Precomputed constants of the Polach model for one rail condition.
+#[derive(Clone, Copy, Debug)]
+pub struct Polach<F> {
+    two_over_pi: F,
+    k_a: F,
+    k_s: F,
+    /// mu_0 (1 - A): the part of the friction that decays with slip velocity (Eq 11).
+    mu_decaying: F,
+    /// mu_0 A = mu_inf (Eq 11).
+    mu_inf: F,
+    b_exp: F,
+    /// (2/3) C pi a^2 b, N: Eq (10) reads eps = stiffness s / (Q mu).
+    stiffness: F,
+    creep_speed_floor: F,
+}
+
+/// The contact of one wheelset (two wheels lumped: Q is the axle load).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ContactForce<F> {
+    /// Adhesion force F, N (positive: the rail decelerates the wheelset).
+    pub force: F,
+    /// Chord slope F / (v - r omega), N s/m, >= 0: the semi-implicit spin update treats
+    /// F = chord * slip velocity implicitly, which is stable at any step and exact at a
+    /// steady state.
+    pub chord: F,
+    /// Wheel-rail friction coefficient mu (Eq 11).
+    pub mu: F,
+    /// Creepage s (Eq 12, with the speed floor).
+    pub creepage: F,
+}
+
+impl<F: Real> Polach<F> {
+    pub fn new(contact: &ContactParams, rail: Rail) -> Self {
+        let set = contact.set(rail);
+        let stiffness = 2.0 / 3.0
+            * contact.shear_stiffness_c
+            * core::f64::consts::PI
+            * contact.semi_axis_a
+            * contact.semi_axis_a
+            * contact.semi_axis_b;
+        Self {
+            two_over_pi: F::of(2.0 / core::f64::consts::PI),
+            k_a: F::of(set.k_a),
+            k_s: F::of(set.k_s),
+            mu_decaying: F::of(set.mu_0 * (1.0 - set.a_ratio)),
+            mu_inf: F::of(set.mu_0 * set.a_ratio),
+            b_exp: F::of(set.b_exp),
+            stiffness: F::of(stiffness),
+            creep_speed_floor: F::of(contact.creep_speed_floor),
+        }
+    }
+
+    /// Eq (11): mu = mu_0 [(1 - A) e^(-B |w|) + A] for slip velocity w = v - r omega.
+    #[inline(always)]
+    pub fn friction(&self, slip_velocity: F) -> F {
+        self.mu_decaying * (-self.b_exp * slip_velocity.abs()).exp() + self.mu_inf
+    }
+
+    /// Eqs (9)-(12) for slip velocity `u = v - r omega` (m/s), wheelset speed `v` (m/s)
+    /// and axle load `q` (N). Returns the force, its chord slope F/u, mu and the creepage.
+    ///
+    /// F = (2 mu Q / pi) [k_A eps / (1 + (k_A eps)^2) + atan(k_s eps)]        (9)
+    /// eps = (2/3) C pi a^2 b s / (Q mu)                                      (10)
+    /// s = u / max(|v|, floor)                                                (12)
+    /// Written as F = chord * u with chord = (2/pi)(K/V)[k_A/(1+(k_A eps)^2) + k_s atan(x)/x],
+    /// x = k_s eps, which has no division by u and stays finite at u = 0 and Q -> 0.
+    #[inline(always)]
+    pub fn evaluate(&self, slip_velocity: F, speed: F, load: F) -> ContactForce<F> {
+        let v_floor = speed.abs().max(self.creep_speed_floor);
+        let mu = self.friction(slip_velocity);
+        let creepage = slip_velocity / v_floor;
+        if !(load > F::ZERO) {
+            return ContactForce { force: F::ZERO, chord: F::ZERO, mu, creepage };
+        }
+        let eps = self.stiffness * creepage / (load * mu);
+        let x_a = self.k_a * eps;
+        let x_s = self.k_s * eps;
+        let adhesion_part = self.k_a / (F::ONE + x_a * x_a);
+        let atan_over_x = if x_s.abs() < F::of(1.0e-3) {
+            F::ONE - x_s * x_s / F::of(3.0)
+        } else {
+            x_s.atan() / x_s
+        };
+        let chord =
+            self.two_over_pi * (self.stiffness / v_floor) * (adhesion_part + self.k_s * atan_over_x);
+        ContactForce { force: chord * slip_velocity, chord, mu, creepage }
+    }
+
+    /// Adhesion coefficient F/Q (paper Eq 13) at creepage `s` and speed `v` (for Fig 11).
+    pub fn adhesion_coefficient(&self, creepage: F, speed: F) -> F {
+        let v_floor = speed.abs().max(self.creep_speed_floor);
+        let q = F::of(1.0e5);
+        self.evaluate(creepage * v_floor, speed, q).force / q
+    }
+
+    /// Normalised force F/(Q mu) as a function of eps (the bracket of Eq 9 times 2/pi);
+    /// tends to 1 as eps grows. Used by tests of the Polach identities.
+    pub fn normalised_force(&self, eps: F) -> F {
+        let x_a = self.k_a * eps;
+        self.two_over_pi * (x_a / (F::ONE + x_a * x_a) + (self.k_s * eps).atan())
+    }
+}

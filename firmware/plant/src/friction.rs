@@ -1,0 +1,49 @@
+//! Disc-pad friction coefficient, paper Eq (2).
+
+use crate::params::{FrictionModel, FrictionParams};
+use crate::real::Real;
+
+/// Precomputed Eq (2): mu_d = c mu_d0 (n_v e^(-m_v v_d) + 1)(n_T e^(-m_T T_d) + 1),
+/// or mu_d0 alone with [`FrictionModel::Constant`]; times the pressure extension
+/// (1 + k_p f_clamp / 10 kN), which is 1 in the reference model.
+#[derive(Clone, Copy, Debug)]
+pub struct DiscPadFriction<F> {
+    variable: bool,
+    mu_d0: F,
+    c_mu_d0: F,
+    n_v: F,
+    m_v: F,
+    n_t: F,
+    m_t: F,
+    /// k_p / 10 kN, 1/N.
+    k_p_per_n: F,
+}
+
+impl<F: Real> DiscPadFriction<F> {
+    pub fn new(p: &FrictionParams) -> Self {
+        Self {
+            variable: p.model == FrictionModel::Variable,
+            mu_d0: F::of(p.mu_d0),
+            c_mu_d0: F::of(p.correction_c * p.mu_d0),
+            n_v: F::of(p.n_v),
+            m_v: F::of(p.m_v),
+            n_t: F::of(p.n_t),
+            m_t: F::of(p.m_t),
+            k_p_per_n: F::of(p.k_p / 1.0e4),
+        }
+    }
+
+    /// mu_d at friction speed `v_d` (m/s, at the friction radius), disc temperature rise
+    /// `t_d` (degC) and pad clamp force `f_clamp` (N per face).
+    #[inline(always)]
+    pub fn mu_d(&self, v_d: F, t_d: F, f_clamp: F) -> F {
+        let base = if self.variable {
+            let speed_factor = self.n_v * (-self.m_v * v_d.abs()).exp() + F::ONE;
+            let temperature_factor = self.n_t * (-self.m_t * t_d).exp() + F::ONE;
+            self.c_mu_d0 * speed_factor * temperature_factor
+        } else {
+            self.mu_d0
+        };
+        base * (F::ONE + self.k_p_per_n * f_clamp)
+    }
+}

@@ -1,0 +1,83 @@
+//! The one place that picks the math implementation of the plant, for every build.
+//!
+//! Every transcendental function the plant evaluates goes through this module, on the
+//! host (tests, tools, f32 and f64) and on the Cortex-M4F alike. The plant never calls
+//! `std`'s float methods: with `#![cfg_attr(not(test), no_std)]` a crate would silently
+//! use the platform libm in its unit tests and a different implementation on the board,
+//! and the host could no longer check the target bit for bit.
+//!
+//! * default: the `libm` crate (a Rust port of FreeBSD msun; f32 functions compute in
+//!   f32 only, so no soft-float double on the Cortex-M4F; results within 1 ulp).
+//! * feature `math-micromath`: micromath's fast approximations for f32 (kept for the
+//!   measured comparison in the README; f64 always uses libm, it is the reference).
+//!
+//! `+ - * /` and `sqrt` are IEEE 754 correctly rounded on both x86-64 (SSE) and the
+//! Cortex-M4F FPU, and Rust never fuses a multiply and an add on its own, so with one
+//! implementation of the functions below an f32 run is bit-identical on both.
+
+#[cfg(not(feature = "math-micromath"))]
+mod f32_impl {
+    #[inline(always)]
+    pub fn exp(x: f32) -> f32 {
+        libm::expf(x)
+    }
+    #[inline(always)]
+    pub fn ln(x: f32) -> f32 {
+        libm::logf(x)
+    }
+    #[inline(always)]
+    pub fn atan(x: f32) -> f32 {
+        libm::atanf(x)
+    }
+    #[inline(always)]
+    pub fn sqrt(x: f32) -> f32 {
+        libm::sqrtf(x)
+    }
+}
+
+#[cfg(feature = "math-micromath")]
+mod f32_impl {
+    use micromath::F32Ext;
+    #[inline(always)]
+    pub fn exp(x: f32) -> f32 {
+        F32Ext::exp(x)
+    }
+    #[inline(always)]
+    pub fn ln(x: f32) -> f32 {
+        F32Ext::ln(x)
+    }
+    #[inline(always)]
+    pub fn atan(x: f32) -> f32 {
+        F32Ext::atan(x)
+    }
+    #[inline(always)]
+    pub fn sqrt(x: f32) -> f32 {
+        libm::sqrtf(x)
+    }
+}
+
+/// Name of the math implementation compiled in (reported by tools and the target).
+pub const IMPLEMENTATION: &str = if cfg!(feature = "math-micromath") {
+    "micromath"
+} else {
+    "libm"
+};
+
+pub use f32_impl::{atan as atan_f32, exp as exp_f32, ln as ln_f32, sqrt as sqrt_f32};
+
+#[inline(always)]
+pub fn exp_f64(x: f64) -> f64 {
+    libm::exp(x)
+}
+#[inline(always)]
+pub fn ln_f64(x: f64) -> f64 {
+    libm::log(x)
+}
+#[inline(always)]
+pub fn atan_f64(x: f64) -> f64 {
+    libm::atan(x)
+}
+#[inline(always)]
+pub fn sqrt_f64(x: f64) -> f64 {
+    libm::sqrt(x)
+}

@@ -1,0 +1,38 @@
+//! Lumped disc heat balance per wheelset, paper Eqs (3)-(6).
+
+use crate::params::ThermalParams;
+use crate::real::Real;
+
+/// Precomputed constants of Eqs (3)-(6).
+#[derive(Clone, Copy, Debug)]
+pub struct DiscThermal<F> {
+    heat_partition: F,
+    inv_heat_capacity: F,
+    alpha: F,
+    beta: F,
+    convection_exponent: F,
+}
+
+impl<F: Real> DiscThermal<F> {
+    pub fn new(p: &ThermalParams) -> Self {
+        Self {
+            heat_partition: F::of(p.heat_partition),
+            inv_heat_capacity: F::of(1.0 / (p.specific_heat * p.disc_mass)),
+            alpha: F::of(p.alpha),
+            beta: F::of(p.beta),
+            convection_exponent: F::of(0.8),
+        }
+    }
+
+    /// dT_d/dt, K/s, from brake power `t_b omega_d` (W), disc temperature rise `t_d` (degC)
+    /// and wheel circumferential speed `v_w = r omega` (m/s):
+    /// E_br = sigma_d T_b omega_d                                   (4)
+    /// Q_cond + Q_conv = alpha T_d + beta T_d v_w^0.8               (5)
+    /// dT_d/dt = (E_br - Q_cond - Q_conv) / (c_p m_disc)            (3), (6)
+    #[inline(always)]
+    pub fn rate(&self, brake_power: F, t_d: F, wheel_speed: F) -> F {
+        let convection = self.beta * wheel_speed.abs().powf_pos(self.convection_exponent);
+        (self.heat_partition * brake_power - (self.alpha + convection) * t_d)
+            * self.inv_heat_capacity
+    }
+}

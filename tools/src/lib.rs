@@ -1,0 +1,17 @@
+//! # hils: host tools of the railway brake HILS
+//!
+//! Software-in-the-loop runs of the plant with the simulated brake unit
+//! ([`scenario`], [`simulate`]), the run-log CSV format ([`runlog`]), plots ([`plots`]),
+//! the host benchmark ([`bench`]), friction fits ([`fit_friction`]), the diagnosis
+//! ([`diagnose`]), the target cost ([`target_cost`]) and the telemetry decoder ([`decode`]).
+
+pub mod bench;
+pub mod decode;
+pub mod diagnose;
+pub mod fit_friction;
+pub mod params_file;
+pub mod plots;
+pub mod runlog;
+pub mod scenario;
+pub mod simulate;
+pub mod target_cost;

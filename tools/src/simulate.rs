@@ -1,0 +1,351 @@
+//! `hils simulate`: the paper's emergency brake in software-in-the-loop, with its figures.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, ValueEnum};
+use hils_plant::contact::Polach;
+use hils_plant::{FrictionModel, Params, Rail};
+
+use crate::params_file::params_or_default;
+use crate::plots::{Chart, Series, Style};
+use crate::runlog::write_run_log;
+use crate::scenario::{EbOptions, Run, run_eb};
+
+#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
+pub enum FrictionArg {
+    Variable,
+    Constant,
+}
+
+impl From<FrictionArg> for FrictionModel {
+    fn from(f: FrictionArg) -> Self {
+        match f {
+            FrictionArg::Variable => FrictionModel::Variable,
+            FrictionArg::Constant => FrictionModel::Constant,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
+pub enum RailArg {
+    Wet,
+    Dry,
+}
+
+impl From<RailArg> for Rail {
+    fn from(r: RailArg) -> Self {
+        match r {
+            RailArg::Wet => Rail::Wet,
+            RailArg::Dry => Rail::Dry,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
+pub enum ScenarioArg {
+    /// The paper's emergency brake from 150 km/h on a wet rail (EB at t = 0).
+    PaperEb,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
+pub enum PrecisionArg {
+    F32,
+    F64,
+}
+
+/// Arguments of `hils simulate`.
+#[derive(Args, Debug, Clone)]
+pub struct SimulateArgs {
+    /// Scenario to run.
+    #[arg(long, value_enum, default_value = "paper-eb")]
+    pub scenario: ScenarioArg,
+    /// Disc-pad friction: Eq (2) (`variable`) or mu_d0 (`constant`). Default: the
+    /// parameter file's `friction.model`.
+    #[arg(long, value_enum)]
+    pub friction: Option<FrictionArg>,
+    /// Parameter file (reference-parameters.toml or a variant); default: built-in values.
+    #[arg(long)]
+    pub params: Option<PathBuf>,
+    /// Rail condition (default: the scenario's).
+    #[arg(long, value_enum)]
+    pub rail: Option<RailArg>,
+    /// Initial speed, km/h (default: the scenario's).
+    #[arg(long)]
+    pub speed_kmh: Option<f64>,
+    /// Output directory (created).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Sample rate of run.csv, Hz (a divisor of the plant rate).
+    #[arg(long, default_value_t = 1000.0)]
+    pub sample_rate_hz: f64,
+    /// Plant precision (f32 is what the target runs).
+    #[arg(long, value_enum, default_value = "f32")]
+    pub precision: PrecisionArg,
+    /// Skip the figures (and the overlay run they need).
+    #[arg(long)]
+    pub no_plots: bool,
+}
+
+/// Builds the parameters and options of a run from the arguments.
+pub fn setup(args: &SimulateArgs) -> Result<(Params, EbOptions)> {
+    let mut params = params_or_default(args.params.as_deref())?;
+    if let Some(f) = args.friction {
+        params.friction.model = f.into();
+    }
+    let mut opts = EbOptions::paper(&params);
+    if let Some(r) = args.rail {
+        opts.rail = r.into();
+    }
+    if let Some(v) = args.speed_kmh {
+        if !(v > 0.0 && v <= 400.0) {
+            bail!("--speed-kmh {v}: must be in (0, 400] km/h");
+        }
+        opts.initial_speed_mps = v / 3.6;
+    }
+    let dt = params.scenario.paper_eb.step;
+    let every = 1.0 / (args.sample_rate_hz * dt);
+    if !(every >= 1.0) || (every - every.round()).abs() > 1e-6 {
+        bail!(
+            "--sample-rate-hz {}: must divide the plant rate {} Hz",
+            args.sample_rate_hz,
+            1.0 / dt
+        );
+    }
+    opts.record_every = every.round() as u32;
+    Ok((params, opts))
+}
+
+fn run(params: &Params, opts: &EbOptions, precision: PrecisionArg) -> Result<Run> {
+    match precision {
+        PrecisionArg::F32 => run_eb::<f32>(params, opts),
+        PrecisionArg::F64 => run_eb::<f64>(params, opts),
+    }
+}
+
+/// `hils simulate`.
+pub fn main(args: SimulateArgs) -> Result<()> {
+    let (params, mut opts) = setup(&args)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    opts.progress = true;
+    let main_run = run(&params, &opts, args.precision)?;
+    let friction = match params.friction.model {
+        FrictionModel::Variable => "variable",
+        FrictionModel::Constant => "constant",
+    };
+    let rail = match opts.rail {
+        Rail::Wet => "wet",
+        Rail::Dry => "dry",
+    };
+    let metadata = vec![
+        ("source", "hils simulate (software-in-the-loop: plant + simulated brake unit)".to_string()),
+        ("scenario", "paper-eb".to_string()),
+        ("rail", rail.to_string()),
+        ("initial_speed_kmh", format!("{}", opts.initial_speed_mps * 3.6)),
+        ("eb_command_s", "0".to_string()),
+        ("friction", friction.to_string()),
+        ("sample_rate_hz", format!("{}", args.sample_rate_hz)),
+        ("plant_step_s", format!("{}", main_run.dt)),
+        ("precision", format!("{:?}", args.precision).to_lowercase()),
+        ("math", hils_plant::math::IMPLEMENTATION.to_string()),
+        (
+            "params",
+            args.params.as_ref().map(|p| p.display().to_string()).unwrap_or("built-in".into()),
+        ),
+    ];
+    let csv_path = args.out.join("run.csv");
+    let file = std::fs::File::create(&csv_path)
+        .with_context(|| format!("cannot create {}", csv_path.display()))?;
+    write_run_log(file, &metadata, &main_run.samples)?;
+    let summary_path = args.out.join("summary.json");
+    std::fs::write(&summary_path, serde_json::to_string_pretty(&main_run.summary)? + "\n")?;
+
+    let s = &main_run.summary;
+    println!("{friction} friction, {rail} rail, {:.0} km/h:", opts.initial_speed_mps * 3.6);
+    match (s.stop_time_s, s.stopping_distance_m) {
+        (Some(t), Some(d)) => println!("  stop after {t:.2} s and {d:.1} m"),
+        _ => println!("  no stop within {} s", opts.max_time_s),
+    }
+    println!(
+        "  WSP acted on wheelsets {:?}; first vents {:?} s",
+        s.slides,
+        s.slide_onset_s.map(|o| o.map(|t| (t * 1000.0).round() / 1000.0))
+    );
+    println!(
+        "  mu_d: {:.4} at 0 s, min {:.4}, {:.4} at the stop; EB pressure {:.0} Pa",
+        s.mu_d_at_s["0"], s.mu_d_min, s.mu_d_end, s.eb_pressure_pa
+    );
+    println!("  {} steps in {:.2} s", s.steps, s.wall_s);
+
+    if !args.no_plots {
+        // The paper overlays the other friction model (Figs 10, 11).
+        let mut other_params = params;
+        other_params.friction.model = match params.friction.model {
+            FrictionModel::Variable => FrictionModel::Constant,
+            FrictionModel::Constant => FrictionModel::Variable,
+        };
+        let other = run(&other_params, &opts, args.precision)?;
+        let files = draw_figures(&args.out, &params, &main_run, &other)?;
+        for f in files {
+            println!("  figure {}", f.display());
+        }
+    }
+    println!("  wrote {} and {}", csv_path.display(), summary_path.display());
+    Ok(())
+}
+
+fn label(run: &Run) -> &'static str {
+    match run.friction {
+        FrictionModel::Variable => "variable mu_d",
+        FrictionModel::Constant => "constant mu_d0",
+    }
+}
+
+/// Draws the paper's Figs 8A, 8B, 9, 10, 11 for `main` with `other` overlaid.
+pub fn draw_figures(dir: &Path, params: &Params, main: &Run, other: &Run) -> Result<Vec<PathBuf>> {
+    let r = params.vehicle.wheel_radius;
+    let mut files = Vec::new();
+    let (var, con) = match main.friction {
+        FrictionModel::Variable => (main, other),
+        FrictionModel::Constant => (other, main),
+    };
+    let series_of = |run: &Run, f: &dyn Fn(&crate::scenario::Sample) -> f64| -> Vec<(f64, f64)> {
+        run.samples.iter().map(|s| (s.t, f(s))).collect()
+    };
+
+    // Fig 8A: circumferential wheel speeds.
+    let mut chart = Chart::new(
+        &format!("Fig 8A: wheel speeds during EB ({})", label(main)),
+        "time, s",
+        "speed, km/h",
+    );
+    chart.series.push(Series::new("vehicle", series_of(main, &|s| s.v_ref * 3.6), Style::Dashed, 7));
+    for j in 0..4 {
+        chart.series.push(Series::new(
+            format!("wheelset {}", j + 1),
+            series_of(main, &|s| s.omega[j] * r * 3.6),
+            Style::Solid,
+            j,
+        ));
+    }
+    files.push(dir.join("fig8a_wheel_speeds.svg"));
+    chart.save_svg(files.last().unwrap())?;
+
+    // Fig 8B: axle loads.
+    let mut chart = Chart::new(
+        &format!("Fig 8B: axle loads during EB ({})", label(main)),
+        "time, s",
+        "axle load, kN",
+    );
+    for j in 0..4 {
+        chart.series.push(Series::new(
+            format!("wheelset {}", j + 1),
+            series_of(main, &|s| s.q[j] / 1e3),
+            Style::Solid,
+            j,
+        ));
+    }
+    files.push(dir.join("fig8b_axle_loads.svg"));
+    chart.save_svg(files.last().unwrap())?;
+
+    // Fig 9: friction coefficient.
+    let stop = var.summary.stop_time_s.unwrap_or(f64::INFINITY);
+    let mut chart = Chart::new("Fig 9: disc-pad friction during EB", "time, s", "mu_d");
+    chart.series.push(Series::new(
+        "variable mu_d (Eq 2), mean of wheelsets",
+        var.samples
+            .iter()
+            .filter(|s| s.t <= stop)
+            .map(|s| (s.t, s.mu_d.iter().sum::<f64>() / 4.0))
+            .collect(),
+        Style::Solid,
+        0,
+    ));
+    let t_end = var.samples.last().map(|s| s.t).unwrap_or(30.0).min(stop);
+    chart.series.push(Series::new(
+        "constant mu_d0",
+        vec![(0.0, params.friction.mu_d0), (t_end, params.friction.mu_d0)],
+        Style::Dotted,
+        2,
+    ));
+    files.push(dir.join("fig9_mu_d.svg"));
+    chart.save_svg(files.last().unwrap())?;
+
+    // Fig 10: tangential brake force on the disc of wheelset 4.
+    let mut chart =
+        Chart::new("Fig 10: brake force on the disc, wheelset 4", "time, s", "brake force, kN");
+    chart.series.push(Series::new(
+        "variable mu_d",
+        series_of(var, &|s| s.f_brake[3] / 1e3),
+        Style::Solid,
+        0,
+    ));
+    chart.series.push(Series::new(
+        "constant mu_d0",
+        series_of(con, &|s| s.f_brake[3] / 1e3),
+        Style::Dotted,
+        2,
+    ));
+    files.push(dir.join("fig10_brake_force_ws4.svg"));
+    chart.save_svg(files.last().unwrap())?;
+
+    // Fig 11: adhesion coefficient vs creepage at ~3 s, with the anti-skid limits.
+    files.push(dir.join("fig11_adhesion_creepage.svg"));
+    fig11(files.last().unwrap(), params, main.rail, var, con)?;
+    Ok(files)
+}
+
+/// The brake force demanded at the rail over the axle load: the adhesion a wheelset needs
+/// not to slide (the paper's "anti-skid limit"), at sample `s`, wheelset `j`.
+pub fn required_adhesion(params: &Params, s: &crate::scenario::Sample, j: usize) -> f64 {
+    let torque = s.f_brake[j] * params.brake.friction_radius;
+    torque / params.vehicle.wheel_radius / s.q[j]
+}
+
+fn fig11(path: &Path, params: &Params, rail: Rail, var: &Run, con: &Run) -> Result<()> {
+    let at = |run: &Run| {
+        let i = run.samples.partition_point(|s| s.t < 3.0).min(run.samples.len() - 1);
+        run.samples[i]
+    };
+    let (sv, sc) = (at(var), at(con));
+    let polach = Polach::<f64>::new(&params.contact, rail);
+    let curve: Vec<(f64, f64)> = (0..=400)
+        .map(|i| {
+            let s = 0.25 * i as f64 / 400.0;
+            (s, polach.adhesion_coefficient(s, sv.v_ref))
+        })
+        .collect();
+    let limit_v = required_adhesion(params, &sv, 3);
+    let limit_c = required_adhesion(params, &sc, 3);
+    let mut chart = Chart::new(
+        &format!("Fig 11: adhesion vs creepage at 3 s ({:.0} km/h), wheelset 4", sv.v_ref * 3.6),
+        "creepage s",
+        "adhesion coefficient F/Q",
+    );
+    chart.series.push(Series::new("Polach (Eqs 9-12)", curve, Style::Solid, 0));
+    chart.series.push(Series::new(
+        format!("anti-skid limit, variable mu_d ({limit_v:.4})"),
+        vec![(0.0, limit_v), (0.25, limit_v)],
+        Style::Dashed,
+        1,
+    ));
+    chart.series.push(Series::new(
+        format!("anti-skid limit, constant mu_d0 ({limit_c:.4})"),
+        vec![(0.0, limit_c), (0.25, limit_c)],
+        Style::Dotted,
+        2,
+    ));
+    // Operating points of wheelset 4 during the first 8 s of each run.
+    let path_of = |run: &Run| -> Vec<(f64, f64)> {
+        run.samples
+            .iter()
+            .filter(|s| s.t <= 8.0 && s.creepage[3] <= 0.25)
+            .map(|s| (s.creepage[3], s.adhesion[3]))
+            .collect()
+    };
+    chart.series.push(Series::new("wheelset 4, variable (0-8 s)", path_of(var), Style::Points, 3));
+    chart.series.push(Series::new("wheelset 4, constant (0-8 s)", path_of(con), Style::Points, 4));
+    chart.x_range = Some((0.0, 0.25));
+    chart.save_svg(path)
+}
