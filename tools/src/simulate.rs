@@ -296,11 +296,14 @@ pub fn draw_figures(dir: &Path, params: &Params, main: &Run, other: &Run) -> Res
     Ok(files)
 }
 
-/// The brake force demanded at the rail over the axle load: the adhesion a wheelset needs
-/// not to slide (the paper's "anti-skid limit"), at sample `s`, wheelset `j`.
+/// The adhesion a wheelset needs not to slide (the paper's "anti-skid limit") at sample
+/// `s`, wheelset `j`: the rail force that makes the wheelset decelerate with the vehicle,
+/// (T_b - I_w a / r) / r (Eq 7 with omega' = a / r), over the axle load (Eq 13).
 pub fn required_adhesion(params: &Params, s: &crate::scenario::Sample, j: usize) -> f64 {
+    let v = &params.vehicle;
     let torque = s.f_brake[j] * params.brake.friction_radius;
-    torque / params.vehicle.wheel_radius / s.q[j]
+    let spin_torque = v.wheelset_spin_inertia * s.a_x / v.wheel_radius;
+    (torque + spin_torque) / v.wheel_radius / s.q[j]
 }
 
 fn fig11(path: &Path, params: &Params, rail: Rail, var: &Run, con: &Run) -> Result<()> {
@@ -313,7 +316,7 @@ fn fig11(path: &Path, params: &Params, rail: Rail, var: &Run, con: &Run) -> Resu
     let curve: Vec<(f64, f64)> = (0..=400)
         .map(|i| {
             let s = 0.25 * i as f64 / 400.0;
-            (s, polach.adhesion_coefficient(s, sv.v_ref))
+            (s, polach.adhesion_coefficient(s, sv.v_ref, sv.q[3]))
         })
         .collect();
     let limit_v = required_adhesion(params, &sv, 3);

@@ -17,18 +17,28 @@
 //!
 //! **Valve states** (one dump valve per wheelset):
 //! * `Apply`: the cylinder follows the brake demand. Slide detected -> `Vent`.
-//! * `Vent`: the cylinder vents. When the wheel re-accelerates relative to the reference
-//!   (a_rel > `recover_accel`) and is no longer locked -> `Hold`.
-//! * `Hold`: the cylinder pressure is held. dv below `reapply_ratio` dv_th -> `Apply`;
-//!   the wheel decelerates again by more than `decel_threshold` while dv > dv_th/2 ->
-//!   `Vent`; held longer than `hold_max` -> `Apply`.
+//! * `Vent`: the cylinder vents. When the wheel speeds up clearly (its own acceleration
+//!   a_j > `recover_accel`, i.e. the vented torque is well below the adhesion torque) and
+//!   is no longer locked -> `Hold`.
+//! * `Hold`: the cylinder pressure is held while the wheel spins back up to the vehicle
+//!   speed. Runaway again or locked -> `Vent`. Once the wheel has stopped speeding up
+//!   (a_j < `caught_up_accel`): dv below `reapply_ratio` dv_th -> `Apply`; dv still above
+//!   dv_th -> `Vent` (the held pressure is too high to recover). Held longer than
+//!   `hold_max` -> `Apply`.
+//! The recovery thresholds use the wheel's own acceleration, not the deficit to the
+//! reference: when every wheel slides the reference is itself too low, and only a wheel
+//! that has spun back up to the rail speed can correct it.
+//!
+//! A recovered wheel runs at the true vehicle speed and lifts the reference to it, so
+//! the reference is re-anchored after every WSP cycle even when all wheels slide at once.
 //!
 //! **Bounds.** A wheel is *locked* while v_j < `lock_ratio` v_ref. A locked wheel always
 //! vents (no hold), so lock ends as soon as the vented pressure lets the adhesion spin it
 //! up: with the reference brake unit (dead time 50 ms, vent lag 150 ms) a lock lasts well
 //! under 0.4 s (the tests measure it). Continuous venting is limited to `vent_max`
-//! (EN 15595's WSP timer): after it the valve returns to `Apply` so that a faulty WSP
-//! cannot release a brake indefinitely. Below `min_speed` the WSP is inhibited (`Apply`).
+//! (EN 15595's WSP timer): after it the valve returns to `Apply` and the channel may not
+//! vent for `hold_max`, so that a faulty WSP cannot release a brake indefinitely. Below
+//! `min_speed` the WSP is inhibited (`Apply`).
 
 use hils_plant::Real;
 
@@ -63,8 +73,10 @@ pub struct WspTuning {
     pub reapply_ratio: f64,
     /// Wheel deceleration beyond the reference that counts as a runaway, m/s^2.
     pub decel_threshold: f64,
-    /// Relative re-acceleration that ends venting, m/s^2.
+    /// Wheel acceleration that ends venting, m/s^2.
     pub recover_accel: f64,
+    /// Wheel acceleration below which a held wheel has caught up, m/s^2.
+    pub caught_up_accel: f64,
     /// A wheel below this share of the reference speed is locked.
     pub lock_ratio: f64,
     /// Longest continuous vent, s (EN 15595 WSP timer).
@@ -86,12 +98,13 @@ impl Default for WspTuning {
             deficit_ratio: 0.06,
             reapply_ratio: 0.5,
             decel_threshold: 2.5,
-            recover_accel: 0.0,
+            recover_accel: 1.5,
+            caught_up_accel: 0.0,
             lock_ratio: 0.5,
             vent_max: 3.0,
             hold_max: 1.0,
             min_speed: 1.4,
-            ref_max_decel: 2.5,
+            ref_max_decel: 2.0,
             accel_filter: 0.01,
         }
     }
@@ -105,6 +118,7 @@ pub struct WspConstants<F> {
     pub reapply_ratio: F,
     pub decel_threshold: F,
     pub recover_accel: F,
+    pub caught_up_accel: F,
     pub lock_ratio: F,
     pub vent_max_cycles: u32,
     pub hold_max_cycles: u32,
@@ -124,6 +138,7 @@ impl<F: Real> WspConstants<F> {
             reapply_ratio: F::of(t.reapply_ratio),
             decel_threshold: F::of(t.decel_threshold),
             recover_accel: F::of(t.recover_accel),
+            caught_up_accel: F::of(t.caught_up_accel),
             lock_ratio: F::of(t.lock_ratio),
             vent_max_cycles: cycles(t.vent_max),
             hold_max_cycles: cycles(t.hold_max),
@@ -214,19 +229,25 @@ impl<F: Real> WspChannel<F> {
                         // `hold_max`, so a slide that never clears cannot keep the brake off.
                         self.inhibit_cycles = k.hold_max_cycles;
                         Valve::Apply
-                    } else if rel_accel > k.recover_accel && !locked {
+                    } else if self.accel > k.recover_accel && !locked {
                         Valve::Hold
                     } else {
                         Valve::Vent
                     }
                 }
                 Valve::Hold => {
-                    if deficit < k.reapply_ratio * threshold
-                        || self.cycles_in_state >= k.hold_max_cycles
-                    {
-                        Valve::Apply
-                    } else if runaway || locked {
+                    if runaway || locked {
                         Valve::Vent
+                    } else if self.cycles_in_state >= k.hold_max_cycles {
+                        Valve::Apply
+                    } else if self.accel < k.caught_up_accel {
+                        if deficit < k.reapply_ratio * threshold {
+                            Valve::Apply
+                        } else if deficit > threshold {
+                            Valve::Vent
+                        } else {
+                            Valve::Hold
+                        }
                     } else {
                         Valve::Hold
                     }

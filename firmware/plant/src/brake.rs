@@ -12,16 +12,18 @@ pub struct Caliper<F> {
     /// l_p N_d: friction radius times friction faces, m.
     radius_faces: F,
     friction_faces: F,
-    /// Largest physically possible pad force (cylinder at supply pressure) times 1.5:
-    /// inputs above it are clamped and flagged.
+    /// Pad force at 1.5 x the supply pressure (Eq 1): clamp-force inputs above it are
+    /// clamped and flagged.
     pub clamp_force_limit: F,
-    /// Supply pressure times 1.5: pressure inputs above it are clamped and flagged.
+    /// 1.5 x the supply pressure: pressure inputs above it are clamped and flagged.
     pub pressure_limit: F,
 }
 
 impl<F: Real> Caliper<F> {
     pub fn new(p: &BrakeParams) -> Self {
-        let max_clamp = ((p.piston_area * p.supply_pressure - p.retaining_spring_force).max(0.0)
+        let pressure_limit = 1.5 * p.supply_pressure;
+        let clamp_force_limit = ((p.piston_area * pressure_limit - p.retaining_spring_force)
+            .max(0.0)
             * p.lever_ratio)
             .max(1.0);
         Self {
@@ -30,8 +32,8 @@ impl<F: Real> Caliper<F> {
             lever_ratio: F::of(p.lever_ratio),
             radius_faces: F::of(p.friction_radius * p.friction_faces as f64),
             friction_faces: F::of(p.friction_faces as f64),
-            clamp_force_limit: F::of(1.5 * max_clamp),
-            pressure_limit: F::of(1.5 * p.supply_pressure),
+            clamp_force_limit: F::of(clamp_force_limit),
+            pressure_limit: F::of(pressure_limit),
         }
     }
 

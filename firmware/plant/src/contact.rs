@@ -91,11 +91,14 @@ impl<F: Real> Polach<F> {
         ContactForce { force: chord * slip_velocity, chord, mu, creepage }
     }
 
-    /// Adhesion coefficient F/Q (paper Eq 13) at creepage `s` and speed `v` (for Fig 11).
-    pub fn adhesion_coefficient(&self, creepage: F, speed: F) -> F {
+    /// Adhesion coefficient F/Q (paper Eq 13) at creepage `s`, speed `v` (m/s) and axle
+    /// load `q` (N) (the curve of Fig 11).
+    pub fn adhesion_coefficient(&self, creepage: F, speed: F, load: F) -> F {
         let v_floor = speed.abs().max(self.creep_speed_floor);
-        let q = F::of(1.0e5);
-        self.evaluate(creepage * v_floor, speed, q).force / q
+        if !(load > F::ZERO) {
+            return F::ZERO;
+        }
+        self.evaluate(creepage * v_floor, speed, load).force / load
     }
 
     /// Normalised force F/(Q mu) as a function of eps (the bracket of Eq 9 times 2/pi);

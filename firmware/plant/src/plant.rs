@@ -471,7 +471,7 @@ impl<F: Real> Plant<F> {
         }
         let value = value.clamp_to(F::ZERO, limit);
         let clamp = match input {
-            BrakeInput::CylinderPressure(_) => cal.clamp_force(value),
+            BrakeInput::CylinderPressure(_) => cal.clamp_force(value).min(cal.clamp_force_limit),
             BrakeInput::ClampForce(_) => value,
         };
         self.s.last_clamp[j] = clamp;
