@@ -12,7 +12,11 @@ fn eb_pressure_decelerates_the_nominal_vehicle_at_5_kmh_per_s() {
     // M_eff * 1.3889 * 0.43 / 4 = 7 384.3 N m; f_clamp = T_b / (0.38 * 0.275 * 4) = 17 665.8 N;
     // P = (f_clamp / 2.5 + 1000) / 0.0227 = 355 345 Pa.
     let hand = ((49_457.3 * 1.3889 * 0.43 / 4.0) / (0.38 * 0.275 * 4.0) / 2.5 + 1000.0) / 0.0227;
-    assert!((eb_pressure(&p) - hand).abs() < 5.0, "{} vs {hand}", eb_pressure(&p));
+    assert!(
+        (eb_pressure(&p) - hand).abs() < 5.0,
+        "{} vs {hand}",
+        eb_pressure(&p)
+    );
 
     // Closed loop, constant mu_d0, WSP off: the steady deceleration is the EB setting.
     let mut p = p;
@@ -29,7 +33,10 @@ fn eb_pressure_decelerates_the_nominal_vehicle_at_5_kmh_per_s() {
         }
     }
     let decel = (v8 - sim.outputs().vehicle_speed) / 12.0;
-    assert!((decel - 1.3889).abs() < 0.01 * 1.3889, "deceleration {decel}");
+    assert!(
+        (decel - 1.3889).abs() < 0.01 * 1.3889,
+        "deceleration {decel}"
+    );
 }
 
 #[test]
@@ -52,7 +59,11 @@ fn cylinder_follows_the_demand_after_the_dead_time_with_the_fill_lag() {
     // ...and follows 1 - exp(-(t - t_dead) / tau) (t_dead = 50 ms, +1 ms control cycle).
     for (i, t) in [(10_000, 1.0), (19_999, 2.0)] {
         let expected = 1.0 - (-(t - 0.0505) / 0.5f64).exp();
-        assert!((trace[i] / p_eb - expected).abs() < 0.003, "{} vs {expected}", trace[i] / p_eb);
+        assert!(
+            (trace[i] / p_eb - expected).abs() < 0.003,
+            "{} vs {expected}",
+            trace[i] / p_eb
+        );
     }
     // Release: exhaust with the vent lag (0.15 s) after the dead time.
     unit.set_demand(BrakeDemand::Release);
@@ -97,13 +108,21 @@ fn wsp_vents_holds_and_reapplies_a_sliding_wheel() {
         }
         assert_eq!(out.valves[0], Valve::Apply);
         // The reference speed follows the true speed (wheels 1-3) during the slide.
-        assert!((out.reference_speed - v).abs() < 0.05, "{} vs {v}", out.reference_speed);
+        assert!(
+            (out.reference_speed - v).abs() < 0.05,
+            "{} vs {v}",
+            out.reference_speed
+        );
         if t > 3.6 && t < 3.7 {
             // Vented after the dead time: pressure well below EB.
             assert!(out.cylinder_pressure[3] < 0.8 * pressure_at_vent.unwrap());
         }
     }
-    assert_eq!(states, vec![Valve::Apply, Valve::Vent, Valve::Hold, Valve::Apply], "{states:?}");
+    assert_eq!(
+        states,
+        vec![Valve::Apply, Valve::Vent, Valve::Hold, Valve::Apply],
+        "{states:?}"
+    );
     let onset = unit.first_vent_time()[3].unwrap();
     // Deficit 0.8 * 40 m/s... threshold max(0.8, 0.06 v) = 2.2 m/s at 36 m/s, reached ~0.3 s
     // into the run-away, or earlier by the deceleration criterion (half the threshold).
@@ -136,7 +155,10 @@ fn wsp_timer_gives_the_brake_back() {
     }
     assert!(applied_after_vent);
     let longest = longest_vent as f64 * 1e-4;
-    assert!(longest <= 3.0 + 2e-3 && longest > 2.9, "longest vent {longest} s");
+    assert!(
+        longest <= 3.0 + 2e-3 && longest > 2.9,
+        "longest vent {longest} s"
+    );
 }
 
 #[test]

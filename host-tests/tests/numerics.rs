@@ -24,12 +24,20 @@ fn f32_absolute_sums_would_drift_but_the_plant_does_not() {
     let naive_error = (naive_distance as f64 - exact).abs();
     assert!(naive_error > 0.5, "naive f32 sum error {naive_error} m");
     // ...while the plant's compensated sum is exact to the f32 resolution of 2.4 km.
-    assert!((o.distance as f64 - exact).abs() < 1e-3, "plant distance {} vs {exact}", o.distance);
+    assert!(
+        (o.distance as f64 - exact).abs() < 1e-3,
+        "plant distance {} vs {exact}",
+        o.distance
+    );
     // Speed unchanged (no force acts) and the suspension stays at its static state:
     // deflections integrate relative to their bodies, not as differences of 2.4 km positions.
     assert!((o.vehicle_speed - 40.0).abs() < 1e-5, "{}", o.vehicle_speed);
     for w in &o.wheelsets {
-        assert!((w.axle_load as f64 - 106_438.5).abs() < 0.05, "axle load {}", w.axle_load);
+        assert!(
+            (w.axle_load as f64 - 106_438.5).abs() < 0.05,
+            "axle load {}",
+            w.axle_load
+        );
         assert!(w.slip_velocity.abs() < 1e-6);
     }
 }
@@ -50,7 +58,11 @@ fn axle_loads_at_600_m_agree_in_f32_and_f64() {
     assert!(ob.distance > 550.0);
     for j in 0..4 {
         let (qa, qb) = (oa.wheelsets[j].axle_load as f64, ob.wheelsets[j].axle_load);
-        assert!((qa - qb).abs() < 20.0, "wheelset {}: f32 {qa} vs f64 {qb}", j + 1);
+        assert!(
+            (qa - qb).abs() < 20.0,
+            "wheelset {}: f32 {qa} vs f64 {qb}",
+            j + 1
+        );
     }
 }
 
@@ -120,7 +132,10 @@ fn explicit_spin_update_chatters_at_low_speed_the_plant_does_not() {
             assert!(o.wheelsets[j].omega >= 0.0);
         }
     }
-    assert!(flips < 20, "{flips} step-to-step sign flips of the slip change");
+    assert!(
+        flips < 20,
+        "{flips} step-to-step sign flips of the slip change"
+    );
     // Stopped: wheels held by the brakes, wheelsets at rest; the carbody still rocks on its
     // lightly damped longitudinal suspension (mm/s).
     let o = plant.outputs();
@@ -133,7 +148,10 @@ fn explicit_spin_update_chatters_at_low_speed_the_plant_does_not() {
 
 #[test]
 fn clean_stop_no_backward_creep_no_nan() {
-    for model in [hils_plant::FrictionModel::Variable, hils_plant::FrictionModel::Constant] {
+    for model in [
+        hils_plant::FrictionModel::Variable,
+        hils_plant::FrictionModel::Constant,
+    ] {
         let mut p = Params::default();
         p.friction.model = model;
         let mut sim = ClosedLoop::<f32>::new(&p, Rail::Wet, 150.0 / 3.6).unwrap();

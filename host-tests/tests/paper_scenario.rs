@@ -57,7 +57,11 @@ fn variable_friction_slides_on_wheelsets_2_and_4_only() {
         assert_eq!(s.slides, vec![2, 4], "onsets {:?}", s.slide_onset_s);
         for j in [1, 3] {
             let onset = s.slide_onset_s[j].expect("onset");
-            assert!((2.0..=6.0).contains(&onset), "wheelset {} onset {onset}", j + 1);
+            assert!(
+                (2.0..=6.0).contains(&onset),
+                "wheelset {} onset {onset}",
+                j + 1
+            );
         }
         assert!(s.slide_onset_s[0].is_none() && s.slide_onset_s[2].is_none());
         let stop = s.stop_time_s.expect("stops");
@@ -102,8 +106,14 @@ fn variable_mu_d_is_above_mu_d0_and_dips_in_the_middle() {
     let start = mean(braking[0]);
     let end = mean(braking.last().unwrap());
     let t_min = braking[i_min].t;
-    assert!(start > min + 0.015 && end > min + 0.03, "start {start}, min {min}, end {end}");
-    assert!(t_min > 0.2 * stop && t_min < 0.8 * stop, "minimum at {t_min} s of {stop}");
+    assert!(
+        start > min + 0.015 && end > min + 0.03,
+        "start {start}, min {min}, end {end}"
+    );
+    assert!(
+        t_min > 0.2 * stop && t_min < 0.8 * stop,
+        "minimum at {t_min} s of {stop}"
+    );
     let s = &run.summary;
     assert!((s.mu_d_min - min).abs() < 2e-3);
     assert!(s.mu_d_at_s["0"] > s.mu_d_at_s["10"] && s.mu_d_at_s["20"] > s.mu_d_at_s["10"]);
@@ -122,17 +132,31 @@ fn axle_loads_during_braking_are_lightest_on_wheelsets_2_and_4() {
         assert!((total - weight).abs() < 0.01 * weight, "total {total}");
         // During steady braking (10-20 s) the order holds throughout.
         for s in run.samples.iter().filter(|s| s.t > 10.0 && s.t < 20.0) {
-            assert!(s.q[1].max(s.q[3]) < s.q[0].min(s.q[2]), "{:?} at {}", s.q, s.t);
+            assert!(
+                s.q[1].max(s.q[3]) < s.q[0].min(s.q[2]),
+                "{:?} at {}",
+                s.q,
+                s.t
+            );
         }
     }
 }
 
 #[test]
 fn f32_run_matches_f64_run() {
-    for (a, b) in [(variable_f32(), variable_f64()), (constant_f32(), constant_f64())] {
+    for (a, b) in [
+        (variable_f32(), variable_f64()),
+        (constant_f32(), constant_f64()),
+    ] {
         let (sa, sb) = (&a.summary, &b.summary);
-        let (da, db) = (sa.stopping_distance_m.unwrap(), sb.stopping_distance_m.unwrap());
-        assert!((da - db).abs() <= 1e-3 * db, "stopping distance f32 {da} vs f64 {db}");
+        let (da, db) = (
+            sa.stopping_distance_m.unwrap(),
+            sb.stopping_distance_m.unwrap(),
+        );
+        assert!(
+            (da - db).abs() <= 1e-3 * db,
+            "stopping distance f32 {da} vs f64 {db}"
+        );
         assert_eq!(sa.slides, sb.slides);
         for j in 0..4 {
             match (sa.slide_onset_s[j], sb.slide_onset_s[j]) {
@@ -143,7 +167,13 @@ fn f32_run_matches_f64_run() {
         }
         // The whole trajectory: vehicle speed within 0.05 % of the initial speed.
         for (x, y) in a.samples.iter().zip(&b.samples) {
-            assert!((x.v_ref - y.v_ref).abs() < 5e-4 * 41.67, "{} vs {} at {}", x.v_ref, y.v_ref, x.t);
+            assert!(
+                (x.v_ref - y.v_ref).abs() < 5e-4 * 41.67,
+                "{} vs {} at {}",
+                x.v_ref,
+                y.v_ref,
+                x.t
+            );
         }
     }
 }
@@ -178,7 +208,10 @@ fn energy_balance_closes_within_one_percent() {
         let (lost, brake, contact, damper) = energy_balance(model);
         let dissipated = brake + contact + damper;
         let ke0 = 0.5 * Params::default().effective_mass() * (150.0f64 / 3.6).powi(2);
-        assert!((lost - ke0).abs() < 0.01 * ke0, "lost {lost} vs initial KE {ke0}");
+        assert!(
+            (lost - ke0).abs() < 0.01 * ke0,
+            "lost {lost} vs initial KE {ke0}"
+        );
         assert!(
             (lost - dissipated).abs() < 0.01 * lost,
             "{model:?}: lost {lost:.0} J, brake {brake:.0} + contact {contact:.0} + dampers {damper:.0}"
@@ -190,7 +223,12 @@ fn energy_balance_closes_within_one_percent() {
 #[test]
 fn summary_has_the_documented_keys() {
     let json = serde_json::to_value(&variable_f32().summary).unwrap();
-    let keys: Vec<&str> = json.as_object().unwrap().keys().map(|k| k.as_str()).collect();
+    let keys: Vec<&str> = json
+        .as_object()
+        .unwrap()
+        .keys()
+        .map(|k| k.as_str())
+        .collect();
     let mut expected = vec![
         "stop_time_s",
         "stopping_distance_m",
@@ -210,7 +248,12 @@ fn summary_has_the_documented_keys() {
     let mut keys = keys;
     keys.sort();
     assert_eq!(keys, expected);
-    let mu_keys: Vec<_> = json["mu_d_at_s"].as_object().unwrap().keys().cloned().collect();
+    let mu_keys: Vec<_> = json["mu_d_at_s"]
+        .as_object()
+        .unwrap()
+        .keys()
+        .cloned()
+        .collect();
     assert_eq!(mu_keys, vec!["0", "10", "20"]);
     assert_eq!(json["slide_onset_s"].as_array().unwrap().len(), 4);
 }

@@ -23,10 +23,17 @@ fn static_axle_loads_are_equal_and_carry_the_weight() {
     let weight = p.total_mass() * p.vehicle.g; // 43 400 kg * 9.81 = 425 754 N
     assert!(close(weight, 425_754.0, 1e-6));
     let sum: f64 = o.wheelsets.iter().map(|w| w.axle_load).sum();
-    assert!(close(sum, weight, 1e-6 * weight), "sum {sum} vs weight {weight}");
+    assert!(
+        close(sum, weight, 1e-6 * weight),
+        "sum {sum} vs weight {weight}"
+    );
     for w in &o.wheelsets {
         // (35 000/2 + 2 500)/2 * 9.81 + 850 * 9.81 = 106 438.5 N
-        assert!(close(w.axle_load, 106_438.5, 1e-6), "axle load {}", w.axle_load);
+        assert!(
+            close(w.axle_load, 106_438.5, 1e-6),
+            "axle load {}",
+            w.axle_load
+        );
     }
     assert!(o.vehicle_speed.abs() < 1e-12);
     // The same in f32.
@@ -35,7 +42,11 @@ fn static_axle_loads_are_equal_and_carry_the_weight() {
         plant.step(&[BrakeInput::ClampForce(0.0); 4]);
     }
     for w in &plant.outputs().wheelsets {
-        assert!(close(w.axle_load as f64, 106_438.5, 0.05), "f32 axle load {}", w.axle_load);
+        assert!(
+            close(w.axle_load as f64, 106_438.5, 0.05),
+            "f32 axle load {}",
+            w.axle_load
+        );
     }
 }
 
@@ -47,8 +58,16 @@ fn polach_normalised_force_identities() {
     // wet: (2/pi)(0.3/1.09 + atan 0.1) = 0.23867.
     let dry = Polach::<f64>::new(&p.contact, Rail::Dry);
     let wet = Polach::<f64>::new(&p.contact, Rail::Wet);
-    assert!(close(dry.normalised_force(1.0), 0.5606, 1e-4), "{}", dry.normalised_force(1.0));
-    assert!(close(wet.normalised_force(1.0), 0.2387, 5e-5), "{}", wet.normalised_force(1.0));
+    assert!(
+        close(dry.normalised_force(1.0), 0.5606, 1e-4),
+        "{}",
+        dry.normalised_force(1.0)
+    );
+    assert!(
+        close(wet.normalised_force(1.0), 0.2387, 5e-5),
+        "{}",
+        wet.normalised_force(1.0)
+    );
     // Tends to 1 for large eps (full slip: F = mu Q).
     for polach in [&dry, &wet] {
         assert!(close(polach.normalised_force(1e6), 1.0, 1e-4));
@@ -57,7 +76,9 @@ fn polach_normalised_force_identities() {
     // And the plant's evaluation (chord form) gives the same force as Eq (9) written out.
     let (u, v, q) = (0.5, 30.0, 100e3);
     let c = wet.evaluate(u, v, q);
-    let k = 2.0 / 3.0 * p.contact.shear_stiffness_c * std::f64::consts::PI
+    let k = 2.0 / 3.0
+        * p.contact.shear_stiffness_c
+        * std::f64::consts::PI
         * p.contact.semi_axis_a.powi(2)
         * p.contact.semi_axis_b;
     let mu = 0.21 * ((1.0 - 0.4) * (-0.2 * u).exp() + 0.4); // Eq (11)
@@ -99,9 +120,15 @@ fn eq2_matches_hand_values_of_table_1() {
     ];
     for (v_d, t_d, hand) in cases {
         let mu = f.mu_d(v_d, t_d, 0.0);
-        assert!(close(mu, hand, 2e-6), "mu_d({v_d}, {t_d}) = {mu}, hand {hand}");
+        assert!(
+            close(mu, hand, 2e-6),
+            "mu_d({v_d}, {t_d}) = {mu}, hand {hand}"
+        );
         let mu32 = DiscPadFriction::<f32>::new(&p.friction).mu_d(v_d as f32, t_d as f32, 0.0);
-        assert!(close(mu32 as f64, hand, 2e-6), "f32 mu_d({v_d}, {t_d}) = {mu32}");
+        assert!(
+            close(mu32 as f64, hand, 2e-6),
+            "f32 mu_d({v_d}, {t_d}) = {mu32}"
+        );
     }
     // Constant model: mu_d0 whatever the speed and temperature.
     let mut constant = p.friction;
@@ -156,7 +183,8 @@ fn quasi_static_axle_loads(p: &Params, a: f64, torques: [f64; 4]) -> [f64; 4] {
         // -(h_sl - h_b) f_sec - (h_b - h_pl) (P0 + P1) - T0 - T1 + (b/2)(dP0 - dP1) = 0
         let h_b = v.bogie_cog_height;
         let h_pl = s.primary_longitudinal_height;
-        let moment = -(h_sl - h_b) * f_sec - (h_b - h_pl) * (primary_on_ws[j0] + primary_on_ws[j1])
+        let moment = -(h_sl - h_b) * f_sec
+            - (h_b - h_pl) * (primary_on_ws[j0] + primary_on_ws[j1])
             - torques[j0]
             - torques[j1];
         let diff = -moment / (v.wheel_base / 2.0); // dP_lead - dP_trail
@@ -203,7 +231,10 @@ fn axle_load_transfer_matches_a_quasi_static_derivation() {
     assert!(q[0] - q[1] > 5_000.0 && q[2] - q[3] > 5_000.0);
     let without_reaction = quasi_static_axle_loads(&p, a, [0.0; 4]);
     let reaction_share = (q[0] - q[1]) - (without_reaction[0] - without_reaction[1]);
-    assert!(reaction_share > 3_000.0, "brake reaction moves {reaction_share} N");
+    assert!(
+        reaction_share > 3_000.0,
+        "brake reaction moves {reaction_share} N"
+    );
 }
 
 #[test]
@@ -220,15 +251,21 @@ fn parameter_files_with_bad_keys_or_values_are_refused_with_the_key_named() {
     let text = std::fs::read_to_string(&path).unwrap();
     // Misspelt key.
     let bad = text.replace("bogie_mass = 2500.0", "bogie_mas = 2500.0");
-    let e = hils::params_file::parse_params(&bad, "variant").unwrap_err().to_string();
+    let e = hils::params_file::parse_params(&bad, "variant")
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("bogie_mas"), "{e}");
     // Value out of range.
     let bad = text.replace("wheelset_mass = 850.0", "wheelset_mass = -850.0");
-    let e = hils::params_file::parse_params(&bad, "variant").unwrap_err().to_string();
+    let e = hils::params_file::parse_params(&bad, "variant")
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("vehicle.wheelset_mass"), "{e}");
     // Wrong type.
     let bad = text.replace("model = \"variable\"", "model = \"sometimes\"");
-    let e = hils::params_file::parse_params(&bad, "variant").unwrap_err().to_string();
+    let e = hils::params_file::parse_params(&bad, "variant")
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("sometimes") || e.contains("model"), "{e}");
     // A variant with changed values loads and differs only there.
     let variant = text.replace("mu_d0 = 0.38", "mu_d0 = 0.35");

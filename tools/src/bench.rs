@@ -63,9 +63,8 @@ fn time_plant<F: Real>(params: &Params, inputs: &[[f32; 4]], repeat: usize) -> R
         .collect();
     let mut best = f64::INFINITY;
     for _ in 0..repeat {
-        let mut plant =
-            Plant::<F>::new(params, params.scenario.paper_eb.rail, F::of(150.0 / 3.6))
-                .map_err(|e| anyhow!("{e}"))?;
+        let mut plant = Plant::<F>::new(params, params.scenario.paper_eb.rail, F::of(150.0 / 3.6))
+            .map_err(|e| anyhow!("{e}"))?;
         let start = Instant::now();
         for input in &inputs {
             black_box(plant.step(black_box(input)));
@@ -119,7 +118,10 @@ pub fn main(args: BenchArgs) -> Result<()> {
     if args.json {
         println!("{}", serde_json::to_string(&f)?);
     } else {
-        println!("plant (17 DOF, 4 contacts, Eq 2, heat), paper EB inputs, one core, best of {}:", f.repeat);
+        println!(
+            "plant (17 DOF, 4 contacts, Eq 2, heat), paper EB inputs, one core, best of {}:",
+            f.repeat
+        );
         println!(
             "  f32: {:>10.0} steps/s  ({:.0} ns/step)  real-time factor at {:.0} Hz: {:.0}x",
             f.steps_per_s_f32, f.ns_per_step_f32, f.plant_rate_hz, f.realtime_factor_f32

@@ -25,8 +25,18 @@ pub struct Series {
 }
 
 impl Series {
-    pub fn new(name: impl Into<String>, points: Vec<(f64, f64)>, style: Style, color: usize) -> Self {
-        Self { name: name.into(), points, style, color }
+    pub fn new(
+        name: impl Into<String>,
+        points: Vec<(f64, f64)>,
+        style: Style,
+        color: usize,
+    ) -> Self {
+        Self {
+            name: name.into(),
+            points,
+            style,
+            color,
+        }
     }
 }
 
@@ -40,6 +50,8 @@ pub struct Chart {
     /// Fixed axis ranges (None: from the data).
     pub x_range: Option<(f64, f64)>,
     pub y_range: Option<(f64, f64)>,
+    /// Legend in the lower right corner instead of the upper right.
+    pub legend_lower_right: bool,
 }
 
 pub const PALETTE: [RGBColor; 8] = [
@@ -87,7 +99,12 @@ pub fn thin(points: &[(f64, f64)], max: usize) -> Vec<(f64, f64)> {
 
 impl Chart {
     pub fn new(title: &str, x_label: &str, y_label: &str) -> Self {
-        Self { title: title.into(), x_label: x_label.into(), y_label: y_label.into(), ..Self::default() }
+        Self {
+            title: title.into(),
+            x_label: x_label.into(),
+            y_label: y_label.into(),
+            ..Self::default()
+        }
     }
 
     pub fn with(mut self, s: Series) -> Self {
@@ -98,8 +115,10 @@ impl Chart {
     /// Draws the chart to an SVG file.
     pub fn save_svg(&self, path: &Path) -> Result<()> {
         let root = SVGBackend::new(path, (900, 560)).into_drawing_area();
-        self.draw(&root).map_err(|e| anyhow!("cannot draw {}: {e}", path.display()))?;
-        root.present().map_err(|e| anyhow!("cannot write {}: {e}", path.display()))?;
+        self.draw(&root)
+            .map_err(|e| anyhow!("cannot draw {}: {e}", path.display()))?;
+        root.present()
+            .map_err(|e| anyhow!("cannot write {}: {e}", path.display()))?;
         Ok(())
     }
 
@@ -109,10 +128,18 @@ impl Chart {
     ) -> std::result::Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
         root.fill(&WHITE)?;
         let x = self.x_range.unwrap_or_else(|| {
-            range_of(self.series.iter().flat_map(|s| s.points.iter().map(|p| p.0)))
+            range_of(
+                self.series
+                    .iter()
+                    .flat_map(|s| s.points.iter().map(|p| p.0)),
+            )
         });
         let y = self.y_range.unwrap_or_else(|| {
-            range_of(self.series.iter().flat_map(|s| s.points.iter().map(|p| p.1)))
+            range_of(
+                self.series
+                    .iter()
+                    .flat_map(|s| s.points.iter().map(|p| p.1)),
+            )
         });
         let mut chart = ChartBuilder::on(root)
             .caption(&self.title, ("sans-serif", 22))
@@ -131,21 +158,15 @@ impl Chart {
             let pts = thin(&s.points, 4000);
             let anno = match s.style {
                 Style::Solid => chart.draw_series(LineSeries::new(pts, color.stroke_width(2)))?,
-                Style::Dashed => chart.draw_series(DashedLineSeries::new(
-                    pts,
-                    10,
-                    6,
-                    color.stroke_width(2),
-                ))?,
-                Style::Dotted => chart.draw_series(DashedLineSeries::new(
-                    pts,
-                    3,
-                    4,
-                    color.stroke_width(2),
-                ))?,
-                Style::Points => chart.draw_series(
-                    pts.into_iter().map(|p| Circle::new(p, 2, color.filled())),
-                )?,
+                Style::Dashed => {
+                    chart.draw_series(DashedLineSeries::new(pts, 10, 6, color.stroke_width(2)))?
+                }
+                Style::Dotted => {
+                    chart.draw_series(DashedLineSeries::new(pts, 3, 4, color.stroke_width(2)))?
+                }
+                Style::Points => {
+                    chart.draw_series(pts.into_iter().map(|p| Circle::new(p, 2, color.filled())))?
+                }
             };
             anno.label(s.name.as_str()).legend(move |(x, y)| {
                 PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
@@ -155,7 +176,11 @@ impl Chart {
             .configure_series_labels()
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperRight)
+            .position(if self.legend_lower_right {
+                SeriesLabelPosition::LowerRight
+            } else {
+                SeriesLabelPosition::UpperRight
+            })
             .draw()?;
         Ok(())
     }

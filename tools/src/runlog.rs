@@ -37,7 +37,11 @@ pub fn columns() -> Vec<String> {
 }
 
 /// Writes `# key: value` metadata, the header and the samples.
-pub fn write_run_log<W: Write>(out: W, metadata: &[(&str, String)], samples: &[Sample]) -> Result<()> {
+pub fn write_run_log<W: Write>(
+    out: W,
+    metadata: &[(&str, String)],
+    samples: &[Sample],
+) -> Result<()> {
     let mut out = std::io::BufWriter::new(out);
     for (k, v) in metadata {
         writeln!(out, "# {k}: {v}")?;

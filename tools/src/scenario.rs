@@ -126,9 +126,12 @@ fn record<F: Real>(sim: &ClosedLoop<F>, eb: bool) -> Sample {
 /// carbody speed falls to 0.01 m/s, plus `after_stop_s`.
 pub fn run_eb<F: Real>(params: &Params, opts: &EbOptions) -> Result<Run> {
     let started = Instant::now();
-    let config = opts.unit.unwrap_or_else(|| UnitConfig::new(params.scenario.paper_eb.step));
-    let mut sim = ClosedLoop::<F>::with_config(params, opts.rail, F::of(opts.initial_speed_mps), &config)
-        .map_err(|e| anyhow!("cannot build the simulation: {e}"))?;
+    let config = opts
+        .unit
+        .unwrap_or_else(|| UnitConfig::new(params.scenario.paper_eb.step));
+    let mut sim =
+        ClosedLoop::<F>::with_config(params, opts.rail, F::of(opts.initial_speed_mps), &config)
+            .map_err(|e| anyhow!("cannot build the simulation: {e}"))?;
     let dt = config.dt;
     let static_loads = sim.outputs().wheelsets.map(|w| w.axle_load.to_f64());
     sim.set_demand(BrakeDemand::Emergency);
@@ -143,14 +146,21 @@ pub fn run_eb<F: Real>(params: &Params, opts: &EbOptions) -> Result<Run> {
     let mut mu_d_min = f64::INFINITY;
     let mut lock_run = [0.0f64; 4];
     let mut longest_lock = [0.0f64; 4];
+    // The bar appears only once a run has taken a second (short runs stay quiet).
     let bar = opts.progress.then(|| {
-        let bar = indicatif::ProgressBar::new(max_steps);
+        let bar = indicatif::ProgressBar::with_draw_target(
+            Some(max_steps),
+            indicatif::ProgressDrawTarget::hidden(),
+        );
         bar.set_style(
-            indicatif::ProgressStyle::with_template("{spinner} simulated {msg} [{bar:30}] {pos}/{len} steps")
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            indicatif::ProgressStyle::with_template(
+                "{spinner} simulated {msg} [{bar:30}] {pos}/{len} steps",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
         );
         bar
     });
+    let mut bar_shown = false;
     let mut steps = 0u64;
     let radius = sim.plant.wheel_radius().to_f64();
     while steps < max_steps {
@@ -185,6 +195,10 @@ pub fn run_eb<F: Real>(params: &Params, opts: &EbOptions) -> Result<Run> {
         }
         if let Some(bar) = &bar {
             if steps % 10_000 == 0 {
+                if !bar_shown && started.elapsed().as_secs_f64() > 1.0 {
+                    bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+                    bar_shown = true;
+                }
                 bar.set_position(steps);
                 bar.set_message(format!("{:.1} s, {:.1} km/h", steps as f64 * dt, v * 3.6));
             }
@@ -200,16 +214,24 @@ pub fn run_eb<F: Real>(params: &Params, opts: &EbOptions) -> Result<Run> {
     }
 
     let mean_mu_at = |t: f64| -> f64 {
-        let i = samples.partition_point(|s| s.t < t - 1e-9).min(samples.len() - 1);
+        let i = samples
+            .partition_point(|s| s.t < t - 1e-9)
+            .min(samples.len() - 1);
         samples[i].mu_d.iter().sum::<f64>() / 4.0
     };
     let stop_time = stop.map(|s| s.1);
     let mu_d_end = match stop_time {
         Some(t) => mean_mu_at(t),
-        None => samples.last().map(|s| s.mu_d.iter().sum::<f64>() / 4.0).unwrap_or(f64::NAN),
+        None => samples
+            .last()
+            .map(|s| s.mu_d.iter().sum::<f64>() / 4.0)
+            .unwrap_or(f64::NAN),
     };
     let onsets = sim.unit.first_vent_time();
-    let slides: Vec<usize> = (0..4).filter(|&j| onsets[j].is_some()).map(|j| j + 1).collect();
+    let slides: Vec<usize> = (0..4)
+        .filter(|&j| onsets[j].is_some())
+        .map(|j| j + 1)
+        .collect();
     let mut mu_at = std::collections::BTreeMap::new();
     for t in [0.0, 10.0, 20.0] {
         mu_at.insert(format!("{}", t as u32), mean_mu_at(t));

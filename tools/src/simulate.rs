@@ -139,10 +139,16 @@ pub fn main(args: SimulateArgs) -> Result<()> {
         Rail::Dry => "dry",
     };
     let metadata = vec![
-        ("source", "hils simulate (software-in-the-loop: plant + simulated brake unit)".to_string()),
+        (
+            "source",
+            "hils simulate (software-in-the-loop: plant + simulated brake unit)".to_string(),
+        ),
         ("scenario", "paper-eb".to_string()),
         ("rail", rail.to_string()),
-        ("initial_speed_kmh", format!("{}", opts.initial_speed_mps * 3.6)),
+        (
+            "initial_speed_kmh",
+            format!("{}", opts.initial_speed_mps * 3.6),
+        ),
         ("eb_command_s", "0".to_string()),
         ("friction", friction.to_string()),
         ("sample_rate_hz", format!("{}", args.sample_rate_hz)),
@@ -151,7 +157,10 @@ pub fn main(args: SimulateArgs) -> Result<()> {
         ("math", hils_plant::math::IMPLEMENTATION.to_string()),
         (
             "params",
-            args.params.as_ref().map(|p| p.display().to_string()).unwrap_or("built-in".into()),
+            args.params
+                .as_ref()
+                .map(|p| p.display().to_string())
+                .unwrap_or("built-in".into()),
         ),
     ];
     let csv_path = args.out.join("run.csv");
@@ -159,10 +168,16 @@ pub fn main(args: SimulateArgs) -> Result<()> {
         .with_context(|| format!("cannot create {}", csv_path.display()))?;
     write_run_log(file, &metadata, &main_run.samples)?;
     let summary_path = args.out.join("summary.json");
-    std::fs::write(&summary_path, serde_json::to_string_pretty(&main_run.summary)? + "\n")?;
+    std::fs::write(
+        &summary_path,
+        serde_json::to_string_pretty(&main_run.summary)? + "\n",
+    )?;
 
     let s = &main_run.summary;
-    println!("{friction} friction, {rail} rail, {:.0} km/h:", opts.initial_speed_mps * 3.6);
+    println!(
+        "{friction} friction, {rail} rail, {:.0} km/h:",
+        opts.initial_speed_mps * 3.6
+    );
     match (s.stop_time_s, s.stopping_distance_m) {
         (Some(t), Some(d)) => println!("  stop after {t:.2} s and {d:.1} m"),
         _ => println!("  no stop within {} s", opts.max_time_s),
@@ -170,7 +185,8 @@ pub fn main(args: SimulateArgs) -> Result<()> {
     println!(
         "  WSP acted on wheelsets {:?}; first vents {:?} s",
         s.slides,
-        s.slide_onset_s.map(|o| o.map(|t| (t * 1000.0).round() / 1000.0))
+        s.slide_onset_s
+            .map(|o| o.map(|t| (t * 1000.0).round() / 1000.0))
     );
     println!(
         "  mu_d: {:.4} at 0 s, min {:.4}, {:.4} at the stop; EB pressure {:.0} Pa",
@@ -191,7 +207,11 @@ pub fn main(args: SimulateArgs) -> Result<()> {
             println!("  figure {}", f.display());
         }
     }
-    println!("  wrote {} and {}", csv_path.display(), summary_path.display());
+    println!(
+        "  wrote {} and {}",
+        csv_path.display(),
+        summary_path.display()
+    );
     Ok(())
 }
 
@@ -220,7 +240,12 @@ pub fn draw_figures(dir: &Path, params: &Params, main: &Run, other: &Run) -> Res
         "time, s",
         "speed, km/h",
     );
-    chart.series.push(Series::new("vehicle", series_of(main, &|s| s.v_ref * 3.6), Style::Dashed, 7));
+    chart.series.push(Series::new(
+        "vehicle",
+        series_of(main, &|s| s.v_ref * 3.6),
+        Style::Dashed,
+        7,
+    ));
     for j in 0..4 {
         chart.series.push(Series::new(
             format!("wheelset {}", j + 1),
@@ -269,12 +294,16 @@ pub fn draw_figures(dir: &Path, params: &Params, main: &Run, other: &Run) -> Res
         Style::Dotted,
         2,
     ));
+    chart.legend_lower_right = true;
     files.push(dir.join("fig9_mu_d.svg"));
     chart.save_svg(files.last().unwrap())?;
 
     // Fig 10: tangential brake force on the disc of wheelset 4.
-    let mut chart =
-        Chart::new("Fig 10: brake force on the disc, wheelset 4", "time, s", "brake force, kN");
+    let mut chart = Chart::new(
+        "Fig 10: brake force on the disc, wheelset 4",
+        "time, s",
+        "brake force, kN",
+    );
     chart.series.push(Series::new(
         "variable mu_d",
         series_of(var, &|s| s.f_brake[3] / 1e3),
@@ -308,7 +337,10 @@ pub fn required_adhesion(params: &Params, s: &crate::scenario::Sample, j: usize)
 
 fn fig11(path: &Path, params: &Params, rail: Rail, var: &Run, con: &Run) -> Result<()> {
     let at = |run: &Run| {
-        let i = run.samples.partition_point(|s| s.t < 3.0).min(run.samples.len() - 1);
+        let i = run
+            .samples
+            .partition_point(|s| s.t < 3.0)
+            .min(run.samples.len() - 1);
         run.samples[i]
     };
     let (sv, sc) = (at(var), at(con));
@@ -322,11 +354,16 @@ fn fig11(path: &Path, params: &Params, rail: Rail, var: &Run, con: &Run) -> Resu
     let limit_v = required_adhesion(params, &sv, 3);
     let limit_c = required_adhesion(params, &sc, 3);
     let mut chart = Chart::new(
-        &format!("Fig 11: adhesion vs creepage at 3 s ({:.0} km/h), wheelset 4", sv.v_ref * 3.6),
+        &format!(
+            "Fig 11: adhesion vs creepage at 3 s ({:.0} km/h), wheelset 4",
+            sv.v_ref * 3.6
+        ),
         "creepage s",
         "adhesion coefficient F/Q",
     );
-    chart.series.push(Series::new("Polach (Eqs 9-12)", curve, Style::Solid, 0));
+    chart
+        .series
+        .push(Series::new("Polach (Eqs 9-12)", curve, Style::Solid, 0));
     chart.series.push(Series::new(
         format!("anti-skid limit, variable mu_d ({limit_v:.4})"),
         vec![(0.0, limit_v), (0.25, limit_v)],
@@ -347,8 +384,19 @@ fn fig11(path: &Path, params: &Params, rail: Rail, var: &Run, con: &Run) -> Resu
             .map(|s| (s.creepage[3], s.adhesion[3]))
             .collect()
     };
-    chart.series.push(Series::new("wheelset 4, variable (0-8 s)", path_of(var), Style::Points, 3));
-    chart.series.push(Series::new("wheelset 4, constant (0-8 s)", path_of(con), Style::Points, 4));
+    chart.series.push(Series::new(
+        "wheelset 4, variable (0-8 s)",
+        path_of(var),
+        Style::Points,
+        3,
+    ));
+    chart.series.push(Series::new(
+        "wheelset 4, constant (0-8 s)",
+        path_of(con),
+        Style::Points,
+        4,
+    ));
     chart.x_range = Some((0.0, 0.25));
+    chart.legend_lower_right = true;
     chart.save_svg(path)
 }

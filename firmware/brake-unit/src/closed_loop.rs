@@ -44,8 +44,8 @@ impl<F: Real> ClosedLoop<F> {
         initial_speed: F,
         config: &UnitConfig,
     ) -> Result<Self, LoopError> {
-        let plant = Plant::with_step(params, rail, initial_speed, config.dt)
-            .map_err(LoopError::Params)?;
+        let plant =
+            Plant::with_step(params, rail, initial_speed, config.dt).map_err(LoopError::Params)?;
         let unit = BrakeUnit::new(params, config).map_err(LoopError::Unit)?;
         let unit_out = UnitOutputs {
             cylinder_pressure: [F::ZERO; WHEELSETS],
@@ -54,7 +54,11 @@ impl<F: Real> ClosedLoop<F> {
             reference_speed: plant.outputs().vehicle_speed,
             demand_pressure: F::ZERO,
         };
-        Ok(Self { plant, unit, unit_out })
+        Ok(Self {
+            plant,
+            unit,
+            unit_out,
+        })
     }
 
     pub fn set_demand(&mut self, demand: BrakeDemand) {
@@ -65,7 +69,10 @@ impl<F: Real> ClosedLoop<F> {
     pub fn step(&mut self) -> &Outputs<F> {
         let speeds = self.plant.wheel_speeds();
         self.unit_out = self.unit.step(&speeds);
-        let inputs = self.unit_out.cylinder_pressure.map(BrakeInput::CylinderPressure);
+        let inputs = self
+            .unit_out
+            .cylinder_pressure
+            .map(BrakeInput::CylinderPressure);
         self.plant.step(&inputs)
     }
 

@@ -35,7 +35,12 @@ pub struct UnitConfig {
 
 impl UnitConfig {
     pub fn new(dt: f64) -> Self {
-        Self { dt, control_period: 1.0e-3, wsp: WspTuning::default(), wsp_enabled: true }
+        Self {
+            dt,
+            control_period: 1.0e-3,
+            wsp: WspTuning::default(),
+            wsp_enabled: true,
+        }
     }
 }
 
@@ -203,7 +208,11 @@ impl<F: Real> BrakeUnit<F> {
             BrakeDemand::Emergency => self.eb_pressure,
             BrakeDemand::Service(decel) => {
                 let d = F::of(decel as f64);
-                let d = if d.is_finite() { d.clamp_to(F::ZERO, self.eb_deceleration) } else { F::ZERO };
+                let d = if d.is_finite() {
+                    d.clamp_to(F::ZERO, self.eb_deceleration)
+                } else {
+                    F::ZERO
+                };
                 (self.eb_pressure * d / self.eb_deceleration).min(self.supply_pressure)
             }
         }

@@ -22,10 +22,9 @@ pub struct Caliper<F> {
 impl<F: Real> Caliper<F> {
     pub fn new(p: &BrakeParams) -> Self {
         let pressure_limit = 1.5 * p.supply_pressure;
-        let clamp_force_limit = ((p.piston_area * pressure_limit - p.retaining_spring_force)
-            .max(0.0)
-            * p.lever_ratio)
-            .max(1.0);
+        let clamp_force_limit =
+            ((p.piston_area * pressure_limit - p.retaining_spring_force).max(0.0) * p.lever_ratio)
+                .max(1.0);
         Self {
             piston_area: F::of(p.piston_area),
             retaining_spring_force: F::of(p.retaining_spring_force),

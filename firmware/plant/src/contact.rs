@@ -75,7 +75,12 @@ impl<F: Real> Polach<F> {
         let mu = self.friction(slip_velocity);
         let creepage = slip_velocity / v_floor;
         if !(load > F::ZERO) {
-            return ContactForce { force: F::ZERO, chord: F::ZERO, mu, creepage };
+            return ContactForce {
+                force: F::ZERO,
+                chord: F::ZERO,
+                mu,
+                creepage,
+            };
         }
         let eps = self.stiffness * creepage / (load * mu);
         let x_a = self.k_a * eps;
@@ -86,9 +91,15 @@ impl<F: Real> Polach<F> {
         } else {
             x_s.atan() / x_s
         };
-        let chord =
-            self.two_over_pi * (self.stiffness / v_floor) * (adhesion_part + self.k_s * atan_over_x);
-        ContactForce { force: chord * slip_velocity, chord, mu, creepage }
+        let chord = self.two_over_pi
+            * (self.stiffness / v_floor)
+            * (adhesion_part + self.k_s * atan_over_x);
+        ContactForce {
+            force: chord * slip_velocity,
+            chord,
+            mu,
+            creepage,
+        }
     }
 
     /// Adhesion coefficient F/Q (paper Eq 13) at creepage `s`, speed `v` (m/s) and axle

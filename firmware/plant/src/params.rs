@@ -14,7 +14,11 @@ use serde::Deserialize;
 
 /// Wheel-rail condition: selects the Polach parameter set (`[contact]` or `[contact.dry]`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-#[cfg_attr(feature = "serde", derive(Deserialize), serde(rename_all = "lowercase"))]
+#[cfg_attr(
+    feature = "serde",
+    derive(Deserialize),
+    serde(rename_all = "lowercase")
+)]
 pub enum Rail {
     #[default]
     Wet,
@@ -23,7 +27,11 @@ pub enum Rail {
 
 /// Disc-pad friction law.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-#[cfg_attr(feature = "serde", derive(Deserialize), serde(rename_all = "lowercase"))]
+#[cfg_attr(
+    feature = "serde",
+    derive(Deserialize),
+    serde(rename_all = "lowercase")
+)]
 pub enum FrictionModel {
     /// Paper Eq (2): mu_d = c mu_d0 (n_v e^(-m_v v_d) + 1)(n_T e^(-m_T T_d) + 1).
     #[default]
@@ -117,8 +125,13 @@ section!(
 
 impl AdhesionSet {
     /// Polach's dry-rail values of the reference file (`[contact.dry]`).
-    pub const DRY: AdhesionSet =
-        AdhesionSet { k_a: 1.00, k_s: 0.40, mu_0: 0.55, a_ratio: 0.40, b_exp: 0.60 };
+    pub const DRY: AdhesionSet = AdhesionSet {
+        k_a: 1.00,
+        k_s: 0.40,
+        mu_0: 0.55,
+        a_ratio: 0.40,
+        b_exp: 0.60,
+    };
 }
 
 section!(
@@ -155,12 +168,22 @@ impl ContactParams {
     /// `k_a, k_s, mu_0, a_ratio, b_exp` (used by fits).
     pub fn set_mut(&mut self, rail: Rail) -> [&mut f64; 5] {
         match rail {
-            Rail::Wet => {
-                [&mut self.k_a, &mut self.k_s, &mut self.mu_0, &mut self.a_ratio, &mut self.b_exp]
-            }
+            Rail::Wet => [
+                &mut self.k_a,
+                &mut self.k_s,
+                &mut self.mu_0,
+                &mut self.a_ratio,
+                &mut self.b_exp,
+            ],
             Rail::Dry => {
                 let d = &mut self.dry;
-                [&mut d.k_a, &mut d.k_s, &mut d.mu_0, &mut d.a_ratio, &mut d.b_exp]
+                [
+                    &mut d.k_a,
+                    &mut d.k_s,
+                    &mut d.mu_0,
+                    &mut d.a_ratio,
+                    &mut d.b_exp,
+                ]
             }
         }
     }
@@ -292,13 +315,21 @@ impl core::fmt::Display for ParamError {
 
 fn check(key: &'static str, value: f64, min: f64, max: f64) -> Result<(), ParamError> {
     // `!(a && b)` also rejects NaN.
-    if value >= min && value <= max { Ok(()) } else { Err(ParamError { key, value, min, max }) }
+    if value >= min && value <= max {
+        Ok(())
+    } else {
+        Err(ParamError {
+            key,
+            value,
+            min,
+            max,
+        })
+    }
 }
 
 fn check_count(key: &'static str, value: u32) -> Result<(), ParamError> {
     check(key, value as f64, 1.0, 16.0)
 }
-
 
 impl Params {
     /// Total mass of the car (carbody, 2 bogies, 4 wheelsets), kg.
@@ -319,24 +350,70 @@ impl Params {
         let v = &self.vehicle;
         check("vehicle.g", v.g, 0.1, 100.0)?;
         check("vehicle.carbody_mass", v.carbody_mass, 1e3, 1e6)?;
-        check("vehicle.carbody_pitch_inertia", v.carbody_pitch_inertia, 1e3, 1e9)?;
-        check("vehicle.carbody_cog_height", v.carbody_cog_height, 0.0, 10.0)?;
+        check(
+            "vehicle.carbody_pitch_inertia",
+            v.carbody_pitch_inertia,
+            1e3,
+            1e9,
+        )?;
+        check(
+            "vehicle.carbody_cog_height",
+            v.carbody_cog_height,
+            0.0,
+            10.0,
+        )?;
         check("vehicle.bogie_mass", v.bogie_mass, 100.0, 1e5)?;
-        check("vehicle.bogie_pitch_inertia", v.bogie_pitch_inertia, 10.0, 1e6)?;
+        check(
+            "vehicle.bogie_pitch_inertia",
+            v.bogie_pitch_inertia,
+            10.0,
+            1e6,
+        )?;
         check("vehicle.bogie_cog_height", v.bogie_cog_height, 0.0, 10.0)?;
         check("vehicle.wheelset_mass", v.wheelset_mass, 50.0, 1e4)?;
-        check("vehicle.wheelset_spin_inertia", v.wheelset_spin_inertia, 1.0, 1e4)?;
+        check(
+            "vehicle.wheelset_spin_inertia",
+            v.wheelset_spin_inertia,
+            1.0,
+            1e4,
+        )?;
         check("vehicle.wheel_radius", v.wheel_radius, 0.05, 2.0)?;
         check("vehicle.bogie_base", v.bogie_base, 0.5, 100.0)?;
         check("vehicle.wheel_base", v.wheel_base, 0.1, 20.0)?;
 
         let s = &self.suspension;
-        check("suspension.secondary_vertical_stiffness", s.secondary_vertical_stiffness, 1e3, 1e9)?;
-        check_count("suspension.secondary_vertical_count", s.secondary_vertical_count)?;
-        check("suspension.secondary_vertical_damping", s.secondary_vertical_damping, 0.0, 1e7)?;
-        check("suspension.secondary_longitudinal_stiffness", s.secondary_longitudinal_stiffness, 1e3, 1e9)?;
-        check_count("suspension.secondary_longitudinal_count", s.secondary_longitudinal_count)?;
-        check("suspension.traction_link_stiffness", s.traction_link_stiffness, 0.0, 1e9)?;
+        check(
+            "suspension.secondary_vertical_stiffness",
+            s.secondary_vertical_stiffness,
+            1e3,
+            1e9,
+        )?;
+        check_count(
+            "suspension.secondary_vertical_count",
+            s.secondary_vertical_count,
+        )?;
+        check(
+            "suspension.secondary_vertical_damping",
+            s.secondary_vertical_damping,
+            0.0,
+            1e7,
+        )?;
+        check(
+            "suspension.secondary_longitudinal_stiffness",
+            s.secondary_longitudinal_stiffness,
+            1e3,
+            1e9,
+        )?;
+        check_count(
+            "suspension.secondary_longitudinal_count",
+            s.secondary_longitudinal_count,
+        )?;
+        check(
+            "suspension.traction_link_stiffness",
+            s.traction_link_stiffness,
+            0.0,
+            1e9,
+        )?;
         check(
             "suspension.secondary_longitudinal_damping",
             s.secondary_longitudinal_damping,
@@ -349,11 +426,32 @@ impl Params {
             0.0,
             10.0,
         )?;
-        check("suspension.primary_vertical_stiffness", s.primary_vertical_stiffness, 1e3, 1e9)?;
-        check_count("suspension.primary_vertical_count", s.primary_vertical_count)?;
-        check("suspension.primary_vertical_damping", s.primary_vertical_damping, 0.0, 1e7)?;
-        check("suspension.primary_longitudinal_stiffness", s.primary_longitudinal_stiffness, 1e3, 1e9)?;
-        check_count("suspension.primary_longitudinal_count", s.primary_longitudinal_count)?;
+        check(
+            "suspension.primary_vertical_stiffness",
+            s.primary_vertical_stiffness,
+            1e3,
+            1e9,
+        )?;
+        check_count(
+            "suspension.primary_vertical_count",
+            s.primary_vertical_count,
+        )?;
+        check(
+            "suspension.primary_vertical_damping",
+            s.primary_vertical_damping,
+            0.0,
+            1e7,
+        )?;
+        check(
+            "suspension.primary_longitudinal_stiffness",
+            s.primary_longitudinal_stiffness,
+            1e3,
+            1e9,
+        )?;
+        check_count(
+            "suspension.primary_longitudinal_count",
+            s.primary_longitudinal_count,
+        )?;
         check(
             "suspension.primary_longitudinal_damping",
             s.primary_longitudinal_damping,
@@ -374,8 +472,18 @@ impl Params {
             check(key("contact.k_a", "contact.dry.k_a"), set.k_a, 1e-3, 100.0)?;
             check(key("contact.k_s", "contact.dry.k_s"), set.k_s, 1e-3, 100.0)?;
             check(key("contact.mu_0", "contact.dry.mu_0"), set.mu_0, 1e-3, 2.0)?;
-            check(key("contact.a_ratio", "contact.dry.a_ratio"), set.a_ratio, 0.0, 1.0)?;
-            check(key("contact.b_exp", "contact.dry.b_exp"), set.b_exp, 0.0, 100.0)?;
+            check(
+                key("contact.a_ratio", "contact.dry.a_ratio"),
+                set.a_ratio,
+                0.0,
+                1.0,
+            )?;
+            check(
+                key("contact.b_exp", "contact.dry.b_exp"),
+                set.b_exp,
+                0.0,
+                100.0,
+            )?;
         }
         check("contact.semi_axis_a", c.semi_axis_a, 1e-5, 0.1)?;
         check("contact.semi_axis_b", c.semi_axis_b, 1e-5, 0.1)?;
@@ -384,7 +492,12 @@ impl Params {
 
         let b = &self.brake;
         check("brake.piston_area", b.piston_area, 1e-5, 1.0)?;
-        check("brake.retaining_spring_force", b.retaining_spring_force, 0.0, 1e5)?;
+        check(
+            "brake.retaining_spring_force",
+            b.retaining_spring_force,
+            0.0,
+            1e5,
+        )?;
         check("brake.lever_ratio", b.lever_ratio, 0.01, 100.0)?;
         check("brake.friction_radius", b.friction_radius, 0.01, 2.0)?;
         check("brake.friction_faces", b.friction_faces as f64, 1.0, 16.0)?;
@@ -408,21 +521,51 @@ impl Params {
         check("thermal.beta", t.beta, 0.0, 1e6)?;
         check("thermal.ambient_rise", t.ambient_rise, -100.0, 1000.0)?;
 
-        check("track.gradient_permille", self.track.gradient_permille, -100.0, 100.0)?;
+        check(
+            "track.gradient_permille",
+            self.track.gradient_permille,
+            -100.0,
+            100.0,
+        )?;
 
         let r = &self.resistance;
         check("resistance.davis_a_n", r.davis_a_n, 0.0, 1e6)?;
-        check("resistance.davis_b_n_per_mps", r.davis_b_n_per_mps, 0.0, 1e6)?;
-        check("resistance.davis_c_n_per_mps2", r.davis_c_n_per_mps2, 0.0, 1e5)?;
+        check(
+            "resistance.davis_b_n_per_mps",
+            r.davis_b_n_per_mps,
+            0.0,
+            1e6,
+        )?;
+        check(
+            "resistance.davis_c_n_per_mps2",
+            r.davis_c_n_per_mps2,
+            0.0,
+            1e5,
+        )?;
 
         let u = &self.brake_unit;
         check("brake_unit.eb_deceleration", u.eb_deceleration, 0.01, 10.0)?;
-        check("brake_unit.fill_time_constant", u.fill_time_constant, 1e-3, 100.0)?;
-        check("brake_unit.vent_time_constant", u.vent_time_constant, 1e-3, 100.0)?;
+        check(
+            "brake_unit.fill_time_constant",
+            u.fill_time_constant,
+            1e-3,
+            100.0,
+        )?;
+        check(
+            "brake_unit.vent_time_constant",
+            u.vent_time_constant,
+            1e-3,
+            100.0,
+        )?;
         check("brake_unit.dead_time", u.dead_time, 0.0, 1.0)?;
 
         let p = &self.scenario.paper_eb;
-        check("scenario.paper_eb.initial_speed_kmh", p.initial_speed_kmh, 0.0, 500.0)?;
+        check(
+            "scenario.paper_eb.initial_speed_kmh",
+            p.initial_speed_kmh,
+            0.0,
+            500.0,
+        )?;
         check("scenario.paper_eb.step", p.step, 1e-6, 1e-2)?;
 
         // Geometry: the wheelsets of a bogie must fit between the bogie centres.

@@ -296,7 +296,12 @@ impl<F: Real> Plant<F> {
 
     fn constants(p: &Params, rail: Rail, dt: f64) -> Result<Constants<F>, ParamError> {
         if !(dt >= 1e-6 && dt <= 1e-2) {
-            return Err(ParamError { key: "step", value: dt, min: 1e-6, max: 1e-2 });
+            return Err(ParamError {
+                key: "step",
+                value: dt,
+                min: 1e-6,
+                max: 1e-2,
+            });
         }
         let v = &p.vehicle;
         let s = &p.suspension;
@@ -319,18 +324,28 @@ impl<F: Real> Plant<F> {
         let h_pl_b = s.primary_longitudinal_height - v.bogie_cog_height;
         let h_sl_c = s.secondary_longitudinal_height - v.carbody_cog_height;
         let modes = [
-            ((2.0 * k_sl + 2.0 * k_sv) / v.carbody_mass, (2.0 * c_sl + 2.0 * c_sv) / v.carbody_mass),
+            (
+                (2.0 * k_sl + 2.0 * k_sv) / v.carbody_mass,
+                (2.0 * c_sl + 2.0 * c_sv) / v.carbody_mass,
+            ),
             (
                 (2.0 * k_sv * half_base * half_base + 2.0 * k_sl * h_sl_c * h_sl_c)
                     / v.carbody_pitch_inertia,
                 (2.0 * c_sv * half_base * half_base + 2.0 * c_sl * h_sl_c * h_sl_c)
                     / v.carbody_pitch_inertia,
             ),
-            ((k_sl + 2.0 * k_pl + k_sv + 2.0 * k_pv) / v.bogie_mass, (c_sl + 2.0 * c_pl + c_sv + 2.0 * c_pv) / v.bogie_mass),
             (
-                (2.0 * k_pv * half_wb * half_wb + k_sl * h_sl_b * h_sl_b + 2.0 * k_pl * h_pl_b * h_pl_b)
+                (k_sl + 2.0 * k_pl + k_sv + 2.0 * k_pv) / v.bogie_mass,
+                (c_sl + 2.0 * c_pl + c_sv + 2.0 * c_pv) / v.bogie_mass,
+            ),
+            (
+                (2.0 * k_pv * half_wb * half_wb
+                    + k_sl * h_sl_b * h_sl_b
+                    + 2.0 * k_pl * h_pl_b * h_pl_b)
                     / v.bogie_pitch_inertia,
-                (2.0 * c_pv * half_wb * half_wb + c_sl * h_sl_b * h_sl_b + 2.0 * c_pl * h_pl_b * h_pl_b)
+                (2.0 * c_pv * half_wb * half_wb
+                    + c_sl * h_sl_b * h_sl_b
+                    + 2.0 * c_pl * h_pl_b * h_pl_b)
                     / v.bogie_pitch_inertia,
             ),
             (k_pl / v.wheelset_mass, c_pl / v.wheelset_mass),
@@ -339,7 +354,12 @@ impl<F: Real> Plant<F> {
             // Needs omega dt well inside the stability limit 2 and damping rate dt < 1.
             let omega_dt = libm::sqrt(stiff) * dt;
             if !(omega_dt <= 1.0) || !(damp * dt <= 0.5) {
-                return Err(ParamError { key: "step", value: dt, min: 1e-6, max: dt / omega_dt.max(2.0 * damp * dt) });
+                return Err(ParamError {
+                    key: "step",
+                    value: dt,
+                    min: 1e-6,
+                    max: dt / omega_dt.max(2.0 * damp * dt),
+                });
             }
         }
 
@@ -409,7 +429,11 @@ impl<F: Real> Plant<F> {
                 speed: v0,
                 axle_load: self.k.q_static,
                 disc_temp,
-                mu_d: self.k.friction.mu_d(v0 * self.k.inv_r * self.k.friction_radius, disc_temp, F::ZERO),
+                mu_d: self.k.friction.mu_d(
+                    v0 * self.k.inv_r * self.k.friction_radius,
+                    disc_temp,
+                    F::ZERO,
+                ),
                 rail_mu: self.k.polach.friction(F::ZERO),
                 ..WheelsetOutput::default()
             };
@@ -519,8 +543,8 @@ impl<F: Real> Plant<F> {
             // Secondary longitudinal (springs + traction link), bogie relative to carbody at
             // the element height; force on the bogie.
             let d = s.dx_b[i] - k.pz_bogie_sl * s.pitch_b[i] + k.pz_carbody_sl * s.pitch_c;
-            let d_rate = s.dv_b[i] - k.pz_bogie_sl * s.pitch_rate_b[i]
-                + k.pz_carbody_sl * s.pitch_rate_c;
+            let d_rate =
+                s.dv_b[i] - k.pz_bogie_sl * s.pitch_rate_b[i] + k.pz_carbody_sl * s.pitch_rate_c;
             f_sl[i] = -(k.k_sl * d + k.c_sl * d_rate);
             damper_power += k.c_sv * e_rate * e_rate + k.c_sl * d_rate * d_rate;
         }
@@ -550,7 +574,9 @@ impl<F: Real> Plant<F> {
             if !(q[j] > F::ZERO) {
                 flags |= Flags::wheelset_bit(Flags::WHEEL_UNLOADED, j);
             }
-            let mu_d = k.friction.mu_d(omega[j] * k.friction_radius, s.disc_temp[j], clamp[j]);
+            let mu_d = k
+                .friction
+                .mu_d(omega[j] * k.friction_radius, s.disc_temp[j], clamp[j]);
             let torque_kinetic = k.caliper.torque(mu_d, clamp[j]);
 
             // Semi-implicit spin/slip update with the brake as a clutch. Unknowns at the
@@ -586,7 +612,11 @@ impl<F: Real> Plant<F> {
             w.creepage = contact.creepage;
             w.axle_load = q[j];
             w.adhesion_force = force;
-            w.adhesion = if q[j] > F::ZERO { force / q[j] } else { F::ZERO };
+            w.adhesion = if q[j] > F::ZERO {
+                force / q[j]
+            } else {
+                F::ZERO
+            };
             w.rail_mu = contact.mu;
             w.mu_d = mu_d;
             w.clamp_force = clamp[j];
@@ -597,7 +627,9 @@ impl<F: Real> Plant<F> {
             s.slip[j] = u_new;
 
             // Disc heat balance, Eqs (3)-(6) (explicit: time constant of minutes).
-            let rate = k.thermal.rate(w.brake_power, s.disc_temp[j], k.r * omega_new);
+            let rate = k
+                .thermal
+                .rate(w.brake_power, s.disc_temp[j], k.r * omega_new);
             s.disc_temp[j] += dt * rate;
             w.disc_temp = s.disc_temp[j];
         }
@@ -626,7 +658,8 @@ impl<F: Real> Plant<F> {
             az_b[i] = (f_pv[j0] + f_pv[j1] - f_sv[i]) * k.inv_m_b;
             // Moments: primary vertical at +-b/2, primary longitudinal (-f_pl on the bogie)
             // at pz_pl, secondary longitudinal at pz_sl, brake reactions -T_b.
-            let m = k.x_axle[0] * f_pv[j0] + k.x_axle[1] * f_pv[j1]
+            let m = k.x_axle[0] * f_pv[j0]
+                + k.x_axle[1] * f_pv[j1]
                 + k.pz_bogie_pl * (f_pl[j0] + f_pl[j1])
                 - k.pz_bogie_sl * f_sl[i]
                 - brake_torque[j0]
@@ -709,9 +742,7 @@ impl<F: Real> Plant<F> {
         let k = &self.k;
         let f = |x: F| x.to_f64();
         let v_c = f(s.v_c);
-        let mut kinetic = 0.5
-            * f(k.m_c)
-            * (v_c * v_c + f(s.vz_c) * f(s.vz_c))
+        let mut kinetic = 0.5 * f(k.m_c) * (v_c * v_c + f(s.vz_c) * f(s.vz_c))
             + 0.5 * f(s.pitch_rate_c) * f(s.pitch_rate_c) / f(k.inv_i_c);
         let mut potential = 0.0;
         for i in 0..2 {

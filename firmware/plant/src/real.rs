@@ -50,12 +50,20 @@ pub trait Real:
     /// `self` limited to `[lo, hi]`; NaN becomes `lo`.
     #[inline(always)]
     fn clamp_to(self, lo: Self, hi: Self) -> Self {
-        if self > lo { if self < hi { self } else { hi } } else { lo }
+        if self > lo {
+            if self < hi { self } else { hi }
+        } else {
+            lo
+        }
     }
     /// x^y for x > 0 (0 for x <= 0), as exp(y ln x).
     #[inline(always)]
     fn powf_pos(self, y: Self) -> Self {
-        if self > Self::ZERO { (y * self.ln()).exp() } else { Self::ZERO }
+        if self > Self::ZERO {
+            (y * self.ln()).exp()
+        } else {
+            Self::ZERO
+        }
     }
 }
 
