@@ -15,3 +15,5 @@ pub fn shared_dir() -> PathBuf {
 pub fn reference_parameters_path() -> PathBuf {
     shared_dir().join("spec/reference-parameters.toml")
 }
+
+pub mod generator;

@@ -1,12 +1,453 @@
-//! `hils decode` (being built; see its issue).
+//! `hils decode`: the rig board's defmt telemetry log -> a run-log CSV in the format of
+//! `spec/measured-data.md` (section 1), ready for `hils diagnose`.
+//!
+//! Input, either:
+//! * a **raw defmt capture** (the bytes of the board's RTT channel, e.g. from
+//!   `probe-rs attach --rtt-raw`-style tools or the QEMU fixture) together with the firmware
+//!   ELF (`--elf`), decoded with the ELF's defmt table (`defmt-decoder`); or
+//! * a **text log** as `probe-rs run` / `defmt-print` print it (one message per line,
+//!   timestamps, levels and location lines around it are skipped).
+//!
+//! The board logs `tlm1-start ...` when a run starts, `tlm1 ...` records every `divider`
+//! steps and `tlm1-end ...` when it ends (layout and parser: `hils_rig_core::telemetry`).
+//! Each run becomes one CSV. Nothing is dropped silently: malformed defmt frames, missing
+//! records (gaps in the step count: the board's log queue or the RTT buffer overflowed) and
+//! a missing end line are counted, printed, and written into the metadata; a malformed
+//! telemetry line is an error naming its line.
 
-use anyhow::{Result, bail};
+use std::fmt::Write as _;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, anyhow, bail};
 use clap::Args;
+pub use hils_rig_core as rig_core;
+use hils_rig_core::telemetry::{Line, RunHeader, TelemetryRecord, WSP_KNOWN, parse_line};
 
 /// Arguments of `hils decode`.
 #[derive(Args, Debug, Clone)]
-pub struct DecodeArgs {}
+pub struct DecodeArgs {
+    /// The captured log: raw defmt bytes (with --elf) or text (probe-rs / defmt-print output).
+    pub input: PathBuf,
+    /// Firmware ELF whose defmt table decodes a raw capture (target/thumbv7em-none-eabihf/release/board).
+    #[arg(long)]
+    pub elf: Option<PathBuf>,
+    /// Output CSV file; with several runs in the log, `-N` is added before the extension
+    /// unless --run picks one.
+    #[arg(short, long)]
+    pub out: PathBuf,
+    /// Decode only this run of the log (1 = the first).
+    #[arg(long)]
+    pub run: Option<usize>,
+}
 
-pub fn main(_args: DecodeArgs) -> Result<()> {
-    bail!("`hils decode` is not available yet")
+/// Text lines of a log, with what could not be decoded.
+#[derive(Clone, Debug, Default)]
+pub struct LogText {
+    pub lines: Vec<String>,
+    /// defmt frames that did not decode (skipped; their records show up as missing).
+    pub malformed_frames: usize,
+}
+
+/// Decodes a raw defmt capture with the table of the firmware ELF into message lines.
+pub fn defmt_to_text(elf: &[u8], raw: &[u8]) -> Result<LogText> {
+    let table = defmt_decoder::Table::parse(elf)
+        .map_err(|e| anyhow!("cannot read the defmt table of the ELF: {e}"))?
+        .ok_or_else(|| {
+            anyhow!("the ELF has no defmt table (.defmt section): not a defmt firmware")
+        })?;
+    let mut decoder = table.new_stream_decoder();
+    decoder.received(raw);
+    let mut out = LogText::default();
+    loop {
+        match decoder.decode() {
+            Ok(frame) => out.lines.push(frame.display_message().to_string()),
+            Err(defmt_decoder::DecodeError::UnexpectedEof) => break,
+            Err(defmt_decoder::DecodeError::Malformed) => {
+                out.malformed_frames += 1;
+                // rzcobs: the decoder has skipped the bad frame; raw encoding cannot resync.
+                if table.encoding() == defmt_decoder::Encoding::Raw {
+                    bail!(
+                        "malformed defmt frame in a raw-encoded capture after {} messages: cannot resynchronise",
+                        out.lines.len()
+                    );
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// One run of a telemetry log.
+#[derive(Clone, Debug)]
+pub struct Run {
+    pub header: RunHeader,
+    /// 1-based line of the header.
+    pub line: usize,
+    pub records: Vec<TelemetryRecord>,
+    /// The end line (step, state) if the log has it.
+    pub end: Option<(u32, u8)>,
+    /// Records missing in gaps of the step count.
+    pub missing_records: u64,
+}
+
+/// Finds the runs in the text lines of a log. A malformed telemetry line, a record before
+/// any run header, or steps that go backwards are errors naming the line.
+pub fn parse_runs<'a>(lines: impl IntoIterator<Item = &'a str>) -> Result<Vec<Run>> {
+    let mut runs: Vec<Run> = Vec::new();
+    for (i, text) in lines.into_iter().enumerate() {
+        let n = i + 1;
+        let line = parse_line(text).map_err(|e| anyhow!("line {n}: bad telemetry line: {e}"))?;
+        match line {
+            None => {}
+            Some(Line::Header(header)) => {
+                if header.divider == 0 || header.step_ns == 0 {
+                    bail!("line {n}: run header with a zero divider or step");
+                }
+                runs.push(Run {
+                    header,
+                    line: n,
+                    records: Vec::new(),
+                    end: None,
+                    missing_records: 0,
+                });
+            }
+            Some(Line::Record(r)) => {
+                let run = runs.last_mut().ok_or_else(|| {
+                    anyhow!("line {n}: telemetry record before any run header (`tlm1-start`): the capture began during a run; start the capture before the run")
+                })?;
+                if run.end.is_some() {
+                    bail!("line {n}: telemetry record after the run's end line");
+                }
+                if let Some(last) = run.records.last() {
+                    if r.step <= last.step {
+                        bail!(
+                            "line {n}: step {} does not increase (previous record: step {})",
+                            r.step,
+                            last.step
+                        );
+                    }
+                    let gap = (r.step - last.step) as u64;
+                    let d = run.header.divider as u64;
+                    // The last record of a run may come after fewer steps than the divider.
+                    if gap > d {
+                        run.missing_records += gap.div_ceil(d) - 1;
+                    }
+                }
+                run.records.push(r);
+            }
+            Some(Line::End { step, state }) => {
+                let run = runs
+                    .last_mut()
+                    .ok_or_else(|| anyhow!("line {n}: run end line before any run header"))?;
+                run.end = Some((step, state));
+            }
+        }
+    }
+    Ok(runs)
+}
+
+fn cmd_text(code: u8) -> &'static str {
+    match code {
+        0 => "REL",
+        1 => "EB",
+        2 => "SB",
+        _ => "",
+    }
+}
+
+fn state_text(code: u8) -> &'static str {
+    match code {
+        0 => "idle",
+        1 => "running",
+        2 => "finished",
+        3 => "stopped",
+        4 => "fault",
+        _ => "unknown",
+    }
+}
+
+/// A float cell: the f32's shortest exact text, empty for NaN (not measured).
+fn cell(x: f32) -> String {
+    if x.is_nan() {
+        String::new()
+    } else {
+        format!("{x}")
+    }
+}
+
+impl Run {
+    /// Time of a record, s.
+    pub fn time_s(&self, r: &TelemetryRecord) -> f64 {
+        r.step as f64 * self.header.step_ns as f64 * 1e-9
+    }
+
+    fn self_test(&self) -> bool {
+        self.header.mode == 1
+    }
+
+    /// Whether the log has cylinder pressures / clamp forces.
+    fn has_pressure(&self) -> bool {
+        self.self_test() || self.header.pressure_channels & 0x0F != 0
+    }
+    fn has_clamp(&self) -> bool {
+        self.self_test() || self.header.pressure_channels & 0x0F != 0x0F
+    }
+    fn has_wsp(&self) -> bool {
+        self.records.iter().any(|r| r.wsp & WSP_KNOWN != 0)
+    }
+
+    /// Column names of the CSV, in order.
+    pub fn columns(&self) -> Vec<String> {
+        let mut c = vec!["t_s".to_string(), "v_ref_mps".to_string()];
+        let per = |c: &mut Vec<String>, pre: &str, suf: &str| {
+            for j in 1..=4 {
+                c.push(format!("{pre}{j}{suf}"));
+            }
+        };
+        per(&mut c, "omega", "_radps");
+        if self.has_pressure() {
+            per(&mut c, "p_cyl", "_pa");
+        }
+        if self.has_clamp() {
+            per(&mut c, "f_clamp", "_n");
+        }
+        per(&mut c, "f_brake", "_n");
+        per(&mut c, "t_disc", "_c");
+        per(&mut c, "q", "_n");
+        if self.has_wsp() {
+            per(&mut c, "wsp", "");
+        }
+        c.push("a_x_mps2".into());
+        c.push("cmd".into());
+        per(&mut c, "mu_d", "");
+        for extra in [
+            "state",
+            "faults",
+            "sensor_faults",
+            "step_max_us",
+            "step_mean_us",
+            "overruns",
+            "missed_ticks",
+        ] {
+            c.push(extra.into());
+        }
+        c
+    }
+
+    /// `# key: value` metadata of the CSV.
+    pub fn metadata(&self, source: &str) -> Vec<(&'static str, String)> {
+        let h = &self.header;
+        let mut m = vec![
+            (
+                "source",
+                format!("rig interface board, hils decode of {source}"),
+            ),
+            (
+                "mode",
+                if self.self_test() {
+                    "self-test (simulated brake unit)"
+                } else {
+                    "rig (measured brake inputs)"
+                }
+                .to_string(),
+            ),
+            ("rail", if h.rail == 1 { "dry" } else { "wet" }.to_string()),
+            (
+                "friction",
+                if h.friction == 1 {
+                    "constant"
+                } else {
+                    "variable"
+                }
+                .to_string(),
+            ),
+            ("initial_speed_kmh", format!("{}", h.initial_speed_kmh)),
+        ];
+        if let Some(r) = self.records.iter().find(|r| r.cmd == 1) {
+            m.push(("eb_command_s", format!("{}", self.time_s(r))));
+        }
+        let rate = 1e9 / (h.step_ns as f64 * h.divider as f64);
+        m.push(("sample_rate_hz", format!("{rate}")));
+        m.push(("plant_step_s", format!("{}", h.step_ns as f64 * 1e-9)));
+        m.push(("cpu_hz", h.cpu_hz.to_string()));
+        m.push(("teeth", h.teeth.to_string()));
+        m.push(("records", self.records.len().to_string()));
+        m.push(("missing_records", self.missing_records.to_string()));
+        m.push((
+            "end",
+            match self.end {
+                Some((step, state)) => format!("{} at step {step}", state_text(state)),
+                None => "none (the log ends during the run)".to_string(),
+            },
+        ));
+        if let Some(last) = self.records.last() {
+            let max = self
+                .records
+                .iter()
+                .map(|r| r.step_max_cycles)
+                .max()
+                .unwrap_or(0);
+            m.push((
+                "step_max_us",
+                format!("{:.2}", max as f64 * 1e6 / h.cpu_hz.max(1) as f64),
+            ));
+            m.push(("overruns", last.overruns.to_string()));
+            m.push(("missed_ticks", last.missed_ticks.to_string()));
+        }
+        m.push((
+            "notes",
+            "p_cyl/f_clamp empty = not measured on that channel; faults = hils_rig_core::rig::Faults bits; sensor_faults = 4 bits per channel; step times from the DWT cycle counter".to_string(),
+        ));
+        m
+    }
+
+    /// Writes the run as a run-log CSV.
+    pub fn write_csv<W: Write>(&self, out: W, source: &str) -> Result<()> {
+        let mut out = std::io::BufWriter::new(out);
+        for (k, v) in self.metadata(source) {
+            writeln!(out, "# {k}: {v}")?;
+        }
+        let columns = self.columns();
+        let mut w = csv::WriterBuilder::new().from_writer(out);
+        w.write_record(&columns)?;
+        let (p, c, wsp) = (self.has_pressure(), self.has_clamp(), self.has_wsp());
+        let us = |cycles: u32| {
+            format!(
+                "{:.3}",
+                cycles as f64 * 1e6 / self.header.cpu_hz.max(1) as f64
+            )
+        };
+        let mut row: Vec<String> = Vec::with_capacity(columns.len());
+        for r in &self.records {
+            row.clear();
+            row.push(format!("{:.6}", self.time_s(r)));
+            row.push(cell(r.v_ref));
+            row.extend(r.omega.iter().map(|&x| cell(x)));
+            if p {
+                row.extend(r.p_cyl.iter().map(|&x| cell(x)));
+            }
+            if c {
+                row.extend(r.f_clamp.iter().map(|&x| cell(x)));
+            }
+            for a in [r.f_brake, r.t_disc, r.q] {
+                row.extend(a.iter().map(|&x| cell(x)));
+            }
+            if wsp {
+                for j in 0..4 {
+                    row.push(if r.wsp & WSP_KNOWN == 0 {
+                        String::new()
+                    } else {
+                        ((r.wsp >> j) & 1).to_string()
+                    });
+                }
+            }
+            row.push(cell(r.a_x));
+            row.push(cmd_text(r.cmd).to_string());
+            row.extend(r.mu_d.iter().map(|&x| cell(x)));
+            row.push(state_text(r.state).to_string());
+            let mut faults = String::new();
+            let _ = write!(faults, "0x{:08x}", r.faults);
+            row.push(faults);
+            row.push(format!("0x{:04x}", r.sensor_faults));
+            row.push(us(r.step_max_cycles));
+            row.push(us(r.step_mean_cycles));
+            row.push(r.overruns.to_string());
+            row.push(r.missed_ticks.to_string());
+            w.write_record(&row)?;
+        }
+        w.flush()?;
+        Ok(())
+    }
+}
+
+/// Reads a log file: raw defmt with an ELF, else text.
+pub fn read_log(input: &Path, elf: Option<&Path>) -> Result<LogText> {
+    let bytes = std::fs::read(input).with_context(|| format!("cannot read {}", input.display()))?;
+    match elf {
+        Some(elf_path) => {
+            let elf = std::fs::read(elf_path)
+                .with_context(|| format!("cannot read the ELF {}", elf_path.display()))?;
+            defmt_to_text(&elf, &bytes).with_context(|| format!("{}", input.display()))
+        }
+        None => {
+            let text = String::from_utf8(bytes).map_err(|_| {
+                anyhow!(
+                    "{} is not text: a raw defmt capture needs --elf FIRMWARE",
+                    input.display()
+                )
+            })?;
+            Ok(LogText {
+                lines: text.lines().map(str::to_string).collect(),
+                ..Default::default()
+            })
+        }
+    }
+}
+
+pub fn main(args: DecodeArgs) -> Result<()> {
+    let log = read_log(&args.input, args.elf.as_deref())?;
+    if log.malformed_frames > 0 {
+        eprintln!(
+            "warning: {} malformed defmt frames skipped",
+            log.malformed_frames
+        );
+    }
+    let runs = parse_runs(log.lines.iter().map(String::as_str))
+        .with_context(|| format!("{}", args.input.display()))?;
+    if runs.is_empty() {
+        bail!(
+            "{}: no run in the log (no `tlm1-start` line among {} lines)",
+            args.input.display(),
+            log.lines.len()
+        );
+    }
+    let chosen: Vec<(usize, &Run)> = match args.run {
+        Some(k) => {
+            let run = runs
+                .get(k.wrapping_sub(1))
+                .ok_or_else(|| anyhow!("--run {k}: the log has {} run(s)", runs.len()))?;
+            vec![(k, run)]
+        }
+        None => runs.iter().enumerate().map(|(i, r)| (i + 1, r)).collect(),
+    };
+    let source = args.input.display().to_string();
+    for (k, run) in &chosen {
+        let path = if chosen.len() == 1 {
+            args.out.clone()
+        } else {
+            let stem = args
+                .out
+                .file_stem()
+                .and_then(|s| s.to_str())
+                .unwrap_or("run");
+            let ext = args
+                .out
+                .extension()
+                .and_then(|s| s.to_str())
+                .unwrap_or("csv");
+            args.out.with_file_name(format!("{stem}-{k}.{ext}"))
+        };
+        if run.records.is_empty() {
+            bail!("run {k} (line {}): no telemetry records", run.line);
+        }
+        let file = std::fs::File::create(&path)
+            .with_context(|| format!("cannot create {}", path.display()))?;
+        run.write_csv(file, &source)?;
+        let last = run.records.last().map(|r| run.time_s(r)).unwrap_or(0.0);
+        println!(
+            "run {k}: {} records, 0 to {last:.3} s, {} missing, end: {} -> {}",
+            run.records.len(),
+            run.missing_records,
+            run.end.map(|(_, s)| state_text(s)).unwrap_or("none"),
+            path.display()
+        );
+        if run.missing_records > 0 {
+            eprintln!(
+                "warning: run {k}: {} records missing (the board's log queue or the RTT buffer overflowed; see `missing_records`)",
+                run.missing_records
+            );
+        }
+    }
+    Ok(())
 }

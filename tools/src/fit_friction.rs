@@ -1,12 +1,384 @@
-//! `hils fit-friction` (being built; see its issue).
+//! `hils fit-friction`: fits paper Eq (2) to brake-dynamometer friction tests.
+//!
+//! mu_d = c mu_d0 (n_v e^(-m_v v_d) + 1)(n_T e^(-m_T T_d) + 1)               (Eq 2)
+//!
+//! with the correction constant c fixed (the parameter file's `friction.correction_c`,
+//! 0.98 in the reference file, as in the paper) and the five parameters mu_d0, n_v, m_v,
+//! n_T, m_T fitted by nonlinear least squares (Levenberg-Marquardt, [`crate::diagnose::lsq`])
+//! from several starts. The model evaluated is the plant's own
+//! [`hils_plant::friction::DiscPadFriction`] (one copy of Eq 2).
+//!
+//! Identifiability: mu_d0 is the friction at high speed and temperature. The product
+//! c mu_d0 (1 + n_v e^(-m_v v))(1 + n_T e^(-m_T T)) separates mu_d0 from the factors only
+//! when the points reach speeds and temperatures where the exponentials have decayed; when
+//! they do not, the parameters are strongly correlated, their intervals are wide, and the
+//! command says so (it warns on |correlation| > 0.95).
 
-use anyhow::{Result, bail};
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
 use clap::Args;
+use hils_plant::FrictionModel;
+use hils_plant::friction::DiscPadFriction;
+use hils_plant::params::FrictionParams;
+use serde::Serialize;
+
+use crate::diagnose::lsq::{self, ParamSpec};
+use crate::measured::{FrictionTest, read_friction_test};
+use crate::params_file::params_or_default;
+use crate::plots::{Chart, Series, Style};
 
 /// Arguments of `hils fit-friction`.
 #[derive(Args, Debug, Clone)]
-pub struct FitFrictionArgs {}
+pub struct FitFrictionArgs {
+    /// Write the fitted parameters as JSON to this file.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Write plots like the paper's Fig 2 (and report.md) into this directory.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Parameter file whose `friction.correction_c` is used (default: the reference values).
+    #[arg(long)]
+    pub params: Option<PathBuf>,
+    /// Friction-test CSV files (spec measured-data.md, section 2).
+    #[arg(required = true)]
+    pub files: Vec<PathBuf>,
+}
 
-pub fn main(_args: FitFrictionArgs) -> Result<()> {
-    bail!("`hils fit-friction` is not available yet")
+/// Names of the fitted parameters, in order.
+pub const NAMES: [&str; 5] = ["mu_d0", "n_v", "m_v", "n_t", "m_t"];
+
+/// A fit of Eq (2).
+#[derive(Clone, Debug, Serialize)]
+pub struct FrictionFit {
+    pub mu_d0: f64,
+    pub n_v: f64,
+    pub m_v: f64,
+    pub n_t: f64,
+    pub m_t: f64,
+    /// [low, high] per parameter.
+    pub ci95: std::collections::BTreeMap<String, [f64; 2]>,
+    /// Root mean square of mu - fitted mu.
+    pub rms: f64,
+    pub correction_c: f64,
+    pub points: usize,
+    pub skipped_rows: usize,
+    pub files: Vec<String>,
+    /// Warnings on identifiability and data coverage.
+    pub warnings: Vec<String>,
+    /// Parameter pairs with |correlation| > 0.95.
+    pub correlated: Vec<(String, String, f64)>,
+    pub wall_s: f64,
+}
+
+impl FrictionFit {
+    /// The fit as friction parameters (variable model, c as fitted with).
+    pub fn params(&self) -> FrictionParams {
+        FrictionParams {
+            model: FrictionModel::Variable,
+            mu_d0: self.mu_d0,
+            n_v: self.n_v,
+            m_v: self.m_v,
+            n_t: self.n_t,
+            m_t: self.m_t,
+            correction_c: self.correction_c,
+            k_p: 0.0,
+        }
+    }
+}
+
+/// Eq (2) through the plant's implementation.
+pub fn eq2(p: &FrictionParams, v_d: f64, t_d: f64) -> f64 {
+    DiscPadFriction::<f64>::new(p).mu_d(v_d, t_d, 0.0)
+}
+
+fn with(x: &[f64], c: f64) -> FrictionParams {
+    FrictionParams {
+        model: FrictionModel::Variable,
+        mu_d0: x[0],
+        n_v: x[1],
+        m_v: x[2],
+        n_t: x[3],
+        m_t: x[4],
+        correction_c: c,
+        k_p: 0.0,
+    }
+}
+
+/// Fits Eq (2) to points (v_d m/s, T_d degC, mu) with c fixed.
+pub fn fit_points(v: &[f64], t: &[f64], mu: &[f64], c: f64) -> Result<FrictionFit> {
+    let started = std::time::Instant::now();
+    let n = mu.len();
+    if n < 6 {
+        bail!("{n} friction points: at least 6 are needed to fit 5 parameters");
+    }
+    let model = |x: &[f64]| -> Option<Vec<f64>> {
+        let f = DiscPadFriction::<f64>::new(&with(x, c));
+        Some((0..n).map(|i| f.mu_d(v[i], t[i], 0.0) - mu[i]).collect())
+    };
+    let mu_min = mu.iter().cloned().fold(f64::INFINITY, f64::min);
+    let v_max = v.iter().cloned().fold(0.0f64, f64::max).max(1.0);
+    let t_max = t.iter().cloned().fold(0.0f64, f64::max).max(1.0);
+    // Starts: decay constants spread over the data's ranges (1/m between a tenth and
+    // twice the range); the best fit wins.
+    let mut best: Option<lsq::Fit> = None;
+    for kv in [0.3, 1.0, 3.0] {
+        for kt in [0.3, 1.0, 3.0] {
+            let m_v = kv / v_max * 3.0;
+            let m_t = kt / t_max * 3.0;
+            let specs = [
+                ParamSpec::new(mu_min / c, 0.05, 1e-3, 2.0),
+                ParamSpec::new(0.1, 0.1, 0.0, 10.0),
+                ParamSpec::new(m_v, m_v, 0.0, 10.0),
+                ParamSpec::new(0.1, 0.1, 0.0, 10.0),
+                ParamSpec::new(m_t, m_t, 0.0, 10.0),
+            ];
+            if let Some(f) = lsq::fit(&model, &specs, 1e-6, 600, 1e-10, 1.0) {
+                if best.as_ref().is_none_or(|b| f.ssr < b.ssr) {
+                    best = Some(f);
+                }
+            }
+        }
+    }
+    let Some(best) = best else {
+        bail!("the fit failed from every start")
+    };
+    let x = &best.x;
+    let mut ci95 = std::collections::BTreeMap::new();
+    for (i, name) in NAMES.iter().enumerate() {
+        ci95.insert(
+            name.to_string(),
+            [x[i] - best.ci95_half[i], x[i] + best.ci95_half[i]],
+        );
+    }
+    let mut warnings = Vec::new();
+    let mut correlated = Vec::new();
+    for a in 0..5 {
+        for b in a + 1..5 {
+            let r = best.correlation[a * 5 + b];
+            if r.abs() > 0.95 || r.is_nan() {
+                correlated.push((NAMES[a].to_string(), NAMES[b].to_string(), r));
+            }
+        }
+    }
+    if !correlated.is_empty() {
+        warnings.push(format!(
+            "parameters not separately identifiable from these points (|correlation| > 0.95: {}); \
+             add points at higher friction speed / disc temperature",
+            correlated
+                .iter()
+                .map(|(a, b, r)| format!("{a}-{b} {r:.3}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
+    if best.ci95_half.iter().any(|h| !h.is_finite()) {
+        warnings
+            .push("some confidence intervals are undefined (singular information matrix)".into());
+    }
+    let decay_v = x[2] * v_max;
+    let decay_t = x[4] * t_max;
+    if decay_v < 2.0 {
+        warnings.push(format!(
+            "the speed factor decays by only e^-{decay_v:.1} over the points' speed range: mu_d0 and n_v are confounded"
+        ));
+    }
+    if decay_t < 2.0 {
+        warnings.push(format!(
+            "the temperature factor decays by only e^-{decay_t:.1} over the points' temperature range: mu_d0 and n_t are confounded"
+        ));
+    }
+    let rms = (best.ssr / n as f64).sqrt();
+    Ok(FrictionFit {
+        mu_d0: x[0],
+        n_v: x[1],
+        m_v: x[2],
+        n_t: x[3],
+        m_t: x[4],
+        ci95,
+        rms,
+        correction_c: c,
+        points: n,
+        skipped_rows: 0,
+        files: Vec::new(),
+        warnings,
+        correlated,
+        wall_s: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// `hils fit-friction`.
+pub fn main(args: FitFrictionArgs) -> Result<()> {
+    let params = params_or_default(args.params.as_deref())?;
+    let c = params.friction.correction_c;
+    let mut tests = Vec::new();
+    for f in &args.files {
+        let t = read_friction_test(f)?;
+        for note in &t.notes {
+            println!("{}: {note}", f.display());
+        }
+        tests.push(t);
+    }
+    let (v, t, mu) = pooled(&tests);
+    let mut fit = fit_points(&v, &t, &mu, c)?;
+    fit.skipped_rows = tests.iter().map(|t| t.skipped).sum();
+    fit.files = args.files.iter().map(|f| f.display().to_string()).collect();
+    print_fit(&fit);
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&fit)? + "\n")
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        println!("wrote {}", path.display());
+    }
+    if let Some(dir) = &args.report {
+        let files = write_report(dir, &fit, &v, &t, &mu)?;
+        for f in files {
+            println!("wrote {}", f.display());
+        }
+    }
+    Ok(())
+}
+
+/// All files' points together.
+pub fn pooled(tests: &[FrictionTest]) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let mut v = Vec::new();
+    let mut t = Vec::new();
+    let mut mu = Vec::new();
+    for x in tests {
+        v.extend_from_slice(&x.v_friction_mps);
+        t.extend_from_slice(&x.t_disc_c);
+        mu.extend_from_slice(&x.mu);
+    }
+    (v, t, mu)
+}
+
+fn print_fit(f: &FrictionFit) {
+    println!(
+        "Eq (2) fitted to {} points ({} rows skipped), c = {} fixed:",
+        f.points, f.skipped_rows, f.correction_c
+    );
+    for (name, value) in NAMES.iter().zip([f.mu_d0, f.n_v, f.m_v, f.n_t, f.m_t]) {
+        let [lo, hi] = f.ci95[*name];
+        println!("  {name:6} = {value:10.5}   95 % CI [{lo:.5}, {hi:.5}]");
+    }
+    println!("  rms error of mu = {:.5}", f.rms);
+    println!("  fit time {:.3} s", f.wall_s);
+    for w in &f.warnings {
+        println!("  warning: {w}");
+    }
+}
+
+fn quantile(x: &[f64], q: f64) -> f64 {
+    let mut s = x.to_vec();
+    s.sort_by(f64::total_cmp);
+    s[((s.len() - 1) as f64 * q).round() as usize]
+}
+
+/// Fig 2 of the paper for this data: mu vs disc temperature (curves at low, median and high
+/// friction speed of the points) and mu vs friction speed (curves at low, median and high
+/// temperature); measured points coloured by the band of the other variable.
+pub fn write_report(
+    dir: &Path,
+    fit: &FrictionFit,
+    v: &[f64],
+    t: &[f64],
+    mu: &[f64],
+) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let p = fit.params();
+    let mut files = Vec::new();
+    let bands = |x: &[f64]| [quantile(x, 0.1), quantile(x, 0.5), quantile(x, 0.9)];
+    let (vb, tb) = (bands(v), bands(t));
+    let band_of = |x: f64, b: &[f64; 3]| -> usize {
+        let cuts = [(b[0] + b[1]) / 2.0, (b[1] + b[2]) / 2.0];
+        if x < cuts[0] {
+            0
+        } else if x < cuts[1] {
+            1
+        } else {
+            2
+        }
+    };
+    let t_hi = t.iter().cloned().fold(0.0f64, f64::max) * 1.05 + 1.0;
+    let v_hi = v.iter().cloned().fold(0.0f64, f64::max) * 1.05 + 0.5;
+
+    let mut a = Chart::new(
+        "Fig 2(a): friction coefficient vs disc temperature",
+        "disc temperature rise T_d, degC",
+        "mu_d",
+    );
+    let mut b = Chart::new(
+        "Fig 2(b): friction coefficient vs friction speed",
+        "friction speed v_d, m/s",
+        "mu_d",
+    );
+    for k in 0..3 {
+        let pts: Vec<(f64, f64)> = (0..mu.len())
+            .filter(|&i| band_of(v[i], &vb) == k)
+            .map(|i| (t[i], mu[i]))
+            .collect();
+        a.series.push(Series::new(
+            format!("measured, v_d near {:.1} m/s", vb[k]),
+            pts,
+            Style::Points,
+            k,
+        ));
+        let curve = (0..=200).map(|i| {
+            let x = t_hi * i as f64 / 200.0;
+            (x, eq2(&p, vb[k], x))
+        });
+        a.series.push(Series::new(
+            format!("Eq (2) at {:.1} m/s", vb[k]),
+            curve.collect(),
+            Style::Solid,
+            k,
+        ));
+        let pts: Vec<(f64, f64)> = (0..mu.len())
+            .filter(|&i| band_of(t[i], &tb) == k)
+            .map(|i| (v[i], mu[i]))
+            .collect();
+        b.series.push(Series::new(
+            format!("measured, T_d near {:.0} degC", tb[k]),
+            pts,
+            Style::Points,
+            k,
+        ));
+        let curve = (0..=200).map(|i| {
+            let x = v_hi * i as f64 / 200.0;
+            (x, eq2(&p, x, tb[k]))
+        });
+        b.series.push(Series::new(
+            format!("Eq (2) at {:.0} degC", tb[k]),
+            curve.collect(),
+            Style::Solid,
+            k,
+        ));
+    }
+    files.push(dir.join("fig2a_mu_vs_temperature.svg"));
+    a.save_svg(files.last().unwrap())?;
+    files.push(dir.join("fig2b_mu_vs_speed.svg"));
+    b.save_svg(files.last().unwrap())?;
+
+    let mut md = String::from("# Friction fit (paper Eq 2)\n\n");
+    md += &format!(
+        "{} points from {}; {} rows skipped; c = {} fixed.\n\n| parameter | value | 95 % CI |\n|---|---|---|\n",
+        fit.points,
+        fit.files.join(", "),
+        fit.skipped_rows,
+        fit.correction_c
+    );
+    for (name, value) in NAMES
+        .iter()
+        .zip([fit.mu_d0, fit.n_v, fit.m_v, fit.n_t, fit.m_t])
+    {
+        let [lo, hi] = fit.ci95[*name];
+        md += &format!("| {name} | {value:.5} | [{lo:.5}, {hi:.5}] |\n");
+    }
+    md += &format!("\nrms error of mu: {:.5}\n\n", fit.rms);
+    for w in &fit.warnings {
+        md += &format!("**Warning:** {w}\n\n");
+    }
+    md += "![mu vs temperature](fig2a_mu_vs_temperature.svg)\n\n![mu vs speed](fig2b_mu_vs_speed.svg)\n";
+    files.push(dir.join("report.md"));
+    std::fs::write(files.last().unwrap(), md)?;
+    Ok(files)
 }

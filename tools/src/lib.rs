@@ -2,13 +2,14 @@
 //!
 //! Software-in-the-loop runs of the plant with the simulated brake unit
 //! ([`scenario`], [`simulate`]), the run-log CSV format ([`runlog`]), plots ([`plots`]),
-//! the host benchmark ([`bench`]), friction fits ([`fit_friction`]), the diagnosis
-//! ([`diagnose`]), the target cost ([`target_cost`]) and the telemetry decoder ([`decode`]).
+//! the host benchmark ([`bench`]), measured data ([`measured`]), friction fits
+//! ([`fit_friction`]), the diagnosis ([`diagnose`]), the target cost ([`target_cost`]) and the telemetry decoder ([`decode`]).
 
 pub mod bench;
 pub mod decode;
 pub mod diagnose;
 pub mod fit_friction;
+pub mod measured;
 pub mod params_file;
 pub mod plots;
 pub mod runlog;

@@ -37,9 +37,22 @@ impl<F: Real> DiscPadFriction<F> {
     /// `t_d` (degC) and pad clamp force `f_clamp` (N per face).
     #[inline(always)]
     pub fn mu_d(&self, v_d: F, t_d: F, f_clamp: F) -> F {
+        self.mu_d_with(v_d, self.temperature_factor(t_d), f_clamp)
+    }
+
+    /// The temperature bracket of Eq (2), n_T e^(-m_T T_d) + 1 (1 with the constant model).
+    /// The disc temperature changes over seconds, so the plant refreshes this factor less
+    /// often than every step.
+    #[inline(always)]
+    pub fn temperature_factor(&self, t_d: F) -> F {
+        if self.variable { self.n_t * (-self.m_t * t_d).exp() + F::ONE } else { F::ONE }
+    }
+
+    /// mu_d at friction speed `v_d` with a precomputed [`Self::temperature_factor`].
+    #[inline(always)]
+    pub fn mu_d_with(&self, v_d: F, temperature_factor: F, f_clamp: F) -> F {
         let base = if self.variable {
             let speed_factor = self.n_v * (-self.m_v * v_d.abs()).exp() + F::ONE;
-            let temperature_factor = self.n_t * (-self.m_t * t_d).exp() + F::ONE;
             self.c_mu_d0 * speed_factor * temperature_factor
         } else {
             self.mu_d0

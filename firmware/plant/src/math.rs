@@ -6,20 +6,38 @@
 //! use the platform libm in its unit tests and a different implementation on the board,
 //! and the host could no longer check the target bit for bit.
 //!
-//! * default: the `libm` crate (a Rust port of FreeBSD msun; f32 functions compute in
-//!   f32 only, so no soft-float double on the Cortex-M4F; results within 1 ulp).
+//! * default (`expf+libm`): e^x from `math/expf.rs` (f32 only, < 1 ulp, less than half of
+//!   libm's instructions on the Cortex-M4F), ln, atan and sqrt from the `libm` crate (a
+//!   Rust port of FreeBSD msun; f32 functions compute in f32 only, so no soft-float
+//!   double on the Cortex-M4F; results within 1 ulp). Chosen from the measured comparison
+//!   in docs/target.md.
+//! * feature `math-libm`: every f32 function from `libm` (the comparison's baseline).
 //! * feature `math-micromath`: micromath's fast approximations for f32 (kept for the
-//!   measured comparison in the README; f64 always uses libm, it is the reference).
+//!   measured comparison; slower than the default on the Cortex-M4F and less accurate).
+//!
+//! f64 always uses libm: it is the reference.
 //!
 //! `+ - * /` and `sqrt` are IEEE 754 correctly rounded on both x86-64 (SSE) and the
 //! Cortex-M4F FPU, and Rust never fuses a multiply and an add on its own, so with one
 //! implementation of the functions below an f32 run is bit-identical on both.
 
+mod expf;
+
+#[cfg(all(feature = "math-libm", feature = "math-micromath"))]
+compile_error!("the features math-libm and math-micromath exclude each other");
+
 #[cfg(not(feature = "math-micromath"))]
 mod f32_impl {
     #[inline(always)]
     pub fn exp(x: f32) -> f32 {
-        libm::expf(x)
+        #[cfg(feature = "math-libm")]
+        {
+            libm::expf(x)
+        }
+        #[cfg(not(feature = "math-libm"))]
+        {
+            super::expf::exp(x)
+        }
     }
     #[inline(always)]
     pub fn ln(x: f32) -> f32 {
@@ -59,8 +77,10 @@ mod f32_impl {
 /// Name of the math implementation compiled in (reported by tools and the target).
 pub const IMPLEMENTATION: &str = if cfg!(feature = "math-micromath") {
     "micromath"
-} else {
+} else if cfg!(feature = "math-libm") {
     "libm"
+} else {
+    "expf+libm"
 };
 
 pub use f32_impl::{atan as atan_f32, exp as exp_f32, ln as ln_f32, sqrt as sqrt_f32};

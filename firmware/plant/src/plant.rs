@@ -32,6 +32,11 @@
 //!   holds the wheel at omega = 0 when that suffices, solved exactly in the same linear
 //!   update, so a wheel never spins backwards and the vehicle stops cleanly. Creepage uses
 //!   max(|v|, floor).
+//! * **Slow factors.** The temperature bracket of Eq (2) and the loss coefficient of
+//!   Eq (5) (alpha + beta v_w^0.8) follow the disc temperature and the wheel speed, which
+//!   change over seconds; each step refreshes them for one wheelset in turn (every
+//!   wheelset every 0.4 ms), which takes three of the four transcendental functions per
+//!   wheelset out of the 10 kHz step.
 //! * **Bad input.** Brake inputs are clamped to [0, 1.5 x the physical maximum] and
 //!   flagged; a NaN/inf input holds the last valid value and is flagged. A non-finite state
 //!   (never seen with validated parameters) puts the plant in a safe state: at rest, flagged.
@@ -228,6 +233,10 @@ struct State<F> {
     disc_temp: [F; WHEELSETS],
     /// Pad force state of the actuator-lag extension.
     pad_force: [F; WHEELSETS],
+    /// Eq (2) temperature bracket per wheelset (refreshed in turn).
+    temperature_factor: [F; WHEELSETS],
+    /// Eq (5) loss coefficient alpha + beta v_w^0.8 per wheelset, W/K (refreshed in turn).
+    heat_loss: [F; WHEELSETS],
     /// Last valid brake input (clamp force, N) per wheelset.
     last_clamp: [F; WHEELSETS],
 }
@@ -418,6 +427,8 @@ impl<F: Real> Plant<F> {
         self.s = State::default();
         self.s.v_c = v0;
         self.s.disc_temp = [disc_temp; WHEELSETS];
+        self.s.temperature_factor = [self.k.friction.temperature_factor(disc_temp); WHEELSETS];
+        self.s.heat_loss = [self.k.thermal.loss_coefficient(v0); WHEELSETS];
         self.out.steps = 0;
         self.out.vehicle_speed = v0;
         self.out.distance = F::ZERO;
@@ -566,6 +577,11 @@ impl<F: Real> Plant<F> {
             damper_power += k.c_pv * e_rate * e_rate + k.c_pl * d_rate * d_rate;
         }
 
+        // ---- Slow factors of one wheelset (each every 4 steps) ----
+        let slow = (self.out.steps % WHEELSETS as u32) as usize;
+        s.temperature_factor[slow] = k.friction.temperature_factor(s.disc_temp[slow]);
+        s.heat_loss[slow] = k.thermal.loss_coefficient(k.r * omega[slow]);
+
         // ---- Wheelsets: contact (Eqs 9-12), friction (Eq 2), brake (Eq 1), spin (Eqs 7-8)
         let mut a_w = [F::ZERO; WHEELSETS];
         let mut brake_torque = [F::ZERO; WHEELSETS];
@@ -574,9 +590,11 @@ impl<F: Real> Plant<F> {
             if !(q[j] > F::ZERO) {
                 flags |= Flags::wheelset_bit(Flags::WHEEL_UNLOADED, j);
             }
-            let mu_d = k
-                .friction
-                .mu_d(omega[j] * k.friction_radius, s.disc_temp[j], clamp[j]);
+            let mu_d = k.friction.mu_d_with(
+                omega[j] * k.friction_radius,
+                s.temperature_factor[j],
+                clamp[j],
+            );
             let torque_kinetic = k.caliper.torque(mu_d, clamp[j]);
 
             // Semi-implicit spin/slip update with the brake as a clutch. Unknowns at the
@@ -627,9 +645,7 @@ impl<F: Real> Plant<F> {
             s.slip[j] = u_new;
 
             // Disc heat balance, Eqs (3)-(6) (explicit: time constant of minutes).
-            let rate = k
-                .thermal
-                .rate(w.brake_power, s.disc_temp[j], k.r * omega_new);
+            let rate = k.thermal.rate_with(w.brake_power, s.disc_temp[j], s.heat_loss[j]);
             s.disc_temp[j] += dt * rate;
             w.disc_temp = s.disc_temp[j];
         }

@@ -100,7 +100,7 @@ impl Real for f32 {
     }
     #[inline(always)]
     fn is_nan(self) -> bool {
-        self != self
+        f32::is_nan(self)
     }
     #[inline(always)]
     fn abs(self) -> f32 {
@@ -141,7 +141,7 @@ impl Real for f64 {
     }
     #[inline(always)]
     fn is_nan(self) -> bool {
-        self != self
+        f64::is_nan(self)
     }
     #[inline(always)]
     fn abs(self) -> f64 {

@@ -31,8 +31,20 @@ impl<F: Real> DiscThermal<F> {
     /// dT_d/dt = (E_br - Q_cond - Q_conv) / (c_p m_disc)            (3), (6)
     #[inline(always)]
     pub fn rate(&self, brake_power: F, t_d: F, wheel_speed: F) -> F {
-        let convection = self.beta * wheel_speed.abs().powf_pos(self.convection_exponent);
-        (self.heat_partition * brake_power - (self.alpha + convection) * t_d)
-            * self.inv_heat_capacity
+        self.rate_with(brake_power, t_d, self.loss_coefficient(wheel_speed))
+    }
+
+    /// The loss coefficient of Eq (5), alpha + beta v_w^0.8, W/K. It follows the wheel
+    /// speed, which changes over seconds, so the plant refreshes it less often than every
+    /// step.
+    #[inline(always)]
+    pub fn loss_coefficient(&self, wheel_speed: F) -> F {
+        self.alpha + self.beta * wheel_speed.abs().powf_pos(self.convection_exponent)
+    }
+
+    /// dT_d/dt with a precomputed [`Self::loss_coefficient`].
+    #[inline(always)]
+    pub fn rate_with(&self, brake_power: F, t_d: F, loss_coefficient: F) -> F {
+        (self.heat_partition * brake_power - loss_coefficient * t_d) * self.inv_heat_capacity
     }
 }

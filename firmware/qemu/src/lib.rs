@@ -1,0 +1,309 @@
+//! # hils-qemu: the plant on an emulated Cortex-M4F
+//!
+//! The emulator binary (`src/main.rs`, `cargo qemu`) runs the plant with the simulated brake
+//! unit ([`hils_brake_unit::ClosedLoop`] in f32) through the paper's emergency brake on QEMU's
+//! `mps2-an386` (Cortex-M4 with FPU), streams a decimated trajectory over semihosting with
+//! every f32 as its bit pattern, and measures instructions per plant step with SysTick under
+//! `-icount shift=0`. The host (`hils target-cost`, the `target_qemu` test) runs the same
+//! scenario in f32 and compares the trajectories bit for bit.
+//!
+//! This library is what both sides share, `no_std` and target independent, so that there is
+//! one copy of it:
+//! * [`EbScenario`]: the run (EB at t = 0, wet rail, 150 km/h, until 1 s after the stop),
+//!   with the same stop rule and recording as `hils simulate` (`tools/src/scenario.rs`);
+//! * [`TraceRow`]: what is recorded every [`RECORD_EVERY`] steps, and its text line
+//!   ([`TraceRow::encode`], [`TraceRow::decode`]);
+//! * the names of the cost lines the binary prints ([`PARTS`]).
+#![no_std]
+#![forbid(unsafe_code)]
+
+use hils_brake_unit::{BrakeDemand, ClosedLoop, LoopError, UnitOutputs, Valve};
+use hils_plant::{FrictionModel, Outputs, Params, Real, WHEELSETS};
+
+/// Record every this many plant steps: 10 ms at the 0.1 ms step.
+pub const RECORD_EVERY: u32 = 100;
+/// The run goes on this long after the stop, s (as `hils simulate`).
+pub const AFTER_STOP_S: f64 = 1.0;
+/// The run gives up this long after the EB command, s (as `hils simulate`).
+pub const MAX_TIME_S: f64 = 120.0;
+/// The vehicle has stopped when the carbody speed falls to this, m/s (as `hils simulate`).
+pub const STOP_SPEED_MPS: f64 = 0.01;
+
+/// The paper's emergency brake in closed loop: EB command at t = 0 from the scenario's
+/// initial speed on its rail (150 km/h, wet, in the reference parameters), stepped until
+/// [`AFTER_STOP_S`] after the carbody stops. The caller does the steps (so the target can
+/// time them) through [`EbScenario::advance`].
+#[derive(Clone, Debug)]
+pub struct EbScenario<F: Real> {
+    /// The loop being run (plant + simulated brake unit).
+    pub sim: ClosedLoop<F>,
+    stop_step: Option<u32>,
+    after_steps: u32,
+    max_steps: u32,
+}
+
+/// What [`EbScenario::advance`] says about the step just taken.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Advance {
+    /// Record this step (every [`RECORD_EVERY`] steps).
+    pub record: bool,
+    /// The run is over (this step was the last).
+    pub done: bool,
+}
+
+impl<F: Real> EbScenario<F> {
+    /// The scenario with the reference parameters and one friction model.
+    pub fn paper(friction: FrictionModel) -> Result<Self, LoopError> {
+        let mut params = Params::default();
+        params.friction.model = friction;
+        Self::new(&params)
+    }
+
+    /// The scenario with `params` (rail, initial speed and step from
+    /// `scenario.paper_eb`). The EB demand is set before the first step.
+    pub fn new(params: &Params) -> Result<Self, LoopError> {
+        let sc = &params.scenario.paper_eb;
+        let mut sim = ClosedLoop::new(params, sc.rail, F::of(sc.initial_speed_kmh / 3.6))?;
+        sim.set_demand(BrakeDemand::Emergency);
+        let dt = sc.step;
+        Ok(Self {
+            sim,
+            stop_step: None,
+            after_steps: libm::ceil(AFTER_STOP_S / dt) as u32,
+            max_steps: libm::ceil(MAX_TIME_S / dt) as u32,
+        })
+    }
+
+    /// Plant steps taken so far.
+    pub fn steps(&self) -> u32 {
+        self.sim.outputs().steps
+    }
+
+    /// The step at which the carbody speed first fell to [`STOP_SPEED_MPS`].
+    pub fn stop_step(&self) -> Option<u32> {
+        self.stop_step
+    }
+
+    /// Takes one step: `step` must advance `sim` by exactly one step (`sim.step()`, timed
+    /// or not). Returns whether to record it and whether the run is over. A `step` that
+    /// does not advance the plant ends the run (the plant's step counter is the clock).
+    pub fn advance(&mut self, step: impl FnOnce(&mut ClosedLoop<F>)) -> Advance {
+        let before = self.steps();
+        step(&mut self.sim);
+        let steps = self.steps();
+        if steps != before.wrapping_add(1) {
+            return Advance {
+                record: false,
+                done: true,
+            };
+        }
+        if self.stop_step.is_none() && self.sim.outputs().vehicle_speed.to_f64() <= STOP_SPEED_MPS {
+            self.stop_step = Some(steps);
+        }
+        let after_stop =
+            matches!(self.stop_step, Some(s) if steps >= s.saturating_add(self.after_steps));
+        Advance {
+            record: steps.is_multiple_of(RECORD_EVERY),
+            done: after_stop || steps >= self.max_steps,
+        }
+    }
+}
+
+/// Names of the scalar values of a [`TraceRow`], in order (units in the names).
+pub const SCALAR_COLUMNS: [&str; 7] = [
+    "t_s",
+    "vehicle_speed_mps",
+    "distance_m",
+    "carbody_accel_mps2",
+    "carbody_pitch_rad",
+    "reference_speed_mps",
+    "demand_pressure_pa",
+];
+
+/// Names of the per-wheelset values of a [`TraceRow`] (wheelset number appended), in order.
+pub const WHEELSET_COLUMNS: [&str; 15] = [
+    "omega_radps",
+    "speed_mps",
+    "slip_velocity_mps",
+    "creepage",
+    "axle_load_n",
+    "adhesion_force_n",
+    "adhesion",
+    "rail_mu",
+    "mu_d",
+    "clamp_force_n",
+    "brake_torque_nm",
+    "brake_force_n",
+    "disc_temp_c",
+    "brake_power_w",
+    "cylinder_pressure_pa",
+];
+
+/// Number of f32 values in a [`TraceRow`].
+pub const VALUES: usize = SCALAR_COLUMNS.len() + WHEELSETS * WHEELSET_COLUMNS.len();
+
+/// Number of 32-bit words of an encoded row: step, flags, valves, then the values.
+pub const WORDS: usize = 3 + VALUES;
+
+/// Length of an encoded row: `R`, then per word a space and 8 hex digits, then `\n`.
+pub const LINE_LEN: usize = 1 + 9 * WORDS + 1;
+
+/// One recorded step of the closed loop; every float kept as its f32 bit pattern.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TraceRow {
+    /// Plant steps since the start.
+    pub step: u32,
+    /// The plant's flags of the step (`hils_plant::Flags`).
+    pub flags: u32,
+    /// The WSP valve commands, 2 bits per wheelset (0 apply, 1 hold, 2 vent), wheelset 1
+    /// in the lowest bits.
+    pub valves: u32,
+    /// [`SCALAR_COLUMNS`], then [`WHEELSET_COLUMNS`] of wheelset 1, 2, 3, 4.
+    pub values: [u32; VALUES],
+}
+
+impl TraceRow {
+    /// The row of the loop's current state.
+    pub fn of(sim: &ClosedLoop<f32>) -> Self {
+        Self::from_outputs(sim.plant.time(), sim.outputs(), sim.unit_outputs())
+    }
+
+    /// The row of a plant time (s), the plant's outputs and the unit's outputs.
+    pub fn from_outputs(time: f32, o: &Outputs<f32>, u: &UnitOutputs<f32>) -> Self {
+        let mut values = [0u32; VALUES];
+        let scalars = [
+            time,
+            o.vehicle_speed,
+            o.distance,
+            o.carbody_accel,
+            o.carbody_pitch,
+            u.reference_speed,
+            u.demand_pressure,
+        ];
+        let mut k = 0;
+        for x in scalars {
+            values[k] = x.to_bits();
+            k += 1;
+        }
+        let mut valves = 0u32;
+        for j in 0..WHEELSETS {
+            let w = &o.wheelsets[j];
+            let per = [
+                w.omega,
+                w.speed,
+                w.slip_velocity,
+                w.creepage,
+                w.axle_load,
+                w.adhesion_force,
+                w.adhesion,
+                w.rail_mu,
+                w.mu_d,
+                w.clamp_force,
+                w.brake_torque,
+                w.brake_force,
+                w.disc_temp,
+                w.brake_power,
+                u.cylinder_pressure[j],
+            ];
+            for x in per {
+                values[k] = x.to_bits();
+                k += 1;
+            }
+            let bits = match u.valves[j] {
+                Valve::Apply => 0,
+                Valve::Hold => 1,
+                Valve::Vent => 2,
+            };
+            valves |= bits << (2 * j);
+        }
+        Self {
+            step: o.steps,
+            flags: o.flags.0,
+            valves,
+            values,
+        }
+    }
+
+    /// Value `k` as f32.
+    pub fn value(&self, k: usize) -> f32 {
+        f32::from_bits(self.values[k])
+    }
+
+    /// Value of column `c` ([`WHEELSET_COLUMNS`] index) of wheelset `j` (0-based).
+    pub fn wheelset_value(&self, j: usize, c: usize) -> f32 {
+        self.value(SCALAR_COLUMNS.len() + j * WHEELSET_COLUMNS.len() + c)
+    }
+
+    /// Whether wheelset `j`'s WSP valve vents.
+    pub fn venting(&self, j: usize) -> bool {
+        (self.valves >> (2 * j)) & 3 == 2
+    }
+
+    /// Writes the text line (`R`, [`WORDS`] words of 8 hex digits, `\n`) into `buf`.
+    pub fn encode(&self, buf: &mut [u8; LINE_LEN]) {
+        const HEX: &[u8; 16] = b"0123456789abcdef";
+        buf[0] = b'R';
+        let mut at = 1;
+        let mut put = |word: u32| {
+            buf[at] = b' ';
+            for d in 0..8 {
+                buf[at + 1 + d] = HEX[((word >> (28 - 4 * d)) & 0xf) as usize];
+            }
+            at += 9;
+        };
+        put(self.step);
+        put(self.flags);
+        put(self.valves);
+        for v in self.values {
+            put(v);
+        }
+        buf[LINE_LEN - 1] = b'\n';
+    }
+
+    /// Parses a line written by [`TraceRow::encode`] (without or with its `\n`). `None` if it
+    /// is not exactly such a line.
+    pub fn decode(line: &str) -> Option<Self> {
+        let rest = line.strip_suffix('\n').unwrap_or(line).strip_prefix('R')?;
+        let mut words = [0u32; WORDS];
+        let mut n = 0;
+        for field in rest.split(' ').skip(1) {
+            if n == WORDS || field.len() != 8 {
+                return None;
+            }
+            words[n] = u32::from_str_radix(field, 16).ok()?;
+            n += 1;
+        }
+        if n != WORDS || !rest.starts_with(' ') {
+            return None;
+        }
+        let mut values = [0u32; VALUES];
+        values.copy_from_slice(&words[3..]);
+        Some(Self {
+            step: words[0],
+            flags: words[1],
+            valves: words[2],
+            values,
+        })
+    }
+}
+
+/// The timed parts of a step, as the binary names them in its `C` (cost) lines.
+///
+/// * `step`: `Plant::step` (the full plant step: 4 wheelsets, 17 DOF, contact, friction,
+///   heat), timed on an exact replay of each step of the loop;
+/// * `loop`: `ClosedLoop::step` (brake unit + plant), the step that makes the trajectory;
+/// * `contact`, `friction`, `thermal`: the plant's sub-models (Polach Eqs 9-12, Eq 2,
+///   Eqs 3-6) for the four wheelsets, called separately with the step's values;
+/// * `suspension`: the rest of the plant step (suspension forces, the 17-DOF bodies, the
+///   semi-implicit spin/brake update, integration, input checks): `step` minus the three
+///   sub-models, per step;
+/// * `unit`: the brake unit and the loop's wiring: `loop` minus `step`, per step.
+pub const PARTS: [&str; 7] = [
+    "step",
+    "loop",
+    "contact",
+    "friction",
+    "thermal",
+    "suspension",
+    "unit",
+];

@@ -1,0 +1,563 @@
+//! The plant on the emulated Cortex-M4F: QEMU `-machine mps2-an386 -cpu cortex-m4`.
+//!
+//! Runs [`hils_qemu::EbScenario`] (the paper's EB, wet rail, 150 km/h) in f32 for both
+//! disc-pad friction models and prints over semihosting, one line each:
+//!
+//! * `H key=value ...`: the header: math implementation, the SysTick calibration;
+//! * `K n=N instructions=I`: calibration points (a loop of exactly N instructions, measured);
+//! * `F fn=NAME n= sum= max=`: instructions per call of the plant's math functions;
+//! * `B friction=F`: a run starts;
+//! * `R ...`: a [`hils_qemu::TraceRow`] every 10 ms (f32 bit patterns, hex);
+//! * `C friction=F part=P n= sum= max= max_step= p50= p99=`: instructions per step of a part
+//!   (see [`hils_qemu::PARTS`]);
+//! * `E friction=F steps= stop_step= rows=`: the run ended;
+//! * `X message`: an error (then the program exits with failure).
+//!
+//! # Counting instructions
+//!
+//! Under `-icount shift=0` QEMU advances its virtual clock by 2^0 = 1 ns per executed
+//! instruction, and the mps2-an386 core clock is 25 MHz, so SysTick (processor clock source)
+//! counts down one tick every 40 instructions; the program measures that ratio itself at
+//! start (`H ... instructions_per_tick=`). A measurement starts right after a tick edge
+//! (spinning on the counter) and ends by counting spin iterations (4 instructions each) up
+//! to the next edge, which resolves a duration to a few instructions instead of 40; the
+//! constant overhead of the measurement is calibrated and removed, and the `K` lines check
+//! the result against loops of known length.
+
+#![cfg_attr(target_os = "none", no_std, no_main)]
+
+#[cfg(not(target_os = "none"))]
+fn main() {
+    eprintln!(
+        "hils-qemu runs on the emulated Cortex-M4F only: build it with `cargo qemu` \
+         (thumbv7em-none-eabihf) and run it with `hils target-cost`"
+    );
+    std::process::exit(2);
+}
+
+#[cfg(target_os = "none")]
+mod emulator {
+    use core::arch::asm;
+    use core::fmt::Write;
+    use core::hint::black_box;
+
+    use cortex_m::peripheral::syst::SystClkSource;
+    use cortex_m_rt::{ExceptionFrame, entry, exception};
+    use cortex_m_semihosting::{debug, hio};
+    use hils_plant::friction::DiscPadFriction;
+    use hils_plant::thermal::DiscThermal;
+    use hils_plant::{BrakeInput, FrictionModel, Params, WHEELSETS};
+    use hils_qemu::{EbScenario, LINE_LEN, PARTS, TraceRow};
+
+    /// SysTick current value register.
+    const SYST_CVR: u32 = 0xE000_E018;
+    /// SysTick counts 24 bits.
+    const SYST_MASK: u32 = 0x00FF_FFFF;
+    /// Instructions per iteration of the counting spin loop in [`edge_counting`].
+    const SPIN_INSTRUCTIONS: u32 = 4;
+    /// Histogram bin width, instructions.
+    const BIN: u32 = 8;
+    const BINS: usize = 1024;
+
+    /// Spins until the SysTick counter changes; returns the new value (taken within one
+    /// 3-instruction iteration of the tick edge).
+    #[inline(always)]
+    fn edge() -> u32 {
+        let now: u32;
+        // SAFETY: reads the SysTick current value register, which is always mapped.
+        unsafe {
+            asm!(
+                "ldr {first}, [{cvr}]",
+                "2:",
+                "ldr {now}, [{cvr}]",
+                "cmp {now}, {first}",
+                "beq 2b",
+                cvr = in(reg) SYST_CVR,
+                first = out(reg) _,
+                now = out(reg) now,
+                options(nostack),
+            );
+        }
+        now
+    }
+
+    /// As [`edge`], also returning the number of spin iterations (4 instructions each).
+    #[inline(always)]
+    fn edge_counting() -> (u32, u32) {
+        let now: u32;
+        let spins: u32;
+        // SAFETY: as in `edge`.
+        unsafe {
+            asm!(
+                "ldr {first}, [{cvr}]",
+                "movs {spins}, #0",
+                "2:",
+                "ldr {now}, [{cvr}]",
+                "adds {spins}, {spins}, #1",
+                "cmp {now}, {first}",
+                "beq 2b",
+                cvr = in(reg) SYST_CVR,
+                first = out(reg) _,
+                spins = out(reg) spins,
+                now = out(reg) now,
+                options(nostack),
+            );
+        }
+        (now, spins)
+    }
+
+    /// A loop of exactly `2 n` instructions (`subs`, `bne`), n >= 1.
+    #[inline(always)]
+    fn known_loop(n: u32) {
+        // SAFETY: register-only loop.
+        unsafe {
+            asm!(
+                "2:",
+                "subs {n}, {n}, #1",
+                "bne 2b",
+                n = inout(reg) n => _,
+                options(nomem, nostack),
+            );
+        }
+    }
+
+    /// Instructions of a piece of code from SysTick.
+    struct Timer {
+        instructions_per_tick: u32,
+        /// Instructions the measurement itself adds (an empty measurement).
+        overhead: u32,
+    }
+
+    impl Timer {
+        /// Raw instructions between the start edge and the end of `f` (overhead included).
+        #[inline(always)]
+        fn raw<R>(&self, f: impl FnOnce() -> R) -> (R, u32) {
+            let start = edge();
+            let r = f();
+            let (end, spins) = edge_counting();
+            let ticks = start.wrapping_sub(end) & SYST_MASK;
+            let raw = (ticks * self.instructions_per_tick).wrapping_sub(spins * SPIN_INSTRUCTIONS);
+            (r, raw)
+        }
+
+        /// Instructions of `f` (the measurement's own overhead removed).
+        #[inline(always)]
+        fn measure<R>(&self, f: impl FnOnce() -> R) -> (R, u32) {
+            let (r, raw) = self.raw(f);
+            (r, raw.saturating_sub(self.overhead))
+        }
+    }
+
+    /// Distribution of a part's instructions per step.
+    struct Stat {
+        n: u32,
+        sum: u64,
+        max: u32,
+        max_step: u32,
+        hist: [u32; BINS],
+    }
+
+    impl Stat {
+        const fn new() -> Self {
+            Self {
+                n: 0,
+                sum: 0,
+                max: 0,
+                max_step: 0,
+                hist: [0; BINS],
+            }
+        }
+
+        fn add(&mut self, x: u32, step: u32) {
+            self.n += 1;
+            self.sum += x as u64;
+            if x > self.max {
+                self.max = x;
+                self.max_step = step;
+            }
+            self.hist[((x / BIN) as usize).min(BINS - 1)] += 1;
+        }
+
+        /// Upper edge of the bin holding the q-quantile (q in per mille).
+        fn quantile(&self, per_mille: u32) -> u32 {
+            let target = (self.n as u64 * per_mille as u64).div_ceil(1000);
+            let mut seen = 0u64;
+            for (b, &c) in self.hist.iter().enumerate() {
+                seen += c as u64;
+                if seen >= target {
+                    return (b as u32 + 1) * BIN;
+                }
+            }
+            self.max
+        }
+    }
+
+    /// A line being formatted for the host.
+    struct Line {
+        buf: [u8; 512],
+        len: usize,
+    }
+
+    impl Line {
+        fn new() -> Self {
+            Self {
+                buf: [0; 512],
+                len: 0,
+            }
+        }
+    }
+
+    impl Write for Line {
+        fn write_str(&mut self, s: &str) -> core::fmt::Result {
+            let b = s.as_bytes();
+            let end = self.len + b.len();
+            if end > self.buf.len() {
+                return Err(core::fmt::Error);
+            }
+            self.buf[self.len..end].copy_from_slice(b);
+            self.len = end;
+            Ok(())
+        }
+    }
+
+    struct Host {
+        out: hio::HostStream,
+    }
+
+    impl Host {
+        fn send(&mut self, bytes: &[u8]) {
+            if self.out.write_all(bytes).is_err() {
+                fail_exit();
+            }
+        }
+
+        fn line(&mut self, args: core::fmt::Arguments) {
+            let mut l = Line::new();
+            if l.write_fmt(args).is_err() || l.write_str("\n").is_err() {
+                self.send(b"X line too long\n");
+                fail_exit();
+            }
+            self.send(&l.buf[..l.len]);
+        }
+
+        fn row(&mut self, row: &TraceRow) {
+            let mut buf = [0u8; LINE_LEN];
+            row.encode(&mut buf);
+            self.send(&buf);
+        }
+    }
+
+    fn fail_exit() -> ! {
+        debug::exit(debug::EXIT_FAILURE);
+        loop {
+            cortex_m::asm::bkpt();
+        }
+    }
+
+    /// The SysTick ratio and the timer's overhead; prints `H` and `K` lines.
+    fn calibrate(host: &mut Host) -> Timer {
+        // Instructions per tick from a 2 000 000-instruction loop (the measurement's own few
+        // instructions are far below one tick).
+        let n = 1_000_000;
+        let start = edge();
+        known_loop(n);
+        let (end, _) = edge_counting();
+        let ticks = (start.wrapping_sub(end) & SYST_MASK).max(1);
+        let mut timer = Timer {
+            instructions_per_tick: (2 * n + ticks / 2) / ticks,
+            overhead: 0,
+        };
+        // Overhead: the mean of empty measurements (each is off by up to one spin iteration
+        // depending on where the edges fall; the mean centres the error).
+        let reps = 64;
+        let total: u32 = (0..reps).map(|_| timer.raw(|| ()).1).sum();
+        let overhead = (total + reps / 2) / reps;
+        timer.overhead = overhead;
+        host.line(format_args!(
+            "H hils-qemu math={} instructions_per_tick={} ticks_for_2000000={} overhead={} spin={}",
+            hils_plant::math::IMPLEMENTATION,
+            timer.instructions_per_tick,
+            ticks,
+            overhead,
+            SPIN_INSTRUCTIONS
+        ));
+        // Check points: loops of exactly 2 n instructions.
+        for n in [1u32, 2, 3, 5, 8, 13, 21, 50, 100, 377, 1000, 1500] {
+            let ((), got) = timer.measure(|| known_loop(n));
+            host.line(format_args!("K n={} instructions={}", 2 * n, got));
+        }
+        timer
+    }
+
+    /// Measures four calls of a sub-model (one per wheelset) with per-wheelset arguments;
+    /// `baseline` is the same harness around a trivial function, subtracted.
+    #[inline(always)]
+    fn four(timer: &Timer, args: &[[f32; 3]; WHEELSETS], f: impl Fn([f32; 3]) -> f32) -> u32 {
+        timer
+            .measure(|| {
+                let mut acc = 0.0f32;
+                for a in args {
+                    acc += f(black_box(*a));
+                }
+                black_box(acc);
+            })
+            .1
+    }
+
+    /// As [`four`] for a single call.
+    fn one(timer: &Timer, args: &[[f32; 3]; 1], f: impl Fn([f32; 3]) -> f32) -> u32 {
+        timer
+            .measure(|| {
+                black_box(f(black_box(args[0])));
+            })
+            .1
+    }
+
+    fn trivial(a: [f32; 3]) -> f32 {
+        a[0] + a[1] + a[2]
+    }
+
+    /// Instructions per call of the plant's transcendental functions (whatever
+    /// implementation `hils_plant::math` compiled in) over the argument ranges of the
+    /// scenario; prints `F fn=NAME n= sum= max= lo= hi=` lines (the math comparison).
+    type MathFn<'a> = &'a dyn Fn(f32) -> f32;
+
+    fn function_costs(host: &mut Host, timer: &Timer) {
+        use hils_plant::math::{atan_f32, exp_f32, ln_f32};
+        // One call inside the harness, minus the harness around an identity function.
+        let one = |x: f32, f: &dyn Fn(f32) -> f32| {
+            timer
+                .measure(|| {
+                    black_box(f(black_box(x)));
+                })
+                .1
+        };
+        let base = (0..16).map(|i| one(i as f32, &|x| x)).min().unwrap_or(0);
+        let ranges: [(&str, f32, f32, MathFn); 3] = [
+            // exp: -B|w|, -m_v v_d, -m_T T_d, 0.8 ln v: arguments in [-20, 3].
+            ("exp", -20.0, 3.0, &|x| exp_f32(x)),
+            // ln: wheel speeds 0.01..45 m/s.
+            ("ln", 0.01, 45.0, &|x| ln_f32(x)),
+            // atan: k_s eps over the creep range, 1e-3..50.
+            ("atan", 1.0e-3, 50.0, &|x| atan_f32(x)),
+        ];
+        for (name, lo, hi, f) in ranges {
+            let n = 1000u32;
+            let (mut sum, mut max) = (0u64, 0u32);
+            for i in 0..n {
+                let x = lo + (hi - lo) * (i as f32 + 0.5) / n as f32;
+                let c = one(x, f).saturating_sub(base);
+                sum += c as u64;
+                max = max.max(c);
+            }
+            host.line(format_args!(
+                "F fn={name} n={n} sum={sum} max={max} lo={lo} hi={hi}"
+            ));
+        }
+    }
+
+    fn friction_name(f: FrictionModel) -> &'static str {
+        match f {
+            FrictionModel::Variable => "variable",
+            FrictionModel::Constant => "constant",
+        }
+    }
+
+    fn run(host: &mut Host, timer: &Timer, friction: FrictionModel) {
+        let name = friction_name(friction);
+        let mut params = Params::default();
+        params.friction.model = friction;
+        let Ok(mut sc) = EbScenario::<f32>::new(&params) else {
+            host.line(format_args!(
+                "X friction={name}: cannot build the closed loop"
+            ));
+            fail_exit();
+        };
+        let fr = DiscPadFriction::<f32>::new(&params.friction);
+        let th = DiscThermal::<f32>::new(&params.thermal);
+        let friction_radius = params.brake.friction_radius as f32;
+        let r = params.vehicle.wheel_radius as f32;
+        let polach = *sc.sim.plant.polach();
+        let zero = [[0.5f32, 20.0, 1.0e5]; WHEELSETS];
+        let baseline = (0..8)
+            .map(|_| four(timer, &zero, trivial))
+            .min()
+            .unwrap_or(0);
+        let baseline_one = (0..8)
+            .map(|_| one(timer, &[zero[0]], trivial))
+            .min()
+            .unwrap_or(0);
+
+        host.line(format_args!(
+            "B friction={name} harness_baseline={baseline}"
+        ));
+        host.row(&TraceRow::of(&sc.sim));
+        let mut stats = [const { Stat::new() }; PARTS.len()];
+        let mut rows = 1u32;
+        loop {
+            let prev = *sc.sim.outputs();
+            let mut replay = sc.sim.plant.clone();
+            let mut loop_cost = 0;
+            let adv = sc.advance(|sim| {
+                loop_cost = timer
+                    .measure(|| {
+                        sim.step();
+                    })
+                    .1;
+            });
+            let step = sc.steps();
+            // The plant step alone, on an exact replay of the step the loop just took.
+            let inputs = sc
+                .sim
+                .unit_outputs()
+                .cylinder_pressure
+                .map(BrakeInput::CylinderPressure);
+            let ((), step_cost) = timer.measure(|| {
+                replay.step(black_box(&inputs));
+            });
+            let cur = *sc.sim.outputs();
+            if *replay.outputs() != cur {
+                host.line(format_args!(
+                    "X friction={name}: the replayed plant step {step} differs"
+                ));
+                fail_exit();
+            }
+            // The sub-models, with this step's per-wheelset values.
+            let w = |o: &hils_plant::Outputs<f32>, j: usize| o.wheelsets[j];
+            let contact_args = [0, 1, 2, 3].map(|j| {
+                [
+                    w(&prev, j).slip_velocity,
+                    w(&prev, j).speed,
+                    w(&cur, j).axle_load,
+                ]
+            });
+            // Friction and heat as the step computes them: Eq (2) with the temperature
+            // bracket and Eq (5) with the loss coefficient that the step refreshes for one
+            // wheelset (`slow`), plus that refresh.
+            let slow = (prev.steps % WHEELSETS as u32) as usize;
+            let friction_args = [0, 1, 2, 3].map(|j| {
+                [
+                    w(&prev, j).omega * friction_radius,
+                    fr.temperature_factor(w(&prev, j).disc_temp),
+                    w(&cur, j).clamp_force,
+                ]
+            });
+            let thermal_args = [0, 1, 2, 3].map(|j| {
+                [
+                    w(&cur, j).brake_power,
+                    w(&prev, j).disc_temp,
+                    th.loss_coefficient(r * w(&prev, j).omega),
+                ]
+            });
+            let refresh_args = [[w(&prev, slow).disc_temp, r * w(&prev, slow).omega, 0.0]; 1];
+            let contact = four(timer, &contact_args, |a| {
+                let c = polach.evaluate(a[0], a[1], a[2]);
+                c.chord + c.mu + c.creepage
+            })
+            .saturating_sub(baseline);
+            let friction = (four(timer, &friction_args, |a| fr.mu_d_with(a[0], a[1], a[2]))
+                + one(timer, &refresh_args, |a| fr.temperature_factor(a[0])))
+            .saturating_sub(baseline + baseline_one);
+            let thermal = (four(timer, &thermal_args, |a| th.rate_with(a[0], a[1], a[2]))
+                + one(timer, &refresh_args, |a| th.loss_coefficient(a[1])))
+            .saturating_sub(baseline + baseline_one);
+            let suspension = step_cost.saturating_sub(contact + friction + thermal);
+            let unit = loop_cost.saturating_sub(step_cost);
+            for (k, x) in [
+                step_cost, loop_cost, contact, friction, thermal, suspension, unit,
+            ]
+            .into_iter()
+            .enumerate()
+            {
+                stats[k].add(x, step);
+            }
+            if adv.record {
+                host.row(&TraceRow::of(&sc.sim));
+                rows += 1;
+            }
+            if adv.done {
+                break;
+            }
+        }
+        for (k, s) in stats.iter().enumerate() {
+            host.line(format_args!(
+                "C friction={name} part={} n={} sum={} max={} max_step={} p50={} p99={}",
+                PARTS[k],
+                s.n,
+                s.sum,
+                s.max,
+                s.max_step,
+                s.quantile(500),
+                s.quantile(990)
+            ));
+        }
+        match sc.stop_step() {
+            Some(s) => host.line(format_args!(
+                "E friction={name} steps={} stop_step={s} rows={rows}",
+                sc.steps()
+            )),
+            None => host.line(format_args!(
+                "E friction={name} steps={} stop_step=none rows={rows}",
+                sc.steps()
+            )),
+        }
+    }
+
+    #[entry]
+    fn main() -> ! {
+        let Some(mut p) = cortex_m::Peripherals::take() else {
+            fail_exit()
+        };
+        // The FPU: cortex-m-rt's reset handler grants CP10/CP11 full access for
+        // -eabihf targets before `main`; set it again (idempotent) and check, since every
+        // f32 operation of the plant would fault without it.
+        // SAFETY: CPACR write enabling the FPU coprocessors, no other effect.
+        unsafe {
+            p.SCB.cpacr.modify(|v| v | (0b1111 << 20));
+        }
+        cortex_m::asm::dsb();
+        cortex_m::asm::isb();
+        let Ok(out) = hio::hstdout() else { fail_exit() };
+        let mut host = Host { out };
+        if p.SCB.cpacr.read() & (0b1111 << 20) != (0b1111 << 20) {
+            host.send(b"X the FPU (CPACR CP10/CP11) could not be enabled\n");
+            fail_exit();
+        }
+        // SysTick free-running from the processor clock, no interrupt.
+        p.SYST.disable_interrupt();
+        p.SYST.set_clock_source(SystClkSource::Core);
+        p.SYST.set_reload(SYST_MASK);
+        p.SYST.clear_current();
+        p.SYST.enable_counter();
+
+        let timer = calibrate(&mut host);
+        function_costs(&mut host, &timer);
+        for friction in [FrictionModel::Variable, FrictionModel::Constant] {
+            run(&mut host, &timer, friction);
+        }
+        debug::exit(debug::EXIT_SUCCESS);
+        loop {
+            cortex_m::asm::bkpt();
+        }
+    }
+
+    #[exception]
+    unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
+        if let Ok(mut out) = hio::hstdout() {
+            let mut l = Line::new();
+            let _ = writeln!(l, "X hard fault at pc {:#010x}", frame.pc());
+            let _ = out.write_all(&l.buf[..l.len]);
+        }
+        fail_exit()
+    }
+
+    #[panic_handler]
+    fn panic(info: &core::panic::PanicInfo) -> ! {
+        if let Ok(mut out) = hio::hstdout() {
+            let mut l = Line::new();
+            let _ = writeln!(l, "X panic: {}", info.message());
+            let _ = out.write_all(&l.buf[..l.len]);
+        }
+        fail_exit()
+    }
+}

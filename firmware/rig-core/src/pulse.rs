@@ -1,0 +1,204 @@
+//! Pulse trains like axle speed sensors: f = teeth x omega / 2 pi.
+//!
+//! Each wheelset drives one timer channel in PWM mode 1 at 50 % duty: the output frequency
+//! is f = f_timer / ((PSC + 1)(ARR + 1)). [`PulseTimer::registers`] picks the smallest
+//! prescaler that lets ARR + 1 fit the counter, then rounds ARR + 1 to the nearest count:
+//! the relative frequency error is at most 0.5 / (ARR + 1), and ARR + 1 >= 32768 whenever
+//! the prescaler is above 1, so the error is below 0.0016 % from 0.04 Hz up to 2.6 kHz and
+//! below 0.1 % up to f_timer / 500 (340 kHz at 170 MHz). Above that the frequency is held
+//! at f_timer / 500 (a wheel of 1000 teeth at 300 rad/s gives 48 kHz).
+//!
+//! **Standstill.** Below [`MIN_FREQUENCY_HZ`] (0.5 Hz: one edge per second or less is no
+//! speed signal) and for NaN the output is silent: CCR = 0 holds the pin low, with a short
+//! 0.1 ms period so that the next setting takes effect at once.
+//!
+//! **Update.** The board writes the registers every step with preload (ARR and CCR
+//! preloaded, PSC always is): the new frequency starts at the end of the running period,
+//! so the train never shows a runt pulse. Like a real sensor, a change shows within one
+//! period of the old frequency.
+
+use core::f32::consts::TAU;
+
+/// Below this the output is silent, Hz.
+pub const MIN_FREQUENCY_HZ: f32 = 0.5;
+
+/// Register values of one pulse channel (written as they are).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PulseRegisters {
+    /// TIMx_PSC: prescaler - 1.
+    pub psc: u16,
+    /// TIMx_ARR: period - 1, counts.
+    pub arr: u32,
+    /// TIMx_CCRy: high time, counts (0 = silent).
+    pub ccr: u32,
+}
+
+impl PulseRegisters {
+    pub fn is_silent(&self) -> bool {
+        self.ccr == 0
+    }
+}
+
+/// A timer that makes a pulse train.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PulseTimer {
+    /// Counter clock before the prescaler, Hz (170 MHz on the G474 at full speed).
+    pub clock_hz: u32,
+    /// Largest ARR + 1 (65536 for a 16-bit counter).
+    pub max_period: u32,
+}
+
+/// Axle-speed-sensor frequency of a wheelset, Hz: teeth |omega| / 2 pi (a speed sensor
+/// has no direction). NaN stays NaN (silent).
+#[inline]
+pub fn wheel_frequency_hz(omega_radps: f32, teeth: u16) -> f32 {
+    teeth as f32 * omega_radps.abs() / TAU
+}
+
+impl PulseTimer {
+    /// A 16-bit timer at `clock_hz`.
+    pub const fn timer16(clock_hz: u32) -> Self {
+        Self {
+            clock_hz,
+            max_period: 1 << 16,
+        }
+    }
+
+    /// Highest frequency set exactly to 0.1 %, Hz.
+    pub fn max_frequency_hz(&self) -> f32 {
+        self.clock_hz as f32 / 500.0
+    }
+
+    /// The silent setting: output low, 0.1 ms period.
+    pub fn silent(&self) -> PulseRegisters {
+        let period = (self.clock_hz / 10_000).clamp(2, self.max_period);
+        PulseRegisters {
+            psc: 0,
+            arr: period - 1,
+            ccr: 0,
+        }
+    }
+
+    /// Registers for a frequency (Hz); silent below [`MIN_FREQUENCY_HZ`] or for NaN.
+    pub fn registers(&self, frequency_hz: f32) -> PulseRegisters {
+        if !(frequency_hz >= MIN_FREQUENCY_HZ) {
+            return self.silent();
+        }
+        let f = frequency_hz.min(self.max_frequency_hz());
+        // Counts of one period at the undivided clock (f >= 0.5 Hz: at most 2 f_clk, which
+        // fits a u64 and, for f_clk <= 2.1 GHz, a u32).
+        let counts = (self.clock_hz as f32 / f + 0.5) as u64;
+        let max_period = self.max_period.max(2) as u64;
+        let prescale = counts.div_ceil(max_period).clamp(1, 1 << 16);
+        let period = ((counts + prescale / 2) / prescale).clamp(2, max_period);
+        PulseRegisters {
+            psc: (prescale - 1) as u16,
+            arr: (period - 1) as u32,
+            ccr: (period / 2) as u32,
+        }
+    }
+
+    /// The frequency a register setting produces, Hz (0 when silent).
+    pub fn frequency_of(&self, r: &PulseRegisters) -> f64 {
+        if r.is_silent() {
+            return 0.0;
+        }
+        self.clock_hz as f64 / ((r.psc as f64 + 1.0) * (r.arr as f64 + 1.0))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    const TIMER: PulseTimer = PulseTimer::timer16(170_000_000);
+
+    /// Independent f64 reference: f = teeth omega / 2 pi.
+    fn exact(omega: f64, teeth: u16) -> f64 {
+        teeth as f64 * omega / (2.0 * std::f64::consts::PI)
+    }
+
+    #[test]
+    fn silent_at_standstill_and_for_nan() {
+        for omega in [0.0f32, -0.0, 1e-6, f32::NAN] {
+            let r = TIMER.registers(wheel_frequency_hz(omega, 90));
+            assert!(r.is_silent(), "{omega}");
+            assert_eq!(TIMER.frequency_of(&r), 0.0);
+        }
+        // 0.5 Hz at 90 teeth: omega = 0.0349 rad/s; just above it runs.
+        assert!(!TIMER.registers(wheel_frequency_hz(0.036, 90)).is_silent());
+    }
+
+    #[test]
+    fn paper_speeds_within_a_thousandth() {
+        // 150 km/h on a 0.43 m wheel, 90 teeth: 1388.0 Hz, 122 479 clock counts: prescaler 2.
+        let omega = 150.0 / 3.6 / 0.43;
+        let r = TIMER.registers(wheel_frequency_hz(omega as f32, 90));
+        let err = (TIMER.frequency_of(&r) / exact(omega, 90) - 1.0).abs();
+        assert!(err < 1e-5, "{err}");
+        assert_eq!(r.psc, 1);
+        let half_period = 170e6 / exact(omega, 90) / 2.0;
+        assert!(
+            (r.arr as f64 + 1.0 - half_period).abs() <= 1.0,
+            "{} vs {half_period}",
+            r.arr
+        );
+    }
+
+    #[test]
+    fn error_sweep_5hz_to_max() {
+        // Log sweep of frequencies over teeth 1..1000: worst relative error.
+        let mut worst = 0.0f64;
+        for teeth in [1u16, 7, 48, 90, 120, 1000] {
+            let mut omega = 5.0 * 2.0 * std::f64::consts::PI / teeth as f64;
+            while exact(omega, teeth) < TIMER.max_frequency_hz() as f64 {
+                let r = TIMER.registers(wheel_frequency_hz(omega as f32, teeth));
+                let e = (TIMER.frequency_of(&r) / exact(omega, teeth) - 1.0).abs();
+                worst = worst.max(e);
+                omega *= 1.0137;
+            }
+        }
+        assert!(worst <= 1e-3, "worst relative error {worst}");
+    }
+
+    #[test]
+    fn duty_is_half_and_registers_fit_16_bits() {
+        for f in [
+            0.5f32,
+            0.51,
+            3.0,
+            17.0,
+            999.0,
+            2593.0,
+            40_000.0,
+            1e6,
+            f32::INFINITY,
+        ] {
+            let r = TIMER.registers(f);
+            assert!(r.arr <= 0xFFFF && r.arr >= 1, "{f}");
+            assert_eq!(r.ccr, (r.arr + 1) / 2);
+        }
+        // Above the exact range the frequency is held at f_clk / 500.
+        let r = TIMER.registers(1e9);
+        assert!((TIMER.frequency_of(&r) - 340_000.0).abs() < 1.0);
+    }
+
+    proptest! {
+        #[test]
+        fn any_speed_any_teeth(omega in proptest::num::f32::ANY, teeth in 1u16..=1000) {
+            let f = wheel_frequency_hz(omega, teeth);
+            let r = TIMER.registers(f);
+            prop_assert!(r.arr <= 0xFFFF);
+            let got = TIMER.frequency_of(&r);
+            let want = exact(omega.abs() as f64, teeth);
+            if want.is_finite() && want >= 5.0 && want <= TIMER.max_frequency_hz() as f64 {
+                prop_assert!((got / want - 1.0).abs() <= 1e-3, "{} vs {}", got, want);
+            }
+            if !(f >= MIN_FREQUENCY_HZ) {
+                prop_assert!(r.is_silent());
+            }
+        }
+    }
+}

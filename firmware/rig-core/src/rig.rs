@@ -1,0 +1,743 @@
+//! The real-time step of the rig interface board and its run state machine.
+//!
+//! [`Rig::step`] runs once per 0.1 ms tick, in the highest-priority interrupt:
+//!
+//! 1. read this tick's ADC sequence (converted at a fixed phase of the previous period)
+//!    and update the four [`SensorChannel`]s;
+//! 2. while running, step the plant: in [`RigMode::Rig`] with the measured brake inputs
+//!    (load cell -> `BrakeInput::ClampForce`, pressure -> `BrakeInput::CylinderPressure`),
+//!    in [`RigMode::SelfTest`] closed with the simulated brake unit
+//!    (`hils_brake_unit::ClosedLoop<f32>`);
+//! 3. write the outputs: four pulse trains, and on schedule the CAN frames (wheel speeds
+//!    every 10 ticks = 1 ms, status every 100 = 10 ms, diagnostics every 1000 = 100 ms);
+//! 4. every `divider` plant steps, a telemetry record.
+//!
+//! The board times each call with the DWT cycle counter and reports it with
+//! [`Rig::record_timing`]; overruns and missed ticks are counted and flagged.
+//!
+//! # Safe state
+//!
+//! Outside a run, and in the states `Stopped` and `Fault`, the outputs are in the safe
+//! state: every pulse train silent (pin low) and every wheel speed "not available"
+//! (raw 0x3FFF) in `RIG_WHEEL_SPEED`; the status frame keeps coming with the state and
+//! the fault flags. A brake controller sees a lost speed signal, the condition its own
+//! sensor supervision is built for, rather than a plausible but false speed. After a run
+//! ends at standstill (`Finished`), the speeds are sent as 0.00 km/h and the trains are
+//! silent (the wheels are at rest).
+//!
+//! A run goes to `Fault` (and so to the safe state), and the plant is no longer stepped,
+//! when during a run:
+//! * in rig mode, a sensor channel latches a fault (open, short, out of range, stuck, ADC
+//!   invalid: see [`crate::sensor`]);
+//! * in rig mode, no fresh ADC sequence arrives for 10 ticks (1 ms);
+//! * the plant reports a numeric fault (non-finite state; it has put itself at rest).
+//!
+//! In self-test mode the sensors close no loop: their faults are reported, nothing stops.
+//! Overruns, missed ticks, dropped frames or telemetry, CAN error passive and bus-off are
+//! flagged and counted but do not stop a run (the rig operator decides from the flags).
+//! `ClearFaults` clears latched faults whose cause is gone and takes `Fault` to `Stopped`.
+
+use embedded_can::Frame;
+use hils_brake_unit::{BrakeDemand, ClosedLoop};
+use hils_plant::{BrakeInput, Flags, FrictionModel, Outputs, Params, Plant, Rail};
+
+use crate::can::{
+    BrakeCommand, Calibration, Command, CommandFrame, CommandResult, ConfigItem, DecodeError,
+    DiagFrame, RigMode, RigState, StatusFrame, WHEEL_SPEED_MAX_KMH, WheelSpeedFrame,
+};
+use crate::hw::{RigIo, TelemetryEvent};
+use crate::pulse::{PulseRegisters, PulseTimer, wheel_frequency_hz};
+use crate::sensor::{CalibrationError, SensorChannel, SensorFault, SensorKind, split_sequence};
+use crate::telemetry::{RunHeader, TelemetryRecord, WSP_KNOWN};
+use crate::timing::{StepTiming, cycles_to_us};
+use crate::{CHANNELS, KMH_PER_MPS, STEP_RATE_HZ, WHEELSETS};
+
+/// Fault flags (bit set). The low 16 bits go into `RIG_STATUS`; all 32 into telemetry.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Faults(pub u32);
+
+impl Faults {
+    /// Bits 0-3: sensor channel 1-4 has a latched fault.
+    pub const SENSOR: u32 = 0x000F;
+    /// A step overran its period (sticky until cleared).
+    pub const OVERRUN: u32 = 0x0010;
+    /// The CAN controller is error passive now.
+    pub const CAN_ERROR_PASSIVE: u32 = 0x0020;
+    /// The CAN controller is or was bus-off since faults were cleared.
+    pub const CAN_BUS_OFF: u32 = 0x0040;
+    /// A plant brake input was clamped or not finite (plant flags).
+    pub const PLANT_INPUT: u32 = 0x0080;
+    /// The plant's state became non-finite; it put itself at rest.
+    pub const PLANT_NUMERIC: u32 = 0x0100;
+    /// A wheel speed was above the frame's 163.82 km/h and was sent saturated.
+    pub const SPEED_SATURATED: u32 = 0x0200;
+    /// A command was rejected (sticky until cleared; the last result is in the status frame).
+    pub const COMMAND_REJECTED: u32 = 0x0400;
+    /// A telemetry event was dropped (logging queue full).
+    pub const TELEMETRY_DROPPED: u32 = 0x0800;
+    /// A fault injection is active on some channel.
+    pub const FAULT_INJECTED: u32 = 0x1000;
+    /// No fresh ADC sequence for at least one tick (sticky); latches the run in rig mode
+    /// after 10 ticks.
+    pub const ADC_STALE: u32 = 0x2000;
+    /// A CAN frame was dropped (transmit queue full).
+    pub const CAN_TX_DROPPED: u32 = 0x4000;
+    /// Ticks were lost (sticky): the simulated time lags the wall clock.
+    pub const MISSED_TICKS: u32 = 0x8000;
+    /// Bits 16-19 (telemetry only): sensor channel 1-4 has a pending (not yet latched) condition.
+    pub const SENSOR_PENDING: u32 = 0x000F_0000;
+
+    pub fn contains(self, mask: u32) -> bool {
+        self.0 & mask != 0
+    }
+}
+
+/// Configuration of the rig.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RigConfig {
+    /// CPU (DWT) clock, Hz.
+    pub cpu_hz: u32,
+    /// Pulse timers' counter clock, Hz.
+    pub pulse_timer: PulseTimer,
+    /// Teeth of the simulated speed-sensor wheel.
+    pub teeth: u16,
+    /// Telemetry every this many plant steps.
+    pub telemetry_divider: u16,
+}
+
+impl RigConfig {
+    /// NUCLEO-G474RE at 170 MHz, 16-bit pulse timers at 170 MHz, 90 teeth, 100 Hz telemetry.
+    pub const fn nucleo_g474re() -> Self {
+        Self {
+            cpu_hz: 170_000_000,
+            pulse_timer: PulseTimer::timer16(170_000_000),
+            teeth: 90,
+            telemetry_divider: 100,
+        }
+    }
+}
+
+/// Why a command was not carried out.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CommandError {
+    /// The frame did not decode.
+    Frame(DecodeError),
+    /// Same alive counter as the last command: a repeated frame, ignored.
+    Repeated,
+    /// Not allowed in this state (e.g. calibration during a run).
+    NotNow(RigState),
+    /// Initial speed above what the wheel-speed frame carries (163.82 km/h) or negative.
+    SpeedOutOfRange,
+    /// A rig-mode start with latched sensor faults (clear them first).
+    SensorFaults,
+    /// The plant or brake unit refused the parameters.
+    Build,
+    Calibration(CalibrationError),
+}
+
+/// The simulation of a run.
+#[derive(Clone, Debug)]
+#[allow(clippy::large_enum_variant)]
+enum Sim {
+    None,
+    Rig(Plant<f32>),
+    SelfTest(ClosedLoop<f32>),
+}
+
+/// The rig: sensors, simulation, outputs, telemetry and state.
+pub struct Rig {
+    config: RigConfig,
+    pub sensors: [SensorChannel; CHANNELS],
+    sim: Sim,
+    state: RigState,
+    mode: RigMode,
+    rail: Rail,
+    friction: FrictionModel,
+    initial_speed_kmh: f32,
+    brake: Option<BrakeCommand>,
+    timing: StepTiming,
+    /// Ticks since power-up (schedules the frames).
+    tick: u32,
+    /// Plant steps of the run.
+    run_steps: u32,
+    sticky: u32,
+    bus_flags: u32,
+    pub bus_off_count: u8,
+    last_command_counter: Option<u8>,
+    last_result: CommandResult,
+    stale_ticks: u32,
+    last_adc: [u16; crate::sensor::ADC_SEQUENCE_LEN],
+    counters: [u8; 2],
+    diag_window: (u32, u64, u32),
+    wheel_speed_kmh: [Option<f32>; WHEELSETS],
+    pulses: [PulseRegisters; WHEELSETS],
+    /// Sensor channels with a condition present but not latched (this tick).
+    pending: [bool; CHANNELS],
+    /// A run started: header and t = 0 record due at the next tick.
+    start_events: bool,
+    /// A run ended: final record and end line due.
+    end_event: bool,
+    /// Plant step of the last telemetry record of the run (no record twice for a step).
+    last_record_step: Option<u32>,
+}
+
+impl Rig {
+    pub fn new(config: RigConfig) -> Self {
+        let silent = config.pulse_timer.silent();
+        Self {
+            config,
+            sensors: [SensorChannel::new(SensorKind::LoadCell); CHANNELS],
+            sim: Sim::None,
+            state: RigState::Idle,
+            mode: RigMode::Rig,
+            rail: Rail::Wet,
+            friction: FrictionModel::Variable,
+            initial_speed_kmh: 0.0,
+            brake: None,
+            timing: StepTiming::new(config.cpu_hz, STEP_RATE_HZ),
+            tick: 0,
+            run_steps: 0,
+            sticky: 0,
+            bus_flags: 0,
+            bus_off_count: 0,
+            last_command_counter: None,
+            last_result: CommandResult::None,
+            stale_ticks: 0,
+            last_adc: [0; crate::sensor::ADC_SEQUENCE_LEN],
+            counters: [0; 2],
+            diag_window: (0, 0, 0),
+            wheel_speed_kmh: [None; WHEELSETS],
+            pulses: [silent; WHEELSETS],
+            pending: [false; CHANNELS],
+            start_events: false,
+            end_event: false,
+            last_record_step: None,
+        }
+    }
+
+    pub fn state(&self) -> RigState {
+        self.state
+    }
+    pub fn mode(&self) -> RigMode {
+        self.mode
+    }
+    pub fn config(&self) -> &RigConfig {
+        &self.config
+    }
+    pub fn timing(&self) -> &StepTiming {
+        &self.timing
+    }
+    /// Plant steps of the current (or last) run.
+    pub fn run_steps(&self) -> u32 {
+        self.run_steps
+    }
+    /// Wheel speeds as last sent (None = not available), km/h.
+    pub fn wheel_speeds_kmh(&self) -> [Option<f32>; WHEELSETS] {
+        self.wheel_speed_kmh
+    }
+    /// Pulse registers as last written.
+    pub fn pulses(&self) -> [PulseRegisters; WHEELSETS] {
+        self.pulses
+    }
+
+    /// The plant outputs of the run (None without a run).
+    pub fn outputs(&self) -> Option<&Outputs<f32>> {
+        match &self.sim {
+            Sim::None => None,
+            Sim::Rig(p) => Some(p.outputs()),
+            Sim::SelfTest(c) => Some(c.outputs()),
+        }
+    }
+
+    /// Fault flags now.
+    pub fn faults(&self) -> Faults {
+        let mut f = self.sticky | self.bus_flags;
+        for (j, s) in self.sensors.iter().enumerate() {
+            if s.fault().is_some() {
+                f |= 1 << j;
+            }
+            if s.injected().is_some() {
+                f |= Faults::FAULT_INJECTED;
+            }
+        }
+        Faults(f)
+    }
+
+    /// Bus state from the CAN task (error passive now; bus-off now or seen; bus-off count).
+    pub fn set_bus(&mut self, error_passive: bool, bus_off: bool, bus_off_count: u32) {
+        self.bus_flags = (if error_passive {
+            Faults::CAN_ERROR_PASSIVE
+        } else {
+            0
+        }) | (if bus_off { Faults::CAN_BUS_OFF } else { 0 });
+        self.bus_off_count = bus_off_count.min(255) as u8;
+    }
+
+    /// Records the timing of the last step (DWT cycles at entry and exit of the step
+    /// interrupt; whether the next tick was already pending at exit).
+    pub fn record_timing(&mut self, entry: u32, exit: u32, tick_pending: bool) {
+        let v = self.timing.record(entry, exit, tick_pending);
+        if v.overrun {
+            self.sticky |= Faults::OVERRUN;
+        }
+        if v.missed_ticks > 0 {
+            self.sticky |= Faults::MISSED_TICKS;
+        }
+        let d = &mut self.diag_window;
+        d.0 = d.0.max(v.duration_cycles);
+        d.1 += v.duration_cycles as u64;
+        d.2 += 1;
+    }
+
+    /// Decodes and carries out a received command frame; the result goes into the status
+    /// frame (and `COMMAND_REJECTED` when rejected).
+    pub fn command_frame<F: Frame>(&mut self, frame: &F) -> Result<Command, CommandError> {
+        let r = match CommandFrame::decode(frame) {
+            Ok(cf) => {
+                if self.last_command_counter == Some(cf.counter) {
+                    Err(CommandError::Repeated)
+                } else {
+                    self.last_command_counter = Some(cf.counter);
+                    self.command(cf.command).map(|_| cf.command)
+                }
+            }
+            Err(e) => Err(CommandError::Frame(e)),
+        };
+        self.note_result(r.is_ok());
+        r
+    }
+
+    fn note_result(&mut self, ok: bool) {
+        if ok {
+            self.last_result = CommandResult::Accepted;
+        } else {
+            self.last_result = CommandResult::Rejected;
+            self.sticky |= Faults::COMMAND_REJECTED;
+        }
+    }
+
+    fn running(&self) -> bool {
+        self.state == RigState::Running
+    }
+
+    /// Carries out a command (also from the board's user button).
+    pub fn command(&mut self, command: Command) -> Result<(), CommandError> {
+        match command {
+            Command::Start {
+                mode,
+                rail,
+                friction,
+                emergency,
+                initial_speed_kmh,
+            } => {
+                if self.running() {
+                    return Err(CommandError::NotNow(self.state));
+                }
+                if !(0.0..=WHEEL_SPEED_MAX_KMH).contains(&initial_speed_kmh) {
+                    return Err(CommandError::SpeedOutOfRange);
+                }
+                if mode == RigMode::Rig && self.sensors.iter().any(|s| s.fault().is_some()) {
+                    return Err(CommandError::SensorFaults);
+                }
+                let mut params = Params::default();
+                params.friction.model = friction;
+                let v0 = initial_speed_kmh / KMH_PER_MPS;
+                // Drop the old run first: one simulation in memory at a time.
+                self.sim = Sim::None;
+                self.sim = match mode {
+                    RigMode::Rig => {
+                        Sim::Rig(Plant::new(&params, rail, v0).map_err(|_| CommandError::Build)?)
+                    }
+                    RigMode::SelfTest => {
+                        let mut c =
+                            ClosedLoop::new(&params, rail, v0).map_err(|_| CommandError::Build)?;
+                        let demand = if emergency {
+                            BrakeDemand::Emergency
+                        } else {
+                            BrakeDemand::Release
+                        };
+                        c.set_demand(demand);
+                        Sim::SelfTest(c)
+                    }
+                };
+                self.mode = mode;
+                self.rail = rail;
+                self.friction = friction;
+                self.initial_speed_kmh = initial_speed_kmh;
+                self.brake = match (mode, emergency) {
+                    (RigMode::SelfTest, true) => Some(BrakeCommand::Emergency),
+                    (RigMode::SelfTest, false) => Some(BrakeCommand::Release),
+                    (RigMode::Rig, _) => None,
+                };
+                self.state = RigState::Running;
+                self.run_steps = 0;
+                self.timing.reset();
+                self.diag_window = (0, 0, 0);
+                self.stale_ticks = 0;
+                self.start_events = true;
+                self.last_record_step = None;
+                Ok(())
+            }
+            Command::Stop => {
+                if !self.running() {
+                    return Err(CommandError::NotNow(self.state));
+                }
+                self.end_run(RigState::Stopped);
+                Ok(())
+            }
+            Command::Brake(b) => {
+                if let Sim::SelfTest(c) = &mut self.sim {
+                    c.set_demand(match b {
+                        BrakeCommand::Release => BrakeDemand::Release,
+                        BrakeCommand::Emergency => BrakeDemand::Emergency,
+                        BrakeCommand::Service { deceleration_mps2 } => {
+                            BrakeDemand::Service(deceleration_mps2)
+                        }
+                    });
+                }
+                // In rig mode the brake controller gets its command from the train lines;
+                // the command is kept as the run log's `cmd` marker.
+                self.brake = Some(b);
+                Ok(())
+            }
+            Command::InjectFault { channel, fault } => {
+                let ch = self
+                    .sensors
+                    .get_mut(channel as usize)
+                    .ok_or(CommandError::Frame(DecodeError::BadValue("Channel")))?;
+                ch.inject(fault);
+                Ok(())
+            }
+            Command::Calibrate { channel, action } => {
+                if self.running() {
+                    return Err(CommandError::NotNow(self.state));
+                }
+                let ch = self
+                    .sensors
+                    .get_mut(channel as usize)
+                    .ok_or(CommandError::Frame(DecodeError::BadValue("Channel")))?;
+                match action {
+                    Calibration::Tare => ch.tare(),
+                    Calibration::SetGain(g) => ch.set_gain(g),
+                    Calibration::SetOffset(o) => ch.set_offset(o),
+                    Calibration::SetKind(k) => {
+                        ch.set_kind(k);
+                        Ok(())
+                    }
+                }
+                .map_err(CommandError::Calibration)
+            }
+            Command::ClearFaults => {
+                let mut all_clear = true;
+                for s in &mut self.sensors {
+                    all_clear &= s.clear_fault();
+                }
+                self.sticky = 0;
+                self.stale_ticks = 0;
+                if self.state == RigState::Fault && all_clear {
+                    self.state = RigState::Stopped;
+                }
+                Ok(())
+            }
+            Command::Configure(item) => {
+                if self.running() {
+                    return Err(CommandError::NotNow(self.state));
+                }
+                match item {
+                    ConfigItem::TelemetryDivider(d) => self.config.telemetry_divider = d.max(1),
+                    ConfigItem::Teeth(t) => self.config.teeth = t.max(1),
+                }
+                Ok(())
+            }
+        }
+    }
+
+    fn end_run(&mut self, state: RigState) {
+        self.state = state;
+        self.end_event = true;
+    }
+
+    /// One tick of the real-time loop.
+    pub fn step<IO: RigIo>(&mut self, io: &mut IO) {
+        self.tick = self.tick.wrapping_add(1);
+
+        // 1. Sensors.
+        match io.adc_sequence() {
+            Some(seq) => {
+                self.last_adc = seq;
+                self.stale_ticks = 0;
+            }
+            None => {
+                self.stale_ticks = self.stale_ticks.saturating_add(1);
+                self.sticky |= Faults::ADC_STALE;
+            }
+        }
+        let split = split_sequence(&self.last_adc);
+        let mut readings = [0.0f32; CHANNELS];
+        for (j, s) in self.sensors.iter_mut().enumerate() {
+            let r = s.update(split[j]);
+            readings[j] = r.value;
+            self.pending[j] = r.pending;
+        }
+
+        // 2. Start-of-run telemetry (header and the t = 0 record).
+        if core::mem::take(&mut self.start_events) {
+            let h = self.header();
+            self.emit(io, &TelemetryEvent::Header(h));
+            self.emit_record(io);
+        }
+
+        // 3. Simulation.
+        if self.running() {
+            let rig_fault = self.mode == RigMode::Rig
+                && (self.sensors.iter().any(|s| s.fault().is_some()) || self.stale_ticks >= 10);
+            if rig_fault {
+                self.end_run(RigState::Fault);
+            } else {
+                let flags = self.step_sim(&readings);
+                self.run_steps = self.run_steps.wrapping_add(1);
+                if flags.contains(Flags::INPUT_NOT_FINITE | Flags::INPUT_OUT_OF_RANGE) {
+                    self.sticky |= Faults::PLANT_INPUT;
+                }
+                if flags.contains(Flags::NUMERIC_FAULT) {
+                    self.sticky |= Faults::PLANT_NUMERIC;
+                    self.end_run(RigState::Fault);
+                } else if self.outputs().is_some_and(|o| o.vehicle_speed <= 0.01) {
+                    self.end_run(RigState::Finished);
+                }
+                let divider = self.config.telemetry_divider.max(1) as u32;
+                if self.running() && self.run_steps % divider == 0 {
+                    self.emit_record(io);
+                }
+            }
+        }
+        if core::mem::take(&mut self.end_event) {
+            self.emit_record(io);
+            let ev = TelemetryEvent::End {
+                step: self.run_steps,
+                state: self.state as u8,
+            };
+            self.emit(io, &ev);
+        }
+
+        // 4. Outputs: pulse trains every tick, frames on schedule.
+        self.update_outputs(io);
+    }
+
+    fn step_sim(&mut self, readings: &[f32; CHANNELS]) -> Flags {
+        match &mut self.sim {
+            Sim::None => Flags(0),
+            Sim::Rig(plant) => {
+                let mut inputs = [BrakeInput::ClampForce(0.0f32); WHEELSETS];
+                for j in 0..WHEELSETS {
+                    inputs[j] = match self.sensors[j].kind {
+                        SensorKind::LoadCell => BrakeInput::ClampForce(readings[j]),
+                        SensorKind::PressureTransducer => BrakeInput::CylinderPressure(readings[j]),
+                    };
+                }
+                plant.step(&inputs).flags
+            }
+            Sim::SelfTest(c) => c.step().flags,
+        }
+    }
+
+    fn header(&self) -> RunHeader {
+        let mut pressure_channels = 0u8;
+        for (j, s) in self.sensors.iter().enumerate() {
+            if s.kind == SensorKind::PressureTransducer {
+                pressure_channels |= 1 << j;
+            }
+        }
+        RunHeader {
+            mode: self.mode as u8,
+            rail: match self.rail {
+                Rail::Wet => 0,
+                Rail::Dry => 1,
+            },
+            friction: match self.friction {
+                FrictionModel::Variable => 0,
+                FrictionModel::Constant => 1,
+            },
+            initial_speed_kmh: self.initial_speed_kmh,
+            step_ns: 1_000_000_000 / STEP_RATE_HZ,
+            divider: self.config.telemetry_divider as u32,
+            cpu_hz: self.config.cpu_hz,
+            teeth: self.config.teeth,
+            pressure_channels,
+        }
+    }
+
+    fn emit<IO: RigIo>(&mut self, io: &mut IO, ev: &TelemetryEvent) {
+        if !io.queue_telemetry(ev) {
+            self.sticky |= Faults::TELEMETRY_DROPPED;
+        }
+    }
+
+    fn emit_record<IO: RigIo>(&mut self, io: &mut IO) {
+        if self.last_record_step == Some(self.run_steps) {
+            return;
+        }
+        if let Some(r) = self.record() {
+            self.last_record_step = Some(r.step);
+            self.emit(io, &TelemetryEvent::Record(r));
+        }
+    }
+
+    /// The telemetry record of now (None without a run); takes the timing window.
+    pub fn record(&mut self) -> Option<TelemetryRecord> {
+        let window = self.timing.take_window();
+        let faults = self.faults().0 | self.pending_bits();
+        let mut sensor_faults = 0u16;
+        for (j, s) in self.sensors.iter().enumerate() {
+            sensor_faults |= (SensorFault::code(s.fault()) as u16) << (4 * j);
+        }
+        let (o, unit) = match &self.sim {
+            Sim::None => return None,
+            Sim::Rig(p) => (p.outputs(), None),
+            Sim::SelfTest(c) => (c.outputs(), Some(c.unit_outputs())),
+        };
+        let w = |f: &dyn Fn(usize) -> f32| -> [f32; 4] { [f(0), f(1), f(2), f(3)] };
+        let (p_cyl, f_clamp, wsp) = match unit {
+            Some(u) => {
+                let mut bits = WSP_KNOWN;
+                for j in 0..WHEELSETS {
+                    if u.venting[j] {
+                        bits |= 1 << j;
+                    }
+                }
+                (
+                    u.cylinder_pressure,
+                    w(&|j| o.wheelsets[j].clamp_force),
+                    bits,
+                )
+            }
+            None => {
+                let measured = |kind: SensorKind| {
+                    w(&|j| {
+                        if self.sensors[j].kind == kind {
+                            self.sensors[j].value()
+                        } else {
+                            f32::NAN
+                        }
+                    })
+                };
+                (
+                    measured(SensorKind::PressureTransducer),
+                    measured(SensorKind::LoadCell),
+                    0,
+                )
+            }
+        };
+        Some(TelemetryRecord {
+            step: self.run_steps,
+            state: self.state as u8,
+            mode: self.mode as u8,
+            cmd: self.brake.map(|b| b.code()).unwrap_or(0xFF),
+            wsp,
+            v_ref: o.vehicle_speed,
+            omega: w(&|j| o.wheelsets[j].omega),
+            p_cyl,
+            f_clamp,
+            f_brake: w(&|j| o.wheelsets[j].brake_force),
+            t_disc: w(&|j| o.wheelsets[j].disc_temp),
+            q: w(&|j| o.wheelsets[j].axle_load),
+            mu_d: w(&|j| o.wheelsets[j].mu_d),
+            a_x: o.carbody_accel,
+            step_max_cycles: window.max_cycles,
+            step_mean_cycles: window.mean_cycles,
+            overruns: self.timing.overruns,
+            missed_ticks: self.timing.missed_ticks,
+            faults,
+            sensor_faults,
+        })
+    }
+
+    fn pending_bits(&self) -> u32 {
+        let mut f = 0;
+        for j in 0..CHANNELS {
+            if self.pending[j] {
+                f |= 1 << (16 + j);
+            }
+        }
+        f
+    }
+
+    fn update_outputs<IO: RigIo>(&mut self, io: &mut IO) {
+        let live = matches!(self.state, RigState::Running | RigState::Finished);
+        // Wheel circumferential speeds r omega (m/s) for CAN, spin speeds omega (rad/s)
+        // for the pulse trains.
+        let (speeds, o) = match (&self.sim, live) {
+            (Sim::Rig(p), true) => (p.wheel_speeds(), Some(p.outputs())),
+            (Sim::SelfTest(c), true) => (c.plant.wheel_speeds(), Some(c.outputs())),
+            _ => ([0.0; WHEELSETS], None),
+        };
+        let (v, a) = o
+            .map(|o| (o.vehicle_speed, o.carbody_accel))
+            .unwrap_or((0.0, 0.0));
+        for j in 0..WHEELSETS {
+            let regs = match o {
+                Some(o) => self
+                    .config
+                    .pulse_timer
+                    .registers(wheel_frequency_hz(o.wheelsets[j].omega, self.config.teeth)),
+                None => self.config.pulse_timer.silent(),
+            };
+            self.pulses[j] = regs;
+            io.set_pulse(j, &regs);
+            self.wheel_speed_kmh[j] = o.map(|_| speeds[j] * KMH_PER_MPS);
+        }
+
+        if self.tick % 10 == 0 {
+            let mut saturated = false;
+            for s in self.wheel_speed_kmh {
+                saturated |= WheelSpeedFrame::raw_speed(s).1;
+            }
+            if saturated {
+                self.sticky |= Faults::SPEED_SATURATED;
+            }
+            let frame = WheelSpeedFrame {
+                speeds_kmh: self.wheel_speed_kmh,
+                counter: self.counters[0],
+            };
+            self.counters[0] = (self.counters[0] + 1) & 0x0F;
+            self.send(io, frame.encode());
+        }
+        if self.tick % 100 == 5 {
+            let frame = StatusFrame {
+                vehicle_speed_kmh: if live { v * KMH_PER_MPS } else { 0.0 },
+                deceleration_mps2: if live { -a } else { 0.0 },
+                state: self.state,
+                mode: self.mode,
+                command_result: self.last_result,
+                faults: self.faults().0 as u16,
+                counter: self.counters[1],
+            };
+            self.counters[1] = (self.counters[1] + 1) & 0x0F;
+            self.send(io, frame.encode());
+        }
+        if self.tick % 1000 == 50 {
+            let (max, sum, n) = core::mem::take(&mut self.diag_window);
+            let mean = if n > 0 { (sum / n as u64) as u32 } else { 0 };
+            let frame = DiagFrame {
+                step_max_us: cycles_to_us(max, self.config.cpu_hz),
+                step_mean_us: cycles_to_us(mean, self.config.cpu_hz),
+                overruns: self.timing.overruns.min(u16::MAX as u32) as u16,
+                sensor_faults: core::array::from_fn(|j| self.sensors[j].fault()),
+                bus_off_count: self.bus_off_count.min(15),
+            };
+            self.send(io, frame.encode());
+        }
+    }
+
+    fn send<IO: RigIo>(&mut self, io: &mut IO, frame: Option<IO::Frame>) {
+        match frame {
+            Some(f) => {
+                if !io.queue_frame(f) {
+                    self.sticky |= Faults::CAN_TX_DROPPED;
+                }
+            }
+            None => self.sticky |= Faults::CAN_TX_DROPPED,
+        }
+    }
+}

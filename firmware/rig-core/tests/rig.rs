@@ -1,0 +1,695 @@
+//! The real-time step against a mock of the board (ADC, pulse timers, CAN queue, log queue):
+//! runs, outputs, schedules, the safe state and command handling.
+
+use embedded_can::{Frame, Id, StandardId};
+use hils_brake_unit::{BrakeDemand, ClosedLoop};
+use hils_plant::{BrakeInput, FrictionModel, Params, Plant, Rail};
+use hils_rig_core::can::{
+    BrakeCommand, Calibration, ClassicFrame, Command, CommandFrame, CommandResult, ConfigItem,
+    DiagFrame, ID_DIAG, ID_STATUS, ID_WHEEL_SPEED, InjectedFault, RigMode, RigState, StatusFrame,
+    WheelSpeedFrame,
+};
+use hils_rig_core::hw::{RigIo, TelemetryEvent};
+use hils_rig_core::pulse::PulseRegisters;
+use hils_rig_core::rig::{CommandError, Faults, Rig, RigConfig};
+use hils_rig_core::sensor::{ADC_SEQUENCE_LEN, SensorFault, SensorKind};
+use hils_rig_core::telemetry::{TelemetryRecord, WSP_KNOWN};
+
+type TestFrame = ClassicFrame;
+
+fn sid(f: &TestFrame) -> u16 {
+    match f.id {
+        Id::Standard(s) => s.as_raw(),
+        Id::Extended(_) => 0xFFFF,
+    }
+}
+
+/// The board as the step sees it, recording everything.
+struct MockBoard {
+    /// Counts each channel reads (before noise); `None` = no fresh sequence.
+    adc_counts: Option<[f64; 4]>,
+    tick: u64,
+    frames: Vec<(u64, TestFrame)>,
+    telemetry: Vec<TelemetryEvent>,
+    pulses: [Option<PulseRegisters>; 4],
+    frame_room: usize,
+    telemetry_room: usize,
+}
+
+impl MockBoard {
+    fn new() -> Self {
+        Self {
+            adc_counts: Some([409.5; 4]),
+            tick: 0,
+            frames: vec![],
+            telemetry: vec![],
+            pulses: [None; 4],
+            frame_room: usize::MAX,
+            telemetry_room: usize::MAX,
+        }
+    }
+    fn records(&self) -> Vec<TelemetryRecord> {
+        self.telemetry
+            .iter()
+            .filter_map(|e| {
+                if let TelemetryEvent::Record(r) = e {
+                    Some(*r)
+                } else {
+                    None
+                }
+            })
+            .collect()
+    }
+    fn frames_with(&self, id: u16) -> Vec<&(u64, TestFrame)> {
+        self.frames.iter().filter(|(_, f)| sid(f) == id).collect()
+    }
+}
+
+impl RigIo for MockBoard {
+    type Frame = TestFrame;
+    fn adc_sequence(&mut self) -> Option<[u16; ADC_SEQUENCE_LEN]> {
+        self.tick += 1;
+        let counts = self.adc_counts?;
+        // Live-sensor noise of +-2 counts, different per rank and tick.
+        Some(core::array::from_fn(|rank| {
+            let n = ((self.tick as usize * 7 + rank * 13) % 5) as f64 - 2.0;
+            (counts[rank % 4] + n).round().clamp(0.0, 4095.0) as u16
+        }))
+    }
+    fn set_pulse(&mut self, wheelset: usize, registers: &PulseRegisters) {
+        self.pulses[wheelset] = Some(*registers);
+    }
+    fn queue_frame(&mut self, frame: TestFrame) -> bool {
+        if self.frame_room == 0 {
+            return false;
+        }
+        self.frame_room = self.frame_room.saturating_sub(1);
+        self.frames.push((self.tick, frame));
+        true
+    }
+    fn queue_telemetry(&mut self, event: &TelemetryEvent) -> bool {
+        if self.telemetry_room == 0 {
+            return false;
+        }
+        self.telemetry_room = self.telemetry_room.saturating_sub(1);
+        self.telemetry.push(*event);
+        true
+    }
+}
+
+fn command(rig: &mut Rig, counter: u8, c: Command) -> Result<Command, CommandError> {
+    let f: TestFrame = CommandFrame {
+        command: c,
+        counter,
+    }
+    .encode()
+    .unwrap();
+    rig.command_frame(&f)
+}
+
+fn paper_start(friction: FrictionModel) -> Command {
+    Command::paper_self_test(friction)
+}
+
+/// Counts a load cell shows for a clamp force with the default calibration (f64).
+fn load_cell_counts(force_n: f64) -> f64 {
+    4095.0 * (0.1 + 0.8 * force_n / 40_000.0)
+}
+
+#[test]
+fn self_test_paper_run_matches_the_closed_loop_and_streams_it() {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut io = MockBoard::new();
+    command(&mut rig, 1, paper_start(FrictionModel::Variable)).unwrap();
+    // The same closed loop, stepped directly (one copy of the physics: must agree bit for bit).
+    let params = Params::default();
+    let mut reference = ClosedLoop::<f32>::new(&params, Rail::Wet, 150.0 / 3.6).unwrap();
+    reference.set_demand(BrakeDemand::Emergency);
+    let mut ticks = 0u32;
+    while rig.state() == RigState::Running && ticks < 400_000 {
+        rig.step(&mut io);
+        rig.record_timing(
+            ticks.wrapping_mul(17_000),
+            ticks.wrapping_mul(17_000).wrapping_add(6_000),
+            false,
+        );
+        ticks += 1;
+        if rig.state() == RigState::Running || rig.state() == RigState::Finished {
+            reference.step();
+            let o = rig.outputs().unwrap();
+            assert_eq!(
+                o.vehicle_speed.to_bits(),
+                reference.outputs().vehicle_speed.to_bits()
+            );
+        }
+    }
+    assert_eq!(rig.state(), RigState::Finished);
+    let stop_s = rig.run_steps() as f64 * 1e-4;
+    // The paper scenario with variable friction stops at ~29.1 s (host f64: 29.06 s).
+    assert!((stop_s - 29.1).abs() < 0.3, "stop at {stop_s} s");
+
+    // Telemetry: header, a record at t = 0 and every 100 steps, a final record, end line.
+    assert!(
+        matches!(io.telemetry.first(), Some(TelemetryEvent::Header(h)) if h.mode == 1 && h.divider == 100 && h.initial_speed_kmh == 150.0)
+    );
+    assert!(matches!(
+        io.telemetry.last(),
+        Some(TelemetryEvent::End { state: 2, .. })
+    ));
+    let recs = io.records();
+    assert_eq!(recs[0].step, 0);
+    assert!((recs[0].v_ref - 150.0 / 3.6).abs() < 1e-4);
+    for w in recs.windows(2).take(recs.len() - 2) {
+        assert_eq!(w[1].step - w[0].step, 100);
+    }
+    assert_eq!(
+        recs.len() as u32,
+        rig.run_steps() / 100 + 2 - (rig.run_steps() % 100 == 0) as u32
+    );
+    // WSP vents on wheelsets 2 and 4 only (the paper's result), and the bits say "known".
+    let mut vented = [false; 4];
+    for r in &recs {
+        assert!(r.wsp & WSP_KNOWN != 0);
+        assert_eq!(r.cmd, 1);
+        for (j, v) in vented.iter_mut().enumerate() {
+            *v |= r.wsp & (1 << j) != 0;
+        }
+        // Self-test: pressure from the unit, clamp force = Eq 1 of that pressure.
+        for j in 0..4 {
+            let eq1 = ((0.0227 * r.p_cyl[j] as f64 - 1000.0).max(0.0)) * 2.5;
+            assert!(r.f_clamp[j].is_finite() && r.p_cyl[j].is_finite());
+            assert!(
+                (r.f_clamp[j] as f64 - eq1).abs() < 1.0 + 1e-4 * eq1,
+                "{} vs {eq1}",
+                r.f_clamp[j]
+            );
+        }
+        assert_eq!(
+            (r.step_max_cycles, r.overruns),
+            (if r.step == 0 { 0 } else { 6000 }, 0)
+        );
+    }
+    assert_eq!(vented, [false, true, false, true]);
+
+    // CAN: a wheel-speed frame every 10 ticks with the circumferential speeds, counter 0..15.
+    let ws = io.frames_with(ID_WHEEL_SPEED);
+    assert_eq!(ws.len() as u32, ticks / 10);
+    for (k, (_, f)) in ws.iter().enumerate() {
+        let d = WheelSpeedFrame::decode(f).unwrap();
+        assert_eq!(d.counter as usize, k % 16);
+        assert!(
+            d.speeds_kmh
+                .iter()
+                .all(|s| s.is_some_and(|v| (0.0..=150.01).contains(&v)))
+        );
+    }
+    let status = io.frames_with(ID_STATUS);
+    assert_eq!(status.len() as u32, (ticks + 95) / 100);
+    let s = StatusFrame::decode(&status[1000].1).unwrap(); // at 10 s
+    assert_eq!(
+        (s.state, s.mode, s.command_result),
+        (
+            RigState::Running,
+            RigMode::SelfTest,
+            CommandResult::Accepted
+        )
+    );
+    assert!(
+        s.deceleration_mps2 > 0.5 && s.deceleration_mps2 < 2.0,
+        "{}",
+        s.deceleration_mps2
+    );
+    let diag = io.frames_with(ID_DIAG);
+    assert_eq!(diag.len() as u32, (ticks + 950) / 1000);
+    let d = DiagFrame::decode(&diag[3].1).unwrap();
+    // 6000 cycles at 170 MHz = 35.29 us.
+    assert!((d.step_max_us - 35.29).abs() < 0.01 && (d.step_mean_us - 35.29).abs() < 0.01);
+    assert_eq!(d.overruns, 0);
+}
+
+#[test]
+fn wheel_speed_outputs_follow_the_plant() {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut io = MockBoard::new();
+    command(&mut rig, 1, paper_start(FrictionModel::Constant)).unwrap();
+    for _ in 0..50_000 {
+        rig.step(&mut io);
+        let o = rig.outputs().unwrap();
+        let r = 0.43f64;
+        for j in 0..4 {
+            let omega = o.wheelsets[j].omega as f64;
+            // Pulse frequency within 0.1 % of teeth omega / 2 pi (90 teeth).
+            let p = io.pulses[j].unwrap();
+            let f = 170e6 / ((p.psc as f64 + 1.0) * (p.arr as f64 + 1.0));
+            let want = 90.0 * omega / (2.0 * std::f64::consts::PI);
+            assert!((f / want - 1.0).abs() < 1e-3);
+            // The speed the frame carries: r omega in km/h.
+            let kmh = rig.wheel_speeds_kmh()[j].unwrap() as f64;
+            assert!((kmh - omega * r * 3.6).abs() < 1e-3 * kmh.max(1.0));
+        }
+    }
+    // Decoded frames agree with the speeds within half the resolution.
+    let (_, last) = io
+        .frames_with(ID_WHEEL_SPEED)
+        .last()
+        .copied()
+        .unwrap()
+        .clone();
+    let d = WheelSpeedFrame::decode(&last).unwrap();
+    for j in 0..4 {
+        let v = rig.wheel_speeds_kmh()[j].unwrap();
+        assert!((d.speeds_kmh[j].unwrap() - v).abs() <= 0.0051, "{j}");
+    }
+}
+
+#[test]
+fn rig_mode_steps_the_plant_with_the_measured_clamp_forces() {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut io = MockBoard::new();
+    // Channel 3 is a pressure transducer; the others load cells.
+    command(
+        &mut rig,
+        1,
+        Command::Calibrate {
+            channel: 2,
+            action: Calibration::SetKind(SensorKind::PressureTransducer),
+        },
+    )
+    .unwrap();
+    let force = 12_000.0;
+    let pressure = 350_000.0;
+    let counts = [
+        load_cell_counts(force),
+        load_cell_counts(force),
+        4095.0 * (0.1 + 0.8 * pressure / 1e6),
+        load_cell_counts(force),
+    ];
+    io.adc_counts = Some(counts);
+    command(
+        &mut rig,
+        2,
+        Command::Start {
+            mode: RigMode::Rig,
+            rail: Rail::Wet,
+            friction: FrictionModel::Variable,
+            emergency: false,
+            initial_speed_kmh: 100.0,
+        },
+    )
+    .unwrap();
+    let mut plant = Plant::<f32>::new(&Params::default(), Rail::Wet, 100.0 / 3.6).unwrap();
+    for _ in 0..20_000 {
+        rig.step(&mut io);
+        // The reference gets the channel values the rig computed (scaling checked in the
+        // sensor tests): the same inputs give the same plant, bit for bit.
+        let v = |j: usize| rig.sensors[j].value();
+        plant.step(&[
+            BrakeInput::ClampForce(v(0)),
+            BrakeInput::ClampForce(v(1)),
+            BrakeInput::CylinderPressure(v(2)),
+            BrakeInput::ClampForce(v(3)),
+        ]);
+        assert_eq!(
+            rig.outputs().unwrap().vehicle_speed.to_bits(),
+            plant.outputs().vehicle_speed.to_bits()
+        );
+        // Measured values agree with the applied force within a count of noise.
+        assert!((v(0) as f64 - force).abs() < 2.0 * 40_000.0 / 3276.0);
+        assert!((v(2) as f64 - pressure).abs() < 2.0 * 1e6 / 3276.0);
+    }
+    assert_eq!(rig.state(), RigState::Running);
+    assert!(
+        rig.outputs().unwrap().vehicle_speed < 100.0 / 3.6 - 1.0,
+        "the brakes act"
+    );
+    // Rig-mode records: measured clamp force or pressure, NaN where not measured, WSP unknown.
+    let r = *io.records().last().unwrap();
+    assert!(r.p_cyl[0].is_nan() && r.f_clamp[2].is_nan());
+    assert!((r.p_cyl[2] as f64 - pressure).abs() < 1000.0);
+    assert!((r.f_clamp[0] as f64 - force).abs() < 30.0);
+    assert_eq!((r.wsp, r.cmd), (0, 0xFF));
+}
+
+#[test]
+fn latched_sensor_fault_puts_a_rig_run_in_the_safe_state() {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut io = MockBoard::new();
+    io.adc_counts = Some([load_cell_counts(8000.0); 4]);
+    let start = Command::Start {
+        mode: RigMode::Rig,
+        rail: Rail::Wet,
+        friction: FrictionModel::Variable,
+        emergency: false,
+        initial_speed_kmh: 120.0,
+    };
+    command(&mut rig, 1, start).unwrap();
+    for _ in 0..1000 {
+        rig.step(&mut io);
+    }
+    assert!(io.pulses.iter().all(|p| !p.unwrap().is_silent()));
+    command(
+        &mut rig,
+        2,
+        Command::InjectFault {
+            channel: 1,
+            fault: Some(InjectedFault::Open),
+        },
+    )
+    .unwrap();
+    let steps_before = rig.run_steps();
+    let mut fault_tick = None;
+    for k in 1..=20 {
+        rig.step(&mut io);
+        if rig.state() == RigState::Fault && fault_tick.is_none() {
+            fault_tick = Some(k);
+        }
+    }
+    // Latched after the 10-step debounce, acted on in the same tick.
+    assert_eq!(fault_tick, Some(10));
+    assert_eq!(
+        rig.run_steps(),
+        steps_before + 9,
+        "the plant is no longer stepped"
+    );
+    // Safe state: silent trains, speeds not available, status says Fault + channel 2 + injection.
+    assert!(io.pulses.iter().all(|p| p.unwrap().is_silent()));
+    assert_eq!(rig.wheel_speeds_kmh(), [None; 4]);
+    for _ in 0..200 {
+        rig.step(&mut io);
+    }
+    let (_, ws) = io
+        .frames_with(ID_WHEEL_SPEED)
+        .last()
+        .copied()
+        .unwrap()
+        .clone();
+    assert_eq!(WheelSpeedFrame::decode(&ws).unwrap().speeds_kmh, [None; 4]);
+    let (_, st) = io.frames_with(ID_STATUS).last().copied().unwrap().clone();
+    let st = StatusFrame::decode(&st).unwrap();
+    assert_eq!(st.state, RigState::Fault);
+    assert_eq!(
+        st.faults as u32 & (Faults::SENSOR | Faults::FAULT_INJECTED),
+        0b10 | Faults::FAULT_INJECTED
+    );
+    assert!(matches!(
+        io.telemetry.last(),
+        Some(TelemetryEvent::End { state: 4, .. })
+    ));
+    let last = io.records().last().copied().unwrap();
+    assert_eq!(
+        last.sensor_faults,
+        (SensorFault::code(Some(SensorFault::Open)) as u16) << 4
+    );
+
+    // A new rig run is refused while the fault is latched; clearing needs the cause gone.
+    assert_eq!(command(&mut rig, 3, start), Err(CommandError::SensorFaults));
+    command(&mut rig, 4, Command::ClearFaults).unwrap();
+    assert_eq!(rig.state(), RigState::Fault);
+    command(
+        &mut rig,
+        5,
+        Command::InjectFault {
+            channel: 1,
+            fault: None,
+        },
+    )
+    .unwrap();
+    rig.step(&mut io);
+    command(&mut rig, 6, Command::ClearFaults).unwrap();
+    assert_eq!(rig.state(), RigState::Stopped);
+    assert_eq!(rig.faults().0 & 0xFFFF, 0);
+    command(&mut rig, 7, start).unwrap();
+    assert_eq!(rig.state(), RigState::Running);
+}
+
+#[test]
+fn each_plausibility_fault_stops_a_rig_run_and_self_test_only_reports() {
+    for fault in [
+        InjectedFault::Open,
+        InjectedFault::Short,
+        InjectedFault::OutOfRange,
+        InjectedFault::Stuck,
+    ] {
+        for mode in [RigMode::Rig, RigMode::SelfTest] {
+            let mut rig = Rig::new(RigConfig::nucleo_g474re());
+            let mut io = MockBoard::new();
+            io.adc_counts = Some([load_cell_counts(5000.0); 4]);
+            command(
+                &mut rig,
+                1,
+                Command::Start {
+                    mode,
+                    rail: Rail::Wet,
+                    friction: FrictionModel::Constant,
+                    emergency: true,
+                    initial_speed_kmh: 150.0,
+                },
+            )
+            .unwrap();
+            rig.step(&mut io);
+            command(
+                &mut rig,
+                2,
+                Command::InjectFault {
+                    channel: 3,
+                    fault: Some(fault),
+                },
+            )
+            .unwrap();
+            for _ in 0..6000 {
+                rig.step(&mut io);
+            }
+            assert!(rig.faults().contains(1 << 3), "{fault:?} {mode:?}");
+            let want = if mode == RigMode::Rig {
+                RigState::Fault
+            } else {
+                RigState::Running
+            };
+            assert_eq!(rig.state(), want, "{fault:?} {mode:?}");
+        }
+    }
+}
+
+#[test]
+fn stale_adc_stops_a_rig_run_after_ten_ticks() {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut io = MockBoard::new();
+    io.adc_counts = Some([load_cell_counts(3000.0); 4]);
+    command(
+        &mut rig,
+        1,
+        Command::Start {
+            mode: RigMode::Rig,
+            rail: Rail::Wet,
+            friction: FrictionModel::Variable,
+            emergency: false,
+            initial_speed_kmh: 60.0,
+        },
+    )
+    .unwrap();
+    for _ in 0..100 {
+        rig.step(&mut io);
+    }
+    io.adc_counts = None;
+    for k in 1..=9 {
+        rig.step(&mut io);
+        assert_eq!(rig.state(), RigState::Running, "tick {k}");
+        assert!(rig.faults().contains(Faults::ADC_STALE));
+    }
+    rig.step(&mut io);
+    assert_eq!(rig.state(), RigState::Fault);
+}
+
+#[test]
+fn commands_are_checked_and_results_reported() {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut io = MockBoard::new();
+    assert_eq!(
+        command(&mut rig, 1, Command::Stop),
+        Err(CommandError::NotNow(RigState::Idle))
+    );
+    assert!(rig.faults().contains(Faults::COMMAND_REJECTED));
+    command(&mut rig, 2, Command::ClearFaults).unwrap();
+    assert!(!rig.faults().contains(Faults::COMMAND_REJECTED));
+    // Repeated counter: ignored.
+    assert_eq!(
+        command(&mut rig, 2, Command::ClearFaults),
+        Err(CommandError::Repeated)
+    );
+    // Speed beyond the wheel-speed frame's range.
+    let mut too_fast = paper_start(FrictionModel::Variable);
+    if let Command::Start {
+        initial_speed_kmh, ..
+    } = &mut too_fast
+    {
+        *initial_speed_kmh = 200.0;
+    }
+    assert_eq!(
+        command(&mut rig, 3, too_fast),
+        Err(CommandError::SpeedOutOfRange)
+    );
+    // Configuration: divider 10 -> a record every 10 steps; teeth 45 -> half the frequency.
+    command(
+        &mut rig,
+        4,
+        Command::Configure(ConfigItem::TelemetryDivider(10)),
+    )
+    .unwrap();
+    command(&mut rig, 5, Command::Configure(ConfigItem::Teeth(45))).unwrap();
+    command(&mut rig, 6, paper_start(FrictionModel::Variable)).unwrap();
+    for _ in 0..100 {
+        rig.step(&mut io);
+    }
+    let steps: Vec<u32> = io.records().iter().map(|r| r.step).collect();
+    assert_eq!(steps, (0..=100).step_by(10).collect::<Vec<_>>());
+    let p = io.pulses[0].unwrap();
+    let f = 170e6 / ((p.psc as f64 + 1.0) * (p.arr as f64 + 1.0));
+    let omega = rig.outputs().unwrap().wheelsets[0].omega as f64;
+    assert!((f / (45.0 * omega / std::f64::consts::TAU) - 1.0).abs() < 1e-3);
+    // Not during a run: calibration, configuration, a second start.
+    assert_eq!(
+        command(
+            &mut rig,
+            7,
+            Command::Calibrate {
+                channel: 0,
+                action: Calibration::Tare
+            }
+        ),
+        Err(CommandError::NotNow(RigState::Running))
+    );
+    assert_eq!(
+        command(&mut rig, 8, Command::Configure(ConfigItem::Teeth(10))),
+        Err(CommandError::NotNow(RigState::Running))
+    );
+    assert_eq!(
+        command(&mut rig, 9, paper_start(FrictionModel::Constant)),
+        Err(CommandError::NotNow(RigState::Running))
+    );
+    // A brake command during the self-test reaches the simulated unit: release -> the
+    // cylinder pressure falls.
+    command(&mut rig, 10, Command::Brake(BrakeCommand::Release)).unwrap();
+    for _ in 0..20_000 {
+        rig.step(&mut io);
+    }
+    let r = io.records().last().copied().unwrap();
+    assert_eq!(r.cmd, 0);
+    assert!(r.p_cyl.iter().all(|&p| p < 1000.0), "{:?}", r.p_cyl);
+    // Stop: safe state and an end line.
+    command(&mut rig, 11, Command::Stop).unwrap();
+    rig.step(&mut io);
+    assert_eq!(rig.state(), RigState::Stopped);
+    assert!(io.pulses.iter().all(|p| p.unwrap().is_silent()));
+    assert!(matches!(
+        io.telemetry.last(),
+        Some(TelemetryEvent::End { state: 3, .. })
+    ));
+    // Status reports the last result.
+    for _ in 0..100 {
+        rig.step(&mut io);
+    }
+    let (_, st) = io.frames_with(ID_STATUS).last().copied().unwrap().clone();
+    assert_eq!(
+        StatusFrame::decode(&st).unwrap().command_result,
+        CommandResult::Accepted
+    );
+    // A corrupted command frame is rejected and reported.
+    let mut bad: TestFrame = CommandFrame {
+        command: Command::Stop,
+        counter: 12,
+    }
+    .encode()
+    .unwrap();
+    bad.data[0] ^= 0x40;
+    assert!(matches!(
+        rig.command_frame(&bad),
+        Err(CommandError::Frame(_))
+    ));
+    for _ in 0..100 {
+        rig.step(&mut io);
+    }
+    let (_, st) = io.frames_with(ID_STATUS).last().copied().unwrap().clone();
+    let st = StatusFrame::decode(&st).unwrap();
+    assert_eq!(st.command_result, CommandResult::Rejected);
+    assert!(st.faults as u32 & Faults::COMMAND_REJECTED != 0);
+}
+
+#[test]
+fn idle_outputs_are_safe_and_frames_keep_coming() {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut io = MockBoard::new();
+    io.adc_counts = None;
+    for _ in 0..1000 {
+        rig.step(&mut io);
+    }
+    assert!(io.pulses.iter().all(|p| p.unwrap().is_silent()));
+    assert_eq!(io.frames_with(ID_WHEEL_SPEED).len(), 100);
+    assert_eq!(io.frames_with(ID_STATUS).len(), 10);
+    let (_, st) = io.frames_with(ID_STATUS)[9].clone();
+    let st = StatusFrame::decode(&st).unwrap();
+    assert_eq!((st.state, st.vehicle_speed_kmh), (RigState::Idle, 0.0));
+    assert!(io.telemetry.is_empty(), "no run, no telemetry");
+    // Without a rig the ADC is stale: flagged, but Idle stays Idle.
+    assert!(rig.faults().contains(Faults::ADC_STALE));
+}
+
+#[test]
+fn full_queues_and_overruns_are_counted_and_flagged() {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut io = MockBoard::new();
+    command(&mut rig, 1, paper_start(FrictionModel::Variable)).unwrap();
+    io.frame_room = 3;
+    io.telemetry_room = 2;
+    for k in 0..1000u32 {
+        rig.step(&mut io);
+        // Step 500 takes 18 000 cycles (> 17 000): an overrun; step 700 starts 3 periods late.
+        let entry = k * 17_000 + if k >= 700 { 34_000 } else { 0 };
+        let dur = if k == 500 { 18_000 } else { 5_000 };
+        rig.record_timing(entry, entry + dur, false);
+    }
+    let f = rig.faults();
+    assert!(f.contains(Faults::CAN_TX_DROPPED));
+    assert!(f.contains(Faults::TELEMETRY_DROPPED));
+    assert!(f.contains(Faults::OVERRUN));
+    assert!(f.contains(Faults::MISSED_TICKS));
+    assert_eq!(rig.timing().overruns, 1);
+    assert_eq!(rig.timing().missed_ticks, 2);
+    assert_eq!(rig.timing().run_max_cycles, 18_000);
+    // The run goes on.
+    assert_eq!(rig.state(), RigState::Running);
+}
+
+#[test]
+fn memory_of_the_rig_fits_the_board() {
+    let size = core::mem::size_of::<Rig>();
+    println!("size_of::<Rig>() = {size} bytes");
+    // The board's static RAM budget is 32 KiB; the rig must leave room for the HAL,
+    // the executor, the queues and the defmt buffer.
+    assert!(size < 16 * 1024, "{size}");
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig { cases: 64, ..Default::default() })]
+    /// Arbitrary command frames and ADC garbage between steps: nothing panics, outputs stay
+    /// valid register values.
+    #[test]
+    fn arbitrary_commands_and_adc_never_panic(
+        frames in proptest::collection::vec((0u16..0x800, proptest::collection::vec(proptest::num::u8::ANY, 0..9)), 1..40),
+        adc in proptest::collection::vec(proptest::array::uniform4(0.0f64..5000.0), 1..40),
+    ) {
+        let mut rig = Rig::new(RigConfig::nucleo_g474re());
+        let mut io = MockBoard::new();
+        command(&mut rig, 15, paper_start(FrictionModel::Variable)).ok();
+        for (k, (id, bytes)) in frames.iter().enumerate() {
+            let f = TestFrame::new(StandardId::new(*id).unwrap(), bytes).unwrap();
+            let _ = rig.command_frame(&f);
+            io.adc_counts = Some(adc[k % adc.len()]);
+            for _ in 0..50 {
+                rig.step(&mut io);
+            }
+            for p in io.pulses.iter().flatten() {
+                proptest::prop_assert!(p.arr <= 0xFFFF && p.ccr <= p.arr + 1);
+            }
+        }
+    }
+}

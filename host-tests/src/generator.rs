@@ -1,0 +1,651 @@
+//! Measured-data generator for the hidden-effect tests of the diagnosis (issue 3, item 4).
+//!
+//! A case runs the plant in a closed loop with the simulated brake unit
+//! ([`hils_brake_unit::ClosedLoop`], 0.1 ms, f64) with ONE effect switched on that the
+//! diagnosis does not know, and writes only a run-log CSV (spec `measured-data.md`). The
+//! effect, its magnitude, the scenario (speed 100-160 km/h, wet or dry rail, emergency or
+//! stepped service brake, coasting before the brake command), the sample rate (100 Hz to
+//! 2 kHz, uniform or jittered), the noise of every sensor, the logged column set and the
+//! column order are all drawn from the seed.
+//!
+//! The brake unit is configured with the nominal (baseline) parameters, as a real one would
+//! be: it does not know the hidden effect. For `sensor-gain` the plant is untouched and the
+//! logged reading of one sensor is scaled; for `actuator-lag` the plant's pad force lags the
+//! cylinder pressure (`brake.actuator_lag_s`) and both are logged.
+//!
+//! Column sets are drawn at random, but each effect's draw keeps what a rig engineer logs
+//! to see that effect (see [`Kind`]); cases that cannot be told apart are built on purpose
+//! by [`case_with`] and tested as such.
+
+use std::fmt::Write as _;
+
+use hils_brake_unit::{BrakeDemand, BrakeUnit, ClosedLoop, UnitConfig};
+use hils_plant::{FrictionModel, Params, Rail, WHEELSETS};
+use rand::rngs::StdRng;
+use rand::{RngExt, SeedableRng};
+
+/// Which effect to hide.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    /// No effect: noise only.
+    None,
+    FrictionSpeed,
+    FrictionTemperature,
+    /// The paper's case: friction speed and temperature with the Table 1 values.
+    Paper,
+    FrictionLevel,
+    FrictionPressure,
+    Adhesion,
+    RunningResistance,
+    Gradient,
+    Mass,
+    ActuatorLag,
+    SensorGain,
+    /// An effect outside the spec's list: the vehicle-speed sensor (radar) drifts, reading
+    /// v + d t. No listed effect can explain it; the diagnosis must not blame one.
+    Unlisted,
+}
+
+pub const KINDS: [Kind; 13] = [
+    Kind::None,
+    Kind::FrictionSpeed,
+    Kind::FrictionTemperature,
+    Kind::Paper,
+    Kind::FrictionLevel,
+    Kind::FrictionPressure,
+    Kind::Adhesion,
+    Kind::RunningResistance,
+    Kind::Gradient,
+    Kind::Mass,
+    Kind::ActuatorLag,
+    Kind::SensorGain,
+    Kind::Unlisted,
+];
+
+/// Which sensor a `sensor-gain` case scales.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Sensor {
+    Pressure,
+    ClampForce,
+}
+
+/// The hidden truth of a case.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Truth {
+    pub kind: Kind,
+    /// Effect names the diagnosis should name (spec names).
+    pub causes: Vec<&'static str>,
+    /// Parameter keys (spec keys) and true values.
+    pub params: Vec<(String, f64)>,
+    /// For sensor-gain: the sensor and wheelset (0-based).
+    pub sensor: Option<(Sensor, usize)>,
+}
+
+/// Which brake inputs are logged.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Inputs {
+    Pressure,
+    ClampForce,
+    Both,
+}
+
+/// The drawn scenario and logging.
+#[derive(Clone, Debug)]
+pub struct Scenario {
+    pub rail: Rail,
+    pub speed_kmh: f64,
+    /// Coasting before the brake command, s.
+    pub coast_s: f64,
+    /// Service-brake steps (share of the EB deceleration, duration s) before the EB; empty:
+    /// emergency brake at once.
+    pub service_steps: Vec<(f64, f64)>,
+    pub sample_rate_hz: f64,
+    pub jitter: bool,
+    pub inputs: Inputs,
+    pub log_f_brake: bool,
+    pub log_t_disc: bool,
+    pub log_q: bool,
+    pub log_wsp: bool,
+    pub log_a_x: bool,
+    pub log_cmd: bool,
+    /// Noise sigmas: v m/s, omega rad/s, pressure Pa, clamp N, brake force N, disc degC,
+    /// load N, accel m/s^2.
+    pub noise: [f64; 8],
+}
+
+/// A generated case: the CSV text, the baseline the diagnosis gets, and the truth.
+#[derive(Clone, Debug)]
+pub struct Case {
+    pub seed: u64,
+    pub truth: Truth,
+    pub scenario: Scenario,
+    pub csv: String,
+    /// What the diagnosis is given as the baseline.
+    pub baseline: Params,
+}
+
+/// The usual diagnosis baseline: the reference parameters with constant friction.
+pub fn constant_baseline() -> Params {
+    let mut p = Params::default();
+    p.friction.model = FrictionModel::Constant;
+    p
+}
+
+fn log_uniform(rng: &mut StdRng, lo: f64, hi: f64) -> f64 {
+    (lo.ln() + rng.random::<f64>() * (hi.ln() - lo.ln())).exp()
+}
+
+fn gauss(rng: &mut StdRng) -> f64 {
+    // Box-Muller.
+    let u1: f64 = rng.random::<f64>().max(1e-300);
+    let u2: f64 = rng.random();
+    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+}
+
+/// Draws a scenario with the seed's randomness, then applies `kind`'s logging needs.
+fn draw_scenario(rng: &mut StdRng, kind: Kind) -> Scenario {
+    let rail = if rng.random::<f64>() < 0.5 {
+        Rail::Wet
+    } else {
+        Rail::Dry
+    };
+    let rates = [100.0, 200.0, 250.0, 500.0, 1000.0, 2000.0];
+    let inputs = match rng.random_range(0..3) {
+        0 => Inputs::Pressure,
+        1 => Inputs::ClampForce,
+        _ => Inputs::Both,
+    };
+    let mut s = Scenario {
+        rail,
+        speed_kmh: rng.random_range(100.0..160.0),
+        coast_s: if rng.random::<f64>() < 0.6 {
+            rng.random_range(0.3..3.0)
+        } else {
+            0.0
+        },
+        service_steps: Vec::new(),
+        sample_rate_hz: rates[rng.random_range(0..rates.len())],
+        jitter: rng.random::<f64>() < 0.3,
+        inputs,
+        log_f_brake: rng.random::<f64>() < 0.5,
+        log_t_disc: rng.random::<f64>() < 0.5,
+        log_q: rng.random::<f64>() < 0.5,
+        log_wsp: rng.random::<f64>() < 0.6,
+        log_a_x: rng.random::<f64>() < 0.4,
+        log_cmd: rng.random::<f64>() < 0.5,
+        noise: [
+            log_uniform(rng, 0.003, 0.03),
+            log_uniform(rng, 0.005, 0.05),
+            log_uniform(rng, 100.0, 1500.0),
+            log_uniform(rng, 20.0, 200.0),
+            log_uniform(rng, 30.0, 300.0),
+            log_uniform(rng, 0.05, 0.5),
+            log_uniform(rng, 100.0, 800.0),
+            log_uniform(rng, 0.01, 0.1),
+        ],
+    };
+    // What each effect needs to be seen (a rig engineer logs it).
+    match kind {
+        // Pad force lags pressure: visible only where both are logged.
+        Kind::ActuatorLag => s.inputs = Inputs::Both,
+        // A scaled sensor: both logged, or the tangential force beside the pressure.
+        Kind::SensorGain => {
+            if s.inputs != Inputs::Both {
+                s.inputs = Inputs::Pressure;
+                s.log_f_brake = true;
+            }
+        }
+        // Mass vs friction level: the axle loads tell.
+        Kind::Mass => s.log_q = true,
+        // Friction level vs a clamp-force gain and vs mass: pressure and force, loads.
+        Kind::FrictionLevel => {
+            s.inputs = Inputs::Both;
+            s.log_q = true;
+        }
+        // Friction vs clamp force: the clamp force must vary (stepped service brake).
+        Kind::FrictionPressure => {
+            let n = rng.random_range(2..4);
+            s.service_steps = (0..n)
+                .map(|_| (rng.random_range(0.35..1.0), rng.random_range(5.0..9.0)))
+                .collect();
+            s.inputs = Inputs::Both;
+            s.log_q = true;
+        }
+        // Resistance and gradient act while coasting too.
+        Kind::RunningResistance | Kind::Gradient => s.coast_s = rng.random_range(1.5..4.0),
+        _ => {}
+    }
+    s
+}
+
+/// A case of `kind` drawn from `seed`.
+pub fn case(kind: Kind, seed: u64) -> Case {
+    case_with(kind, seed, |_| {})
+}
+
+/// A case of `kind` drawn from `seed`, with the scenario adjusted by `tweak` (e.g. to build a
+/// case the diagnosis cannot resolve).
+pub fn case_with(kind: Kind, seed: u64, tweak: impl FnOnce(&mut Scenario)) -> Case {
+    let mut rng =
+        StdRng::seed_from_u64(seed ^ (kind as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    let mut scenario = draw_scenario(&mut rng, kind);
+    tweak(&mut scenario);
+    let nominal = constant_baseline();
+    let mut truth_params = nominal;
+    let c = nominal.friction.correction_c;
+    let mut sensor = None;
+    let (causes, params): (Vec<&'static str>, Vec<(String, f64)>) = match kind {
+        Kind::None => (vec![], vec![]),
+        Kind::FrictionSpeed => {
+            let (n, m) = (rng.random_range(0.12..0.3), rng.random_range(0.06..0.2));
+            let f = &mut truth_params.friction;
+            f.model = FrictionModel::Variable;
+            (f.n_v, f.m_v, f.n_t, f.m_t) = (n, m, 1.0 / c - 1.0, 0.0);
+            (
+                vec!["friction-speed"],
+                vec![("n_v".into(), n), ("m_v".into(), m)],
+            )
+        }
+        Kind::FrictionTemperature => {
+            let (n, m) = (rng.random_range(0.08..0.25), rng.random_range(0.008..0.025));
+            let f = &mut truth_params.friction;
+            f.model = FrictionModel::Variable;
+            (f.n_v, f.m_v, f.n_t, f.m_t) = (1.0 / c - 1.0, 0.0, n, m);
+            (
+                vec!["friction-temperature"],
+                vec![("n_t".into(), n), ("m_t".into(), m)],
+            )
+        }
+        Kind::Paper => {
+            truth_params.friction = Params::default().friction;
+            let f = truth_params.friction;
+            (
+                vec!["friction-speed", "friction-temperature"],
+                vec![
+                    ("n_v".into(), f.n_v),
+                    ("m_v".into(), f.m_v),
+                    ("n_t".into(), f.n_t),
+                    ("m_t".into(), f.m_t),
+                ],
+            )
+        }
+        Kind::FrictionLevel => {
+            let factor = if rng.random::<f64>() < 0.5 {
+                rng.random_range(0.8..0.92)
+            } else {
+                rng.random_range(1.08..1.25)
+            };
+            truth_params.friction.mu_d0 *= factor;
+            (
+                vec!["friction-level"],
+                vec![("mu_d0".into(), truth_params.friction.mu_d0)],
+            )
+        }
+        Kind::FrictionPressure => {
+            let k_p = rng.random_range(0.06..0.2);
+            truth_params.friction.k_p = k_p;
+            (vec!["friction-pressure"], vec![("k_p".into(), k_p)])
+        }
+        Kind::Adhesion => {
+            // A poorer rail than the baseline's set assumes (wheels slide).
+            let set = truth_params.contact.set_mut(scenario.rail);
+            let mu_0 = match scenario.rail {
+                Rail::Wet => rng.random_range(0.12..0.17),
+                Rail::Dry => rng.random_range(0.13..0.18),
+            };
+            *set[2] = mu_0;
+            (vec!["adhesion"], vec![("mu_0".into(), mu_0)])
+        }
+        Kind::RunningResistance => {
+            let (a, cc) = (
+                rng.random_range(2000.0..5000.0),
+                rng.random_range(5.0..12.0),
+            );
+            truth_params.resistance.davis_a_n = a;
+            truth_params.resistance.davis_c_n_per_mps2 = cc;
+            (
+                vec!["running-resistance"],
+                vec![("davis_a_n".into(), a), ("davis_c_n_per_mps2".into(), cc)],
+            )
+        }
+        Kind::Gradient => {
+            let g =
+                rng.random_range(3.0..10.0) * if rng.random::<f64>() < 0.5 { -1.0 } else { 1.0 };
+            truth_params.track.gradient_permille = g;
+            (vec!["gradient"], vec![("gradient_permille".into(), g)])
+        }
+        Kind::Mass => {
+            let total = nominal.total_mass() * rng.random_range(1.1..1.3);
+            truth_params.vehicle.carbody_mass =
+                total - (nominal.total_mass() - nominal.vehicle.carbody_mass);
+            (vec!["mass"], vec![("mass_kg".into(), total)])
+        }
+        Kind::ActuatorLag => {
+            let tau = rng.random_range(0.06..0.35);
+            truth_params.brake.actuator_lag_s = tau;
+            (vec!["actuator-lag"], vec![("tau_s".into(), tau)])
+        }
+        Kind::Unlisted => (vec![], vec![("v_ref_drift_mps_per_s".into(), rng.random_range(0.02..0.05))]),
+        Kind::SensorGain => {
+            let j = rng.random_range(0..WHEELSETS);
+            let g = if rng.random::<f64>() < 0.5 {
+                rng.random_range(0.75..0.88)
+            } else {
+                rng.random_range(1.12..1.3)
+            };
+            let which = match scenario.inputs {
+                Inputs::Pressure => Sensor::Pressure,
+                Inputs::ClampForce => Sensor::ClampForce,
+                Inputs::Both => {
+                    if rng.random::<f64>() < 0.5 {
+                        Sensor::Pressure
+                    } else {
+                        Sensor::ClampForce
+                    }
+                }
+            };
+            sensor = Some((which, j));
+            (vec!["sensor-gain"], vec![(format!("gain{}", j + 1), g)])
+        }
+    };
+    let csv = simulate(
+        &truth_params,
+        &nominal,
+        &scenario,
+        kind,
+        &params,
+        sensor,
+        &mut rng,
+    );
+    Case {
+        seed,
+        truth: Truth {
+            kind,
+            causes,
+            params,
+            sensor,
+        },
+        scenario,
+        csv,
+        baseline: nominal,
+    }
+}
+
+struct Row {
+    t: f64,
+    v: f64,
+    omega: [f64; 4],
+    p: [f64; 4],
+    f: [f64; 4],
+    fb: [f64; 4],
+    td: [f64; 4],
+    q: [f64; 4],
+    wsp: [bool; 4],
+    a_x: f64,
+    cmd: &'static str,
+}
+
+fn simulate(
+    truth: &Params,
+    nominal: &Params,
+    s: &Scenario,
+    kind: Kind,
+    params: &[(String, f64)],
+    sensor: Option<(Sensor, usize)>,
+    rng: &mut StdRng,
+) -> String {
+    let dt = 1.0e-4;
+    let config = UnitConfig::new(dt);
+    let v0 = s.speed_kmh / 3.6;
+    let mut sim =
+        ClosedLoop::<f64>::with_config(truth, s.rail, v0, &config).expect("valid truth parameters");
+    // The brake unit knows only the nominal vehicle.
+    sim.unit = BrakeUnit::new(nominal, &config).expect("valid unit");
+
+    // Sample steps (uniform or jittered).
+    let period_steps = 1.0 / (s.sample_rate_hz * dt);
+    let mut rows: Vec<Row> = Vec::new();
+    let mut next_sample = 0.0f64;
+    let mut step = 0u64;
+    let mut stop_step: Option<u64> = None;
+    let coast_steps = (s.coast_s / dt).round() as u64;
+    let mut schedule: Vec<(u64, BrakeDemand, &'static str)> = Vec::new();
+    let mut at = coast_steps;
+    for &(share, dur) in &s.service_steps {
+        schedule.push((
+            at,
+            BrakeDemand::Service((share * nominal.brake_unit.eb_deceleration) as f32),
+            "SB",
+        ));
+        at += (dur / dt).round() as u64;
+    }
+    schedule.push((at, BrakeDemand::Emergency, "EB"));
+    let mut cmd = "REL";
+    let max_steps = (150.0 / dt) as u64;
+    loop {
+        if let Some(&(when, demand, name)) = schedule.first() {
+            if step >= when {
+                sim.set_demand(demand);
+                cmd = name;
+                schedule.remove(0);
+            }
+        }
+        if step as f64 >= next_sample {
+            let o = sim.outputs();
+            let u = sim.unit_outputs();
+            rows.push(Row {
+                t: step as f64 * dt,
+                v: o.vehicle_speed,
+                omega: o.wheelsets.map(|w| w.omega),
+                p: u.cylinder_pressure,
+                f: o.wheelsets.map(|w| w.clamp_force),
+                fb: o.wheelsets.map(|w| w.brake_force),
+                td: o.wheelsets.map(|w| w.disc_temp),
+                q: o.wheelsets.map(|w| w.axle_load),
+                wsp: u.venting,
+                a_x: o.carbody_accel,
+                cmd,
+            });
+            let jitter = if s.jitter {
+                rng.random_range(-0.3..0.3)
+            } else {
+                0.0
+            };
+            next_sample = (rows.len() as f64 + jitter) * period_steps;
+            next_sample = next_sample.max(step as f64 + 1.0);
+        }
+        let o = sim.step();
+        step += 1;
+        if stop_step.is_none() && o.vehicle_speed <= 0.01 {
+            stop_step = Some(step);
+        }
+        if let Some(st) = stop_step {
+            if step >= st + (1.0 / dt) as u64 {
+                break;
+            }
+        }
+        if step >= max_steps {
+            break;
+        }
+    }
+
+    // Unlisted: the speed reference drifts.
+    if kind == Kind::Unlisted {
+        let drift = params[0].1;
+        for r in &mut rows {
+            r.v += drift * r.t;
+        }
+    }
+    // Sensor gain: one sensor reads scaled.
+    if let Some((which, j)) = sensor {
+        let g = params[0].1;
+        for r in &mut rows {
+            match which {
+                Sensor::Pressure => r.p[j] *= g,
+                Sensor::ClampForce => r.f[j] *= g,
+            }
+        }
+    }
+
+    // Columns (shuffled order).
+    let mut cols: Vec<String> = vec!["t_s".into(), "v_ref_mps".into()];
+    let per = |cols: &mut Vec<String>, pre: &str, suf: &str| {
+        for j in 1..=4 {
+            cols.push(format!("{pre}{j}{suf}"));
+        }
+    };
+    per(&mut cols, "omega", "_radps");
+    if s.inputs != Inputs::ClampForce {
+        per(&mut cols, "p_cyl", "_pa");
+    }
+    if s.inputs != Inputs::Pressure {
+        per(&mut cols, "f_clamp", "_n");
+    }
+    if s.log_f_brake {
+        per(&mut cols, "f_brake", "_n");
+    }
+    if s.log_t_disc {
+        per(&mut cols, "t_disc", "_c");
+    }
+    if s.log_q {
+        per(&mut cols, "q", "_n");
+    }
+    if s.log_wsp {
+        per(&mut cols, "wsp", "");
+    }
+    if s.log_a_x {
+        cols.push("a_x_mps2".into());
+    }
+    if s.log_cmd {
+        cols.push("cmd".into());
+    }
+    for i in (1..cols.len()).rev() {
+        let k = rng.random_range(0..=i);
+        cols.swap(i, k);
+    }
+
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "# source: hidden-effect generator (seeded), not to be trusted by the diagnosis"
+    );
+    let _ = writeln!(
+        out,
+        "# rail: {}",
+        if s.rail == Rail::Wet { "wet" } else { "dry" }
+    );
+    let _ = writeln!(out, "# initial_speed_kmh: {:.0}", s.speed_kmh);
+    let _ = writeln!(out, "# eb_command_s: {:.3}", s.coast_s);
+    if !s.jitter {
+        let _ = writeln!(out, "# sample_rate_hz: {}", s.sample_rate_hz);
+    }
+    let _ = writeln!(out, "# notes: case {kind:?}");
+    let mut w = csv::WriterBuilder::new().from_writer(Vec::new());
+    w.write_record(&cols).expect("header");
+    let n = s.noise;
+    let r_w = truth.vehicle.wheel_radius;
+    let _ = r_w;
+    for r in &rows {
+        let mut rec: Vec<String> = Vec::with_capacity(cols.len());
+        for c in &cols {
+            let wj = |prefix: &str| -> usize {
+                c[prefix.len()..prefix.len() + 1]
+                    .parse::<usize>()
+                    .expect("wheelset digit")
+                    - 1
+            };
+            let cell = if c == "t_s" {
+                format!("{:.6}", r.t)
+            } else if c == "v_ref_mps" {
+                format!("{:.5}", r.v + n[0] * gauss(rng))
+            } else if c.starts_with("omega") {
+                format!("{:.5}", r.omega[wj("omega")] + n[1] * gauss(rng))
+            } else if c.starts_with("p_cyl") {
+                format!("{:.1}", r.p[wj("p_cyl")] + n[2] * gauss(rng))
+            } else if c.starts_with("f_clamp") {
+                format!("{:.2}", r.f[wj("f_clamp")] + n[3] * gauss(rng))
+            } else if c.starts_with("f_brake") {
+                format!("{:.2}", r.fb[wj("f_brake")] + n[4] * gauss(rng))
+            } else if c.starts_with("t_disc") {
+                format!("{:.3}", r.td[wj("t_disc")] + n[5] * gauss(rng))
+            } else if c.starts_with("wsp") {
+                (if r.wsp[wj("wsp")] { "1" } else { "0" }).to_string()
+            } else if c.starts_with('q') {
+                format!("{:.1}", r.q[wj("q")] + n[6] * gauss(rng))
+            } else if c == "a_x_mps2" {
+                format!("{:.4}", r.a_x + n[7] * gauss(rng))
+            } else {
+                r.cmd.to_string()
+            };
+            rec.push(cell);
+        }
+        w.write_record(&rec).expect("row");
+    }
+    out += &String::from_utf8(w.into_inner().expect("csv buffer")).expect("utf-8");
+    out
+}
+
+/// Noise-free friction points of Eq (2) (the plant's implementation) with Gaussian noise of
+/// `sigma` on mu, at friction speeds and disc temperatures drawn uniformly from the ranges
+/// (m/s, degC). Returns the CSV text of a points file.
+pub fn dynamometer_points(
+    seed: u64,
+    friction: &hils_plant::params::FrictionParams,
+    sigma: f64,
+    n: usize,
+    v_range: std::ops::Range<f64>,
+    t_range: std::ops::Range<f64>,
+) -> String {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let f = hils_plant::friction::DiscPadFriction::<f64>::new(friction);
+    let mut out = String::from(
+        "# source: dynamometer generator\n# disc: steel, pad: organic\nv_friction_mps,t_disc_c,mu\n",
+    );
+    for _ in 0..n {
+        let v = rng.random_range(v_range.clone());
+        let t = rng.random_range(t_range.clone());
+        let mu = f.mu_d(v, t, 0.0) + sigma * gauss(&mut rng);
+        let _ = writeln!(out, "{v:.4},{t:.3},{mu:.5}");
+    }
+    out
+}
+
+/// A dynamometer time series: stops from `v0` with the clamp force and friction force
+/// logged (mu = f_friction / f_clamp), the disc heating up, brake released before and after.
+pub fn dynamometer_stops(
+    seed: u64,
+    friction: &hils_plant::params::FrictionParams,
+    sigma_force: f64,
+) -> String {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let f = hils_plant::friction::DiscPadFriction::<f64>::new(friction);
+    let mut out = String::from(
+        "# source: dynamometer generator (stops)\nt_s,v_friction_mps,t_disc_c,f_clamp_n,f_friction_n\n",
+    );
+    let mut t = 0.0;
+    let mut temp: f64 = 20.0;
+    for stop in 0..6 {
+        let mut v: f64 = 8.0 + 4.0 * stop as f64;
+        let clamp = rng.random_range(8000.0..20000.0);
+        // Released for 1 s (clamp 0): mu undefined, the reader skips these rows.
+        for _ in 0..10 {
+            let _ = writeln!(out, "{t:.2},{v:.4},{temp:.3},0.0,0.0");
+            t += 0.1;
+        }
+        while v > 0.3 {
+            let mu = f.mu_d(v, temp, clamp);
+            let force = mu * clamp;
+            let _ = writeln!(
+                out,
+                "{t:.2},{v:.4},{temp:.3},{:.2},{:.2}",
+                clamp + sigma_force * gauss(&mut rng),
+                force + sigma_force * gauss(&mut rng)
+            );
+            v -= 0.1 * 1.2;
+            temp += 0.1 * force * v * 2e-4;
+            t += 0.1;
+        }
+        temp = (temp * 0.6).max(20.0);
+    }
+    out
+}

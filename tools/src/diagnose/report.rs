@@ -1,0 +1,692 @@
+//! The human report of `hils diagnose`: where and when the baseline's error grows, what it
+//! goes with, the slides, measured vs baseline vs extended plots, and one paragraph naming
+//! the cause.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use hils_plant::WHEELSETS;
+
+use super::Outcome;
+use super::replay::{Group, Prepared, Quantity, Replay};
+use crate::plots::{Chart, Series, Style};
+
+/// What the baseline's error goes with, for one run.
+#[derive(Clone, Debug, Default)]
+pub struct RunAnalysis {
+    pub name: String,
+    /// First time the v_ref error exceeds 3 bin sigmas, s.
+    pub first_exceed_s: Option<f64>,
+    /// Time and value of the largest v_ref error (model - measured), s and m/s.
+    pub max_error: (f64, f64),
+    /// Mean relative deceleration error while braking (model decel / measured - 1).
+    pub mean_relative_decel_error: f64,
+    /// Pearson correlation of the relative deceleration error with each variable.
+    pub correlations: Vec<(&'static str, f64)>,
+    /// Points (variables, relative decel error) while braking: friction speed m/s, disc
+    /// temperature degC, vehicle speed m/s, clamp force N, time s, creepage, error.
+    pub points: Vec<[f64; 7]>,
+    /// Slide intervals (wheelset 1-based, start s, end s) in the measured data.
+    pub measured_slides: Vec<(usize, f64, f64)>,
+}
+
+/// What the baseline's error goes with, all runs.
+#[derive(Clone, Debug, Default)]
+pub struct Analysis {
+    pub runs: Vec<RunAnalysis>,
+}
+
+pub const VARIABLES: [&str; 6] = [
+    "friction speed",
+    "disc temperature",
+    "vehicle speed",
+    "clamp force",
+    "time",
+    "creepage",
+];
+const UNITS: [&str; 6] = ["m/s", "degC", "m/s", "kN", "s", ""];
+
+fn pearson(x: &[f64], y: &[f64]) -> f64 {
+    let n = x.len() as f64;
+    if x.len() < 3 {
+        return f64::NAN;
+    }
+    let mx = x.iter().sum::<f64>() / n;
+    let my = y.iter().sum::<f64>() / n;
+    let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
+    for (a, b) in x.iter().zip(y) {
+        sxy += (a - mx) * (b - my);
+        sxx += (a - mx) * (a - mx);
+        syy += (b - my) * (b - my);
+    }
+    if sxx <= 0.0 || syy <= 0.0 {
+        f64::NAN
+    } else {
+        sxy / (sxx * syy).sqrt()
+    }
+}
+
+/// Slide intervals from bin means (the slide threshold of [`super::replay::slides`]).
+fn slide_intervals(
+    run: &Prepared,
+    v: &[f64],
+    wheel: &[Vec<f64>; WHEELSETS],
+) -> Vec<(usize, f64, f64)> {
+    let mut out = Vec::new();
+    for j in 0..WHEELSETS {
+        let mut start: Option<f64> = None;
+        for b in 0..run.n_bins {
+            let (vb, wb) = (v[b], wheel[j][b]);
+            let sliding =
+                vb.is_finite() && wb.is_finite() && vb > 1.5 && vb - wb > (0.05 * vb).max(0.5);
+            match (sliding, start) {
+                (true, None) => start = Some(run.bin_time[b]),
+                (false, Some(s)) => {
+                    out.push((j + 1, s, run.bin_time[b]));
+                    start = None;
+                }
+                _ => {}
+            }
+        }
+        if let Some(s) = start {
+            out.push((j + 1, s, run.duration));
+        }
+    }
+    out
+}
+
+/// Analyses the baseline's error: when it grows, and what it goes with.
+pub fn analyse(runs: &[Prepared], baseline: &[Replay]) -> Analysis {
+    let mut out = Analysis::default();
+    for (run, rep) in runs.iter().zip(baseline) {
+        let mut a = RunAnalysis {
+            name: run.name.clone(),
+            ..Default::default()
+        };
+        let n = run.n_bins;
+        let e: Vec<f64> = (0..n).map(|b| rep.v_bin[b] - run.v_bin[b]).collect();
+        if let Some(c) = run.channels.iter().find(|c| c.quantity == Quantity::VRef) {
+            for (k, &b) in c.bins.iter().enumerate() {
+                if (rep.v_bin[b] - c.measured[k]).abs() > 3.0 * c.sigma[k] {
+                    a.first_exceed_s = Some(run.bin_time[b]);
+                    break;
+                }
+            }
+        }
+        for b in 0..n {
+            if e[b].is_finite() && e[b].abs() > a.max_error.1.abs() {
+                a.max_error = (run.bin_time[b], e[b]);
+            }
+        }
+        // Deceleration error over +-0.25 s.
+        let k = ((0.25 / run.bin_s).round() as usize).max(1);
+        let clamp_max = run
+            .clamp_bin
+            .iter()
+            .cloned()
+            .filter(|x| x.is_finite())
+            .fold(0.0f64, f64::max);
+        let slides = slide_intervals(run, &run.v_bin, &run.wheel_bin);
+        let in_slide = |t: f64| slides.iter().any(|(_, s, e)| t >= s - 0.3 && t <= e + 0.3);
+        let ratio = 0.275 / 0.43;
+        for b in k..n.saturating_sub(k) {
+            let span = 2.0 * k as f64 * run.bin_s;
+            let decel_meas = -(run.v_bin[b + k] - run.v_bin[b - k]) / span;
+            let decel_err = -(e[b + k] - e[b - k]) / span;
+            let v = run.v_bin[b];
+            let t = run.bin_time[b];
+            if !(decel_meas > 0.2
+                && v > 1.0
+                && run.clamp_bin[b] > 0.3 * clamp_max
+                && decel_err.is_finite())
+            {
+                continue;
+            }
+            if in_slide(t) {
+                continue;
+            }
+            let w: f64 =
+                (0..WHEELSETS).map(|j| run.wheel_bin[j][b]).sum::<f64>() / WHEELSETS as f64;
+            let temp = if run.disc_temp_bin[b].is_finite() {
+                run.disc_temp_bin[b]
+            } else {
+                rep.disc_temp_bin.iter().map(|x| x[b]).sum::<f64>() / WHEELSETS as f64
+            };
+            let creep = (v - w) / v.max(0.1);
+            a.points.push([
+                w * ratio,
+                temp,
+                v,
+                run.clamp_bin[b] / 1e3,
+                t,
+                creep,
+                decel_err / decel_meas,
+            ]);
+        }
+        if !a.points.is_empty() {
+            a.mean_relative_decel_error =
+                a.points.iter().map(|p| p[6]).sum::<f64>() / a.points.len() as f64;
+            let y: Vec<f64> = a.points.iter().map(|p| p[6]).collect();
+            for (i, name) in VARIABLES.iter().enumerate() {
+                let x: Vec<f64> = a.points.iter().map(|p| p[i]).collect();
+                a.correlations.push((name, pearson(&x, &y)));
+            }
+            a.correlations
+                .sort_by(|x, y| y.1.abs().total_cmp(&x.1.abs()));
+        }
+        a.measured_slides = slides;
+        out.runs.push(a);
+    }
+    out
+}
+
+fn words_for(a: &RunAnalysis) -> String {
+    let mut s = String::new();
+    if a.points.is_empty() {
+        return "No braking interval without slides was long enough to relate the error to the \
+                operating point."
+            .into();
+    }
+    let pct = a.mean_relative_decel_error * 100.0;
+    let _ = write!(
+        s,
+        "While braking, the baseline decelerates {:.1} % {} than measured on average. ",
+        pct.abs(),
+        if pct < 0.0 { "less" } else { "more" }
+    );
+    if let Some(t) = a.first_exceed_s {
+        let _ = write!(
+            s,
+            "Its speed error exceeds three times the noise from {t:.2} s; "
+        );
+    }
+    let _ = write!(
+        s,
+        "the largest speed error is {:.3} m/s at {:.2} s. ",
+        a.max_error.1, a.max_error.0
+    );
+    let strong: Vec<String> = a
+        .correlations
+        .iter()
+        .filter(|(_, r)| r.abs() >= 0.5)
+        .take(3)
+        .map(|(name, r)| {
+            // Relative deceleration error < 0: the model brakes too weakly. A negative
+            // correlation with x: the shortfall grows as x rises.
+            let dir = if *r < 0.0 { "rises" } else { "falls" };
+            format!("the braking shortfall grows as the {name} {dir} (r = {r:.2})")
+        })
+        .collect();
+    let strong: Vec<String> = strong
+        .into_iter()
+        .enumerate()
+        .map(|(i, t)| if i == 0 { format!("T{}", &t[1..]) } else { t })
+        .collect();
+    if strong.is_empty() {
+        s += "The deceleration error goes with none of friction speed, disc temperature, vehicle speed, \
+              clamp force, time or creepage (all |r| < 0.5).";
+    } else {
+        s += &strong.join("; ");
+        s += ".";
+    }
+    s
+}
+
+/// The paragraph that names the cause.
+pub fn cause_paragraph(out: &Outcome) -> String {
+    let r = &out.report;
+    if !r.discrepancy {
+        return format!(
+            "No discrepancy: the baseline replays the measured runs within their noise \
+             (validation error {:.2} times the noise level, {:.4} m/s on the speeds), so no cause is named.",
+            r.gain.baseline, r.gain.speed_rms_mps["baseline"]
+        );
+    }
+    if r.causes.is_empty() {
+        return format!(
+            "The baseline does not explain the data (validation error {:.1} times the noise), and none of \
+             the listed effects, alone or combined, explains it: {:.0} % of the error stays unexplained. \
+             No cause is claimed; the plots below show where and when the error grows.",
+            r.gain.baseline,
+            r.unexplained_share * 100.0
+        );
+    }
+    let mut s = String::from("The cause: ");
+    let parts: Vec<String> = out
+        .result
+        .effects
+        .iter()
+        .zip(&out.result.x)
+        .map(|(e, x)| {
+            let keys: Vec<&str> = e
+                .params(&out.baseline_params, out.runs[0].rail)
+                .into_iter()
+                .map(|(k, _)| k)
+                .collect();
+            let values: Vec<String> = keys
+                .iter()
+                .zip(x)
+                .map(|(k, v)| format!("{k} = {v:.4}"))
+                .collect();
+            format!("{} — {} ({})", e.name(), e.describe(), values.join(", "))
+        })
+        .collect();
+    s += &parts.join("; and ");
+    let _ = write!(
+        s,
+        ". With {} the replay error on validation data falls from {:.2} to {:.2} times the noise \
+         ({:.4} to {:.4} m/s on the speeds), a reduction of {:.1} %; {:.1} % of the baseline's excess \
+         error stays unexplained.",
+        if r.causes.len() > 1 {
+            "these effects"
+        } else {
+            "this effect"
+        },
+        r.gain.baseline,
+        r.gain.extended,
+        r.gain.speed_rms_mps["baseline"],
+        r.gain.speed_rms_mps["extended"],
+        r.gain.reduction * 100.0,
+        r.unexplained_share * 100.0
+    );
+    let missed: Vec<usize> = r
+        .slides
+        .measured
+        .iter()
+        .copied()
+        .filter(|j| !r.slides.baseline.contains(j))
+        .collect();
+    if !missed.is_empty() {
+        let _ = write!(
+            s,
+            " The baseline misses the wheel slide of wheelset(s) {:?}; the extended model {}.",
+            missed,
+            if missed.iter().all(|j| r.slides.extended.contains(j)) {
+                "reproduces it".to_string()
+            } else {
+                format!("shows slides on {:?}", r.slides.extended)
+            }
+        );
+    }
+    for g in &r.confounded {
+        let _ = write!(
+            s,
+            " The data cannot tell {} apart: treat them as alternatives.",
+            g.join(" and ")
+        );
+    }
+    s
+}
+
+fn t_series(run: &Prepared, y: &[f64], scale: f64) -> Vec<(f64, f64)> {
+    run.bin_time
+        .iter()
+        .zip(y)
+        .filter(|(_, v)| v.is_finite())
+        .map(|(t, v)| (*t, v * scale))
+        .collect()
+}
+
+/// Writes report.md and the SVG plots into `dir`.
+pub fn write(dir: &Path, out: &Outcome) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let mut files = Vec::new();
+    let r = &out.report;
+    let mut md = String::from("# Diagnosis\n\n");
+    let _ = writeln!(
+        md,
+        "Baseline `{}`; runs: {}.\n",
+        r.baseline,
+        r.files.join(", ")
+    );
+    md += &cause_paragraph(out);
+    md += "\n\n## Result\n\n";
+    let _ = writeln!(
+        md,
+        "- discrepancy: **{}**\n- causes: {}\n- confounded: {}\n- unexplained share: {:.3}\n- gain ({}): baseline {:.3}, extended {:.3}, reduction {:.3}\n- speeds alone: baseline {:.4} m/s, extended {:.4} m/s\n- slides: measured {:?}, baseline {:?}, extended {:?}\n",
+        r.discrepancy,
+        if r.causes.is_empty() {
+            "none".into()
+        } else {
+            r.causes.join(", ")
+        },
+        if r.confounded.is_empty() {
+            "none".to_string()
+        } else {
+            r.confounded
+                .iter()
+                .map(|g| g.join(" / "))
+                .collect::<Vec<_>>()
+                .join("; ")
+        },
+        r.unexplained_share,
+        r.gain.metric,
+        r.gain.baseline,
+        r.gain.extended,
+        r.gain.reduction,
+        r.gain.speed_rms_mps["baseline"],
+        r.gain.speed_rms_mps["extended"],
+        r.slides.measured,
+        r.slides.baseline,
+        r.slides.extended
+    );
+    if !r.findings.is_empty() {
+        md += "| effect | parameter | value | 95 % CI | gain alone |\n|---|---|---|---|---|\n";
+        for f in &r.findings {
+            for (k, v) in &f.params {
+                let [lo, hi] = f.ci95[k];
+                let _ = writeln!(
+                    md,
+                    "| {} | {k} | {v:.5} | [{lo:.5}, {hi:.5}] | {:.3} |",
+                    f.effect, f.gain
+                );
+            }
+        }
+        md += "\n";
+    }
+    if !r.tried.is_empty() {
+        md += "## Every effect fitted alone (validation data)\n\n| effect | parameters | validation error (x noise) | gain |\n|---|---|---|---|\n";
+        for t in &r.tried {
+            let p: Vec<String> = t
+                .params
+                .iter()
+                .map(|(k, v)| format!("{k} = {v:.4}"))
+                .collect();
+            let _ = writeln!(
+                md,
+                "| {} | {} | {:.3} | {:.3} |",
+                t.effect,
+                p.join(", "),
+                t.validation_rms,
+                t.gain
+            );
+        }
+        md += "\n";
+    }
+
+    md += "## What is wrong: where and when the baseline's error grows\n\n";
+    for (i, (run, a)) in out.runs.iter().zip(&out.analysis.runs).enumerate() {
+        let base = &out.baseline_replays[i];
+        let ext = &out.extended_replays[i];
+        let tag = if out.runs.len() > 1 {
+            format!("run{}_", i + 1)
+        } else {
+            String::new()
+        };
+        let _ = writeln!(md, "### {}\n", run.name);
+        let _ = writeln!(
+            md,
+            "Initial speed {:.2} km/h (measured), rail {:?}{}, {} samples over {:.2} s, replay step {} ms, comparison bins of {} ms (every third 0.2 s block is validation data).\n",
+            run.v0 * 3.6,
+            run.rail,
+            if run.rail_from_metadata {
+                " (metadata)"
+            } else {
+                " (baseline scenario: no `rail` metadata)"
+            },
+            run.t.len(),
+            run.duration,
+            run.dt * 1e3,
+            run.bin_s * 1e3
+        );
+        md += &words_for(a);
+        md += "\n\n";
+        if !a.measured_slides.is_empty() {
+            md += "Measured slides (wheel speed deficit beyond max(0.5 m/s, 5 %)):\n\n| wheelset | from s | to s |\n|---|---|---|\n";
+            for (j, s, e) in &a.measured_slides {
+                let _ = writeln!(md, "| {j} | {s:.2} | {e:.2} |");
+            }
+            md += "\n";
+        }
+        md += "| quantity | baseline rms | extended rms | noise (sample) |\n|---|---|---|---|\n";
+        let rb = super::replay::channel_rms(run, base);
+        let re = super::replay::channel_rms(run, ext);
+        for ((q, b, noise), (_, e, _)) in rb.iter().zip(&re) {
+            let _ = writeln!(
+                md,
+                "| {} ({}) | {b:.4} | {e:.4} | {noise:.4} |",
+                q.label(),
+                q.unit()
+            );
+        }
+        md += "\n";
+
+        // Vehicle speed.
+        let mut c = Chart::new(
+            &format!("{}: vehicle speed", run.name),
+            "time, s",
+            "v_ref, km/h",
+        );
+        c.series.push(Series::new(
+            "measured",
+            t_series(run, &run.v_bin, 3.6),
+            Style::Solid,
+            7,
+        ));
+        c.series.push(Series::new(
+            "baseline",
+            t_series(run, &base.v_bin, 3.6),
+            Style::Dashed,
+            1,
+        ));
+        c.series.push(Series::new(
+            "extended",
+            t_series(run, &ext.v_bin, 3.6),
+            Style::Dotted,
+            2,
+        ));
+        let f = dir.join(format!("{tag}v_ref.svg"));
+        c.save_svg(&f)?;
+        let _ = writeln!(
+            md,
+            "![vehicle speed]({})\n",
+            f.file_name().unwrap().to_string_lossy()
+        );
+        files.push(f);
+
+        // Speed errors.
+        let mut c = Chart::new(
+            &format!("{}: speed error, model - measured", run.name),
+            "time, s",
+            "error, m/s",
+        );
+        let err = |m: &[f64]| -> Vec<(f64, f64)> {
+            (0..run.n_bins)
+                .filter(|&b| m[b].is_finite() && run.v_bin[b].is_finite())
+                .map(|b| (run.bin_time[b], m[b] - run.v_bin[b]))
+                .collect()
+        };
+        c.series.push(Series::new(
+            "v_ref, baseline",
+            err(&base.v_bin),
+            Style::Solid,
+            1,
+        ));
+        c.series.push(Series::new(
+            "v_ref, extended",
+            err(&ext.v_bin),
+            Style::Solid,
+            2,
+        ));
+        let f = dir.join(format!("{tag}speed_error.svg"));
+        c.save_svg(&f)?;
+        let _ = writeln!(
+            md,
+            "![speed error]({})\n",
+            f.file_name().unwrap().to_string_lossy()
+        );
+        files.push(f);
+
+        // Wheel speeds (slides).
+        for j in 0..WHEELSETS {
+            let mut c = Chart::new(
+                &format!("{}: wheelset {} circumferential speed", run.name, j + 1),
+                "time, s",
+                "speed, km/h",
+            );
+            c.series.push(Series::new(
+                "v_ref measured",
+                t_series(run, &run.v_bin, 3.6),
+                Style::Dotted,
+                6,
+            ));
+            c.series.push(Series::new(
+                "measured",
+                t_series(run, &run.wheel_bin[j], 3.6),
+                Style::Solid,
+                7,
+            ));
+            c.series.push(Series::new(
+                "baseline",
+                t_series(run, &base.wheel_bin[j], 3.6),
+                Style::Dashed,
+                1,
+            ));
+            c.series.push(Series::new(
+                "extended",
+                t_series(run, &ext.wheel_bin[j], 3.6),
+                Style::Solid,
+                2,
+            ));
+            let f = dir.join(format!("{tag}wheel{}.svg", j + 1));
+            c.save_svg(&f)?;
+            let _ = writeln!(
+                md,
+                "![wheelset {}]({})\n",
+                j + 1,
+                f.file_name().unwrap().to_string_lossy()
+            );
+            files.push(f);
+        }
+
+        // Residuals against the variables.
+        if !a.points.is_empty() {
+            for (i, name) in VARIABLES.iter().enumerate() {
+                let mut c = Chart::new(
+                    &format!(
+                        "{}: baseline's relative deceleration error vs {name}",
+                        run.name
+                    ),
+                    &format!(
+                        "{name}{}",
+                        if UNITS[i].is_empty() {
+                            String::new()
+                        } else {
+                            format!(", {}", UNITS[i])
+                        }
+                    ),
+                    "model decel / measured - 1",
+                );
+                c.series.push(Series::new(
+                    "baseline (braking, no slide)",
+                    a.points.iter().map(|p| (p[i], p[6])).collect(),
+                    Style::Points,
+                    1,
+                ));
+                let f = dir.join(format!("{tag}residual_vs_{}.svg", name.replace(' ', "_")));
+                c.save_svg(&f)?;
+                let r = a
+                    .correlations
+                    .iter()
+                    .find(|(n, _)| n == name)
+                    .map(|x| x.1)
+                    .unwrap_or(f64::NAN);
+                let _ = writeln!(
+                    md,
+                    "![vs {name}]({}) (r = {r:.2})\n",
+                    f.file_name().unwrap().to_string_lossy()
+                );
+                files.push(f);
+            }
+        }
+
+        // Disc-pad friction of the models.
+        let mut c = Chart::new(
+            &format!("{}: disc-pad friction mu_d (model)", run.name),
+            "time, s",
+            "mu_d",
+        );
+        for (name, rep, color) in [("baseline", base, 1usize), ("extended", ext, 2)] {
+            let mean: Vec<f64> = (0..run.n_bins)
+                .map(|b| rep.mu_d_bin.iter().map(|m| m[b]).sum::<f64>() / 4.0)
+                .collect();
+            c.series.push(Series::new(
+                format!("{name}, mean of wheelsets"),
+                t_series(run, &mean, 1.0),
+                Style::Solid,
+                color,
+            ));
+        }
+        let f = dir.join(format!("{tag}mu_d.svg"));
+        c.save_svg(&f)?;
+        let _ = writeln!(
+            md,
+            "![mu_d]({})\n",
+            f.file_name().unwrap().to_string_lossy()
+        );
+        files.push(f);
+
+        // Other logged quantities: the channel of each group with the largest baseline error.
+        for group in [
+            Group::BrakeForces,
+            Group::AxleLoads,
+            Group::PadForces,
+            Group::DiscTemps,
+            Group::Accel,
+        ] {
+            let best = run
+                .channels
+                .iter()
+                .enumerate()
+                .filter(|(_, c)| c.quantity.group() == group)
+                .max_by(|(i, _), (k, _)| rb[*i].1.total_cmp(&rb[*k].1));
+            let Some((ci, ch)) = best else { continue };
+            let mut c = Chart::new(
+                &format!("{}: {}", run.name, ch.quantity.label()),
+                "time, s",
+                &format!("{} ({})", ch.quantity.label(), ch.quantity.unit()),
+            );
+            let pts = |v: &[f64]| -> Vec<(f64, f64)> {
+                ch.times.iter().zip(v).map(|(t, y)| (*t, *y)).collect()
+            };
+            c.series
+                .push(Series::new("measured", pts(&ch.measured), Style::Solid, 7));
+            c.series.push(Series::new(
+                "baseline",
+                pts(&base.predicted[ci]),
+                Style::Dashed,
+                1,
+            ));
+            c.series.push(Series::new(
+                "extended",
+                pts(&ext.predicted[ci]),
+                Style::Solid,
+                2,
+            ));
+            let f = dir.join(format!(
+                "{tag}{}.svg",
+                ch.quantity.label().replace([' ', '*'], "_")
+            ));
+            c.save_svg(&f)?;
+            let _ = writeln!(
+                md,
+                "![{}]({})\n",
+                ch.quantity.label(),
+                f.file_name().unwrap().to_string_lossy()
+            );
+            files.push(f);
+        }
+    }
+    if !r.notes.is_empty() {
+        md += "## Notes (skipped, repaired, unused)\n\n";
+        for n in &r.notes {
+            let _ = writeln!(md, "- {n}");
+        }
+        md += "\n";
+    }
+    let f = dir.join("report.md");
+    std::fs::write(&f, md).with_context(|| format!("cannot write {}", f.display()))?;
+    files.push(f);
+    Ok(files)
+}
