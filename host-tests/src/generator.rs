@@ -325,7 +325,10 @@ pub fn case_with(kind: Kind, seed: u64, tweak: impl FnOnce(&mut Scenario)) -> Ca
             truth_params.brake.actuator_lag_s = tau;
             (vec!["actuator-lag"], vec![("tau_s".into(), tau)])
         }
-        Kind::Unlisted => (vec![], vec![("v_ref_drift_mps_per_s".into(), rng.random_range(0.02..0.05))]),
+        Kind::Unlisted => (
+            vec![],
+            vec![("v_ref_drift_mps_per_s".into(), rng.random_range(0.02..0.05))],
+        ),
         Kind::SensorGain => {
             let j = rng.random_range(0..WHEELSETS);
             let g = if rng.random::<f64>() < 0.5 {

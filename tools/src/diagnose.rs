@@ -12,15 +12,22 @@
 //! 2. Every third 0.2 s block of each run is validation data: fits never see it, and every
 //!    decision (keep an effect, combine, confounded, gains) is made on it.
 //! 3. **Discrepancy**: the baseline explains the data when its validation RMS (in noise
-//!    units) is at most [`NO_DISCREPANCY_RMS`].
-//! 4. Each effect of the spec's table ([`effects`]) is fitted alone (Levenberg-Marquardt,
-//!    rayon across effects and Jacobian columns). Then forward selection: the effect that
-//!    lowers the validation RMS most is added while it lowers it significantly
-//!    ([`significant`]); then backward elimination drops effects the others make redundant.
+//!    units) is at most [`NO_DISCREPANCY_RMS`] and no 1 s window of a channel group exceeds
+//!    [`SCAN_RMS`]. Models are compared over the windows where either errs beyond the noise
+//!    ([`replay::compare`]), so an error confined to a transient is not diluted.
+//! 4. Each effect of the spec's table ([`effects`]) is fitted alone (coarse scan, then
+//!    Levenberg-Marquardt; rayon across effects and Jacobian columns). Then forward
+//!    selection: effects ranked by a linearised score test at the current fit, the best two
+//!    fitted jointly, the better added while it lowers the validation error significantly
+//!    ([`significant`]); a simpler model that is not significantly worse wins (parsimony);
+//!    backward elimination drops effects the others make redundant. The result is polished
+//!    and refined at the command's replay step (LM, then a coordinate search).
 //! 5. **Confounded**: an effect outside the result that, put in the place of a cause,
 //!    explains the validation data as well (within [`CONFOUND_TOLERANCE`]) is listed with it.
 //! 6. **Unexplained**: the share of the baseline's excess error over noise that remains;
 //!    when the effects leave more than [`MAX_UNEXPLAINED`] of it, no cause is claimed.
+//!
+//! See docs/diagnosis.md for the user's view.
 
 pub mod effects;
 pub mod lsq;
@@ -74,12 +81,21 @@ pub const SCAN_RMS: f64 = 2.5;
 pub fn significant(before: f64, after: f64) -> bool {
     after <= 0.9 * before && before * before - after * after >= 0.5
 }
+/// A second start path is explored when its single effect's error is within this factor.
+pub const BEAM_TOLERANCE: f64 = 1.25;
+/// Smallest material change of an effect's parameter, share of its scale.
+pub const MIN_EFFECT: f64 = 0.2;
+/// Start paths of the forward selection (the best single effects).
+pub const BEAM: usize = 2;
+/// A simpler fit is preferred unless a more complex one is better by this factor (and by
+/// half a noise variance).
+pub const PARSIMONY_TOLERANCE: f64 = 1.03;
 /// Alternatives within this factor of the result's validation RMS are confounded with it.
 pub const CONFOUND_TOLERANCE: f64 = 1.1;
 /// No cause is claimed when more than this share of the excess error stays unexplained.
 pub const MAX_UNEXPLAINED: f64 = 0.5;
 /// Largest number of effects combined.
-pub const MAX_EFFECTS: usize = 4;
+pub const MAX_EFFECTS: usize = 3;
 
 /// One finding of the JSON.
 #[derive(Clone, Debug, Serialize)]
@@ -331,13 +347,35 @@ impl Diagnoser {
                 // small parameter steps, and LM would not leave it.
                 let x0: Vec<Vec<f64>> = effects
                     .iter()
-                    .map(|e| e.params(&self.baseline, self.rail()).into_iter().map(|(_, p)| p.start).collect())
+                    .map(|e| {
+                        e.params(&self.baseline, self.rail())
+                            .into_iter()
+                            .map(|(_, p)| p.start)
+                            .collect()
+                    })
                     .collect();
-                let ssr0 = self
-                    .residuals(effects, &x0)
-                    .map(|r| r.iter().map(|v| v * v).sum())
-                    .unwrap_or(f64::INFINITY);
-                let (x, _) = self.coordinate_search(effects, x0, ssr0, &COARSE_STEPS, 1);
+                let ssr_of = |x: &[Vec<f64>]| {
+                    self.residuals(effects, x)
+                        .map(|r| r.iter().map(|v| v * v).sum())
+                        .unwrap_or(f64::INFINITY)
+                };
+                // A friction factor's amplitude and decay constant trade off (slides make
+                // the landscape multi-modal): scan from three decay constants.
+                let mut starts = vec![x0.clone()];
+                if let [Effect::FrictionSpeed | Effect::FrictionTemperature] = effects {
+                    for f in [1.0 / 3.0, 3.0] {
+                        let mut x = x0.clone();
+                        x[0][1] *= f;
+                        starts.push(x);
+                    }
+                }
+                let (x, _) = starts
+                    .into_par_iter()
+                    .map(|x| {
+                        let ssr = ssr_of(&x);
+                        self.coordinate_search(effects, x, ssr, &COARSE_STEPS, 1)
+                    })
+                    .min_by(|a, b| a.1.total_cmp(&b.1))?;
                 self.fit_set_with(effects, Some(&x), FIT_PATIENCE, FIT_TOLERANCE)
             }
         }
@@ -409,17 +447,40 @@ impl Diagnoser {
     pub fn coordinate_search(
         &self,
         effects: &[Effect],
+        x: Vec<Vec<f64>>,
+        ssr: f64,
+        steps: &[f64],
+        rounds: usize,
+    ) -> (Vec<Vec<f64>>, f64) {
+        self.coordinate_search_of(effects, x, ssr, steps, rounds, None)
+    }
+
+    /// As [`Diagnoser::coordinate_search`], on effect `only` alone when given.
+    pub fn coordinate_search_of(
+        &self,
+        effects: &[Effect],
         mut x: Vec<Vec<f64>>,
         mut ssr: f64,
         steps: &[f64],
         rounds: usize,
+        only: Option<usize>,
     ) -> (Vec<Vec<f64>>, f64) {
         let rail = self.rail();
-        let specs: Vec<Vec<lsq::ParamSpec>> =
-            effects.iter().map(|e| e.params(&self.baseline, rail).into_iter().map(|(_, p)| p).collect()).collect();
+        let specs: Vec<Vec<lsq::ParamSpec>> = effects
+            .iter()
+            .map(|e| {
+                e.params(&self.baseline, rail)
+                    .into_iter()
+                    .map(|(_, p)| p)
+                    .collect()
+            })
+            .collect();
         for round in 0..rounds {
             let shrink = 0.25f64.powi(round as i32);
             for k in 0..effects.len() {
+                if only.is_some_and(|o| o != k) {
+                    continue;
+                }
                 for i in 0..x[k].len() {
                     let sp = specs[k][i];
                     let size = x[k][i].abs().max(sp.scale) * shrink;
@@ -433,7 +494,11 @@ impl Diagnoser {
                             let mut xt = x.clone();
                             xt[k][i] = v;
                             let r = self.residuals(effects, &xt);
-                            (v, r.map(|r| r.iter().map(|e| e * e).sum()).unwrap_or(f64::INFINITY))
+                            (
+                                v,
+                                r.map(|r| r.iter().map(|e| e * e).sum())
+                                    .unwrap_or(f64::INFINITY),
+                            )
                         })
                         .collect();
                     if let Some(&(v, best)) = results.iter().min_by(|a, b| a.1.total_cmp(&b.1)) {
@@ -446,6 +511,46 @@ impl Diagnoser {
             }
         }
         (x, ssr)
+    }
+
+    /// Whether effect `k` of a fitted set is physically material: some parameter differs
+    /// from the value at which the effect changes nothing by at least [`MIN_EFFECT`] of
+    /// its scale (a sensor gain of 1.002 that happens to shift a slide is not a cause).
+    pub fn material(&self, set: &SetFit, k: usize) -> bool {
+        let rail = self.rail();
+        let mut effects = set.effects.clone();
+        let mut xs = set.x.clone();
+        let e = effects.remove(k);
+        let x = xs.remove(k);
+        let active: Vec<(Effect, &[f64])> = effects
+            .iter()
+            .copied()
+            .zip(xs.iter().map(|v| v.as_slice()))
+            .collect();
+        let model = effects::build(&self.baseline, rail, &active);
+        let specs = e.params(&self.baseline, rail);
+        let starts: Vec<f64> = specs.iter().map(|(_, p)| p.start).collect();
+        let neutral = e.neutral(&model, rail, &starts);
+        let factor = matches!(e, Effect::FrictionSpeed | Effect::FrictionTemperature);
+        if factor {
+            // A friction factor must vary over the data: n (1 - e^(-m X)) from the slowest or
+            // coldest to the fastest or hottest point (X: the largest friction speed of the
+            // runs, or a 100 degC disc rise) changes mu_d by at least 1 % (a factor that does
+            // not decay is a friction level).
+            let range = match e {
+                Effect::FrictionSpeed => {
+                    let ratio =
+                        self.baseline.brake.friction_radius / self.baseline.vehicle.wheel_radius;
+                    self.runs.iter().map(|r| r.v0).fold(0.0, f64::max) * ratio
+                }
+                _ => 100.0,
+            };
+            return x[0] * (1.0 - (-x[1] * range).exp()) >= 0.01;
+        }
+        x.iter()
+            .zip(&neutral)
+            .zip(&specs)
+            .any(|((v, n), (_, p))| (v - n).abs() >= MIN_EFFECT * p.scale)
     }
 
     /// Probes effect `a` at the fitted set `s`: Jacobian columns of the fit residuals with
@@ -552,22 +657,32 @@ pub const FD_STEP: f64 = 0.02;
 /// Replay step of the fits, s (the final scores use the command's step).
 pub const FIT_STEP_S: f64 = 4.0e-3;
 /// Relative steps of the coarse scan before a fit from generic start values.
-pub const COARSE_STEPS: [f64; 8] = [-0.3, -0.15, -0.07, -0.03, 0.03, 0.07, 0.15, 0.3];
+pub const COARSE_STEPS: [f64; 8] = [-0.6, -0.3, -0.15, 0.15, 0.3, 0.6, 1.0, 2.0];
 /// Relative steps of the final coordinate search at the command's step.
-pub const FINE_STEPS: [f64; 10] = [-0.04, -0.02, -0.01, -0.005, -0.0025, 0.0025, 0.005, 0.01, 0.02, 0.04];
+pub const FINE_STEPS: [f64; 10] = [
+    -0.04, -0.02, -0.01, -0.005, -0.0025, 0.0025, 0.005, 0.01, 0.02, 0.04,
+];
 /// Budget of the final refinement at the command's step (replays per parameter + 1).
 pub const REFINE_PATIENCE: usize = 5;
 /// Candidates fitted per forward-selection step (the best of the linearised score test).
 pub const CANDIDATES_PER_STEP: usize = 2;
 
 /// The best of several fits of the same step: the lowest validation error, unless a fit
-/// with fewer parameters is not significantly worse (then the simplest such).
+/// with fewer parameters explains the data as well (within [`PARSIMONY_TOLERANCE`]; then
+/// the simplest such): a friction factor that does not decay is a friction level.
 fn pick(trials: Vec<SetFit>) -> Option<SetFit> {
     let best_idx =
         (0..trials.len()).min_by(|&a, &b| trials[a].val().total_cmp(&trials[b].val()))?;
     let best = &trials[best_idx];
     let simpler = (0..trials.len())
-        .filter(|&i| trials[i].n_params() < best.n_params() && !trials[i].improved_by(best))
+        .filter(|&i| {
+            // Simpler wins unless the other is better by the tolerance and by half a noise
+            // variance (below the noise, relative differences mean nothing).
+            let (simple, complex) = replay::compare(&trials[i].validation, &best.validation);
+            let clearly_better = complex * PARSIMONY_TOLERANCE < simple
+                && simple * simple - complex * complex >= 0.5;
+            trials[i].n_params() < best.n_params() && !clearly_better
+        })
         .min_by(|&a, &b| {
             trials[a]
                 .n_params()
@@ -648,28 +763,19 @@ struct Search {
     confounded: Vec<Vec<String>>,
 }
 
-/// Forward selection with linearised candidate ranking, backward elimination, and the
-/// confounding check, all at the fit step.
-fn search(d: &Diagnoser, base: &SetFit, started: Instant) -> Search {
-    let applicable: Vec<Effect> = effects::ALL
-        .iter()
-        .copied()
-        .filter(|e| e.applicable(&d.runs) && d.runs.iter().any(|r| effects::shows(*e, r)))
-        .collect();
-    let singles: Vec<SetFit> = applicable
-        .par_iter()
-        .filter_map(|e| d.fit_set(&[*e], None))
-        .collect();
-    debug(started, d.replays_done(), "single effects fitted");
-
+/// Forward selection from `start` (a fitted single effect), then backward elimination.
+fn grow(
+    d: &Diagnoser,
+    start: SetFit,
+    singles: &[SetFit],
+    applicable: &[Effect],
+    started: Instant,
+) -> SetFit {
     // Forward selection.
-    let mut current = base.clone();
-    if let Some(best) = pick(singles.clone()) {
-        if base.improved_by(&best) {
-            current = best;
-        }
-    }
-    while !current.effects.is_empty() && current.effects.len() < MAX_EFFECTS {
+    let mut current = start;
+    // Below 0.7 x noise no addition can be significant (it must remove half a variance).
+    while !current.effects.is_empty() && current.effects.len() < MAX_EFFECTS && current.val() >= 0.7
+    {
         let Some(j_s) = current.jacobian.clone() else {
             break;
         };
@@ -714,22 +820,59 @@ fn search(d: &Diagnoser, base: &SetFit, started: Instant) -> Search {
         if !significant(rms_now, 0.8 * (best_pred / n_fit).sqrt()) {
             break;
         }
-        let trials: Vec<SetFit> = ranked
+        // The best probes, and the friction factors always: their exponential shapes are
+        // the least linear, so a linearised probe underrates them (the paper's second
+        // factor only shows once the first is in). A factor starts from its fit alone when
+        // that one is material, else from the generic start.
+        let mut chosen: Vec<(Effect, Vec<f64>)> = ranked
             .iter()
             .take(CANDIDATES_PER_STEP)
             .filter(|r| r.0 <= 1.5 * best_pred + 1.0)
-            .collect::<Vec<_>>()
+            .map(|(_, p, delta)| (p.effect, probe_start(p, delta)))
+            .collect();
+        for factor in [Effect::FrictionSpeed, Effect::FrictionTemperature] {
+            if candidates.contains(&factor) && !chosen.iter().any(|(e, _)| *e == factor) {
+                let single = singles
+                    .iter()
+                    .find(|s| s.effects == [factor])
+                    .filter(|s| d.material(s, 0));
+                let start = match single {
+                    Some(s) => s.x[0].clone(),
+                    None => factor
+                        .params(&d.baseline, d.rail())
+                        .into_iter()
+                        .map(|(_, p)| p.start)
+                        .collect(),
+                };
+                chosen.push((factor, start));
+            }
+        }
+        let trials: Vec<SetFit> = chosen
             .par_iter()
-            .filter_map(|(_, p, delta)| {
+            .filter_map(|(effect, own_start)| {
                 let mut effects = current.effects.clone();
-                effects.push(p.effect);
+                effects.push(*effect);
                 let mut start = current.x.clone();
-                start.push(probe_start(p, delta));
+                start.push(own_start.clone());
+                // Scan the added effect coarsely first (slides make the landscape rough:
+                // LM may not leave its start).
+                let ssr = d
+                    .residuals(&effects, &start)
+                    .map(|r| r.iter().map(|v| v * v).sum())
+                    .unwrap_or(f64::INFINITY);
+                let (start, _) = d.coordinate_search_of(
+                    &effects,
+                    start,
+                    ssr,
+                    &COARSE_STEPS,
+                    1,
+                    Some(effects.len() - 1),
+                );
                 d.fit_set(&effects, Some(&start))
             })
             .collect();
         let Some(best) = pick(trials) else { break };
-        if current.improved_by(&best) {
+        if current.improved_by(&best) && d.material(&best, best.effects.len() - 1) {
             current = best;
         } else {
             break;
@@ -758,7 +901,11 @@ fn search(d: &Diagnoser, base: &SetFit, started: Instant) -> Search {
                         from_singles.push(single.unwrap_or_else(|| current.x[i].clone()));
                     }
                 }
-                [(k, from_current), (k, from_singles)]
+                if from_singles == from_current {
+                    vec![(k, from_current)]
+                } else {
+                    vec![(k, from_current), (k, from_singles)]
+                }
             })
             .collect();
         let without: Vec<SetFit> = starts
@@ -767,7 +914,10 @@ fn search(d: &Diagnoser, base: &SetFit, started: Instant) -> Search {
                 let mut effects = current.effects.clone();
                 effects.remove(k);
                 // One effect left, started from its own fit alone: that fit is the answer.
-                if let Some(single) = singles.iter().find(|s| s.effects == effects && s.x == start) {
+                if let Some(single) = singles
+                    .iter()
+                    .find(|s| s.effects == effects && s.x == start)
+                {
                     return Some(single.clone());
                 }
                 d.fit_set(&effects, Some(&start))
@@ -786,6 +936,57 @@ fn search(d: &Diagnoser, base: &SetFit, started: Instant) -> Search {
         }
     }
     debug(started, d.replays_done(), "backward elimination");
+
+    current
+}
+
+/// Forward selection with linearised candidate ranking, backward elimination, and the
+/// confounding check, all at the fit step.
+fn search(d: &Diagnoser, base: &SetFit, started: Instant) -> Search {
+    let applicable: Vec<Effect> = effects::ALL
+        .iter()
+        .copied()
+        .filter(|e| e.applicable(&d.runs) && d.runs.iter().any(|r| effects::shows(*e, r)))
+        .collect();
+    let singles: Vec<SetFit> = applicable
+        .par_iter()
+        .filter_map(|e| d.fit_set(&[*e], None))
+        .collect();
+    debug(started, d.replays_done(), "single effects fitted");
+
+    // Forward selection and backward elimination from the best first effects (a beam:
+    // two effects alone can explain about as much, and only one of them may lead to the
+    // right combination); the best final set wins, the simplest among equals.
+    let mut firsts: Vec<SetFit> = Vec::new();
+    let material: Vec<SetFit> = singles
+        .iter()
+        .filter(|s| d.material(s, 0))
+        .cloned()
+        .collect();
+    if let Some(best) = pick(material.clone()) {
+        if base.improved_by(&best) {
+            firsts.push(best);
+        }
+    }
+    if let Some(first) = firsts.first().cloned() {
+        let mut rest: Vec<&SetFit> = material
+            .iter()
+            .filter(|s| s.effects != first.effects)
+            .collect();
+        rest.sort_by(|a, b| a.val().total_cmp(&b.val()));
+        // A second path only when its first effect explains nearly as much.
+        firsts.extend(
+            rest.into_iter()
+                .take(BEAM - 1)
+                .filter(|s| base.improved_by(s) && s.val() <= BEAM_TOLERANCE * first.val())
+                .cloned(),
+        );
+    }
+    let finals: Vec<SetFit> = firsts
+        .into_par_iter()
+        .map(|f| grow(d, f, &singles, &applicable, started))
+        .collect();
+    let mut current = pick(finals).unwrap_or_else(|| base.clone());
 
     // Confounded: could another effect stand in for a cause? Screen each swap with the
     // linearised fit, confirm the promising ones with a real fit on validation data.
@@ -822,8 +1023,12 @@ fn search(d: &Diagnoser, base: &SetFit, started: Instant) -> Search {
             let j_rest = j_s.select_columns(&keep);
             for p in &probes {
                 let (ssr, delta) = lsq::linear_ssr(&r_without, &hcat(&j_rest, &p.columns));
+                // Worth a real fit when the linearised swap comes near the result, or
+                // explains the data to within the noise (then a small relative gap means
+                // nothing).
                 let screen = CONFOUND_TOLERANCE * CONFOUND_TOLERANCE * 1.5;
-                if ssr <= screen * ssr_s {
+                let n_fit = r_without.len().max(1) as f64;
+                if ssr <= (screen * ssr_s).max(n_fit) {
                     let own = delta[j_rest.ncols()..].to_vec();
                     swaps.push((k, p, own, xs.clone()));
                 }
@@ -840,12 +1045,27 @@ fn search(d: &Diagnoser, base: &SetFit, started: Instant) -> Search {
                 d.fit_set(&effects, Some(&start)).map(|f| (*k, p.effect, f))
             })
             .collect();
+        // A single cause: the other effects' fits alone are the swaps (no refit needed).
+        let mut confirmed = confirmed;
+        if current.effects.len() == 1 {
+            for s1 in &singles {
+                let a = s1.effects[0];
+                if a.name() != current.effects[0].name()
+                    && d.material(s1, 0)
+                    && !confirmed.iter().any(|(_, b, _)| *b == a)
+                {
+                    confirmed.push((0, a, s1.clone()));
+                }
+            }
+        }
         for (k, e) in current.effects.iter().enumerate() {
             let mut group = vec![e.name().to_string()];
             for (kk, a, f) in &confirmed {
                 let (now, alt) = replay::compare(&current.validation, &f.validation);
+                // Confounded: within the tolerance, or not significantly worse (below the
+                // noise, relative differences mean nothing).
                 if *kk == k
-                    && alt <= CONFOUND_TOLERANCE * now
+                    && (alt <= CONFOUND_TOLERANCE * now || !significant(alt, now))
                     && !group.contains(&a.name().to_string())
                 {
                     group.push(a.name().to_string());
@@ -951,7 +1171,9 @@ pub fn diagnose(
             let mut x = s.result.x.clone();
             let mut ci = s.result.ci95_half.clone();
             let mut best = fit_ssr(&x);
-            if let Some(r) = d.fit_set_with(&s.result.effects, Some(&x), REFINE_PATIENCE, FIT_TOLERANCE) {
+            if let Some(r) =
+                d.fit_set_with(&s.result.effects, Some(&x), REFINE_PATIENCE, FIT_TOLERANCE)
+            {
                 let ssr = fit_ssr(&r.x);
                 if ssr <= best {
                     best = ssr;
@@ -959,7 +1181,7 @@ pub fn diagnose(
                     ci = r.ci95_half.clone();
                 }
             }
-            let (xs, _) = d.coordinate_search(&s.result.effects, x, best, &FINE_STEPS, 2);
+            let (xs, _) = d.coordinate_search(&s.result.effects, x, best, &FINE_STEPS, 1);
             result_effects = (s.result.effects.clone(), xs, ci);
             debug(
                 started,

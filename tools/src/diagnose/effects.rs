@@ -232,9 +232,6 @@ pub fn build(base: &Params, rail: Rail, active: &[(Effect, &[f64])]) -> Model {
             p.friction.n_t = 1.0 / c - 1.0;
             p.friction.m_t = 0.0;
         }
-        if !(speed && temperature) {
-            // One factor: the correction constant is absorbed by the held factor.
-        }
     }
     for (effect, x) in active {
         match effect {

@@ -443,7 +443,11 @@ impl Prepared {
                 .zip(&slow)
                 .map(|(s, m)| {
                     let transient = if m.is_finite() { s.min(s - m) } else { *s };
-                    if transient.is_finite() && transient > 0.3 { transient } else { 0.0 }
+                    if transient.is_finite() && transient > 0.3 {
+                        transient
+                    } else {
+                        0.0
+                    }
                 })
                 .collect();
             add(Quantity::WheelSpeed(j), &wheel_speed[j], Some(&inflate));
