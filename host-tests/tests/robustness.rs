@@ -106,23 +106,7 @@ fn assert_finite(o: &Outputs<f32>) {
     assert!(o.vehicle_speed.is_finite() && o.distance.is_finite() && o.carbody_accel.is_finite());
     assert!(o.damper_power.is_finite() && o.external_power.is_finite());
     for w in &o.wheelsets {
-        for x in [
-            w.omega,
-            w.speed,
-            w.slip_velocity,
-            w.creepage,
-            w.axle_load,
-            w.adhesion_force,
-            w.adhesion,
-            w.rail_mu,
-            w.mu_d,
-            w.clamp_force,
-            w.brake_torque,
-            w.brake_force,
-            w.disc_temp,
-            w.brake_power,
-            w.contact_power,
-        ] {
+        for x in w.values() {
             assert!(x.is_finite(), "{o:?}");
         }
     }

@@ -243,6 +243,26 @@ impl Table {
         self.header.iter().position(|h| h == name)
     }
 
+    /// A required column of a file kind (`kind` names the spec section), or the error.
+    fn required(&self, name: &str, kind: &str) -> Result<usize, MeasuredError> {
+        self.column(name).ok_or_else(|| {
+            self.err(
+                self.header_line,
+                0,
+                name,
+                format!("required column is missing (see measured-data.md, {kind})"),
+            )
+        })
+    }
+
+    /// Fails on a file without data rows.
+    fn require_rows(&self) -> Result<(), MeasuredError> {
+        if self.rows.is_empty() {
+            return Err(self.err(self.header_line, 0, "", "no data rows"));
+        }
+        Ok(())
+    }
+
     /// A numeric column: empty cells -> NaN; other non-numbers and NaN/inf -> error.
     fn numeric(&self, idx: usize) -> Result<Vec<f64>, MeasuredError> {
         let name = &self.header[idx];
@@ -505,19 +525,8 @@ fn check_time(table: &Table, idx: usize, t: &[f64]) -> Result<(), MeasuredError>
 }
 
 fn run_from_table(table: Table) -> Result<RunLog, MeasuredError> {
-    let required = |name: &str| -> Result<usize, MeasuredError> {
-        table.column(name).ok_or_else(|| {
-            table.err(
-                table.header_line,
-                0,
-                name,
-                "required column is missing (see measured-data.md, run log)",
-            )
-        })
-    };
-    if table.rows.is_empty() {
-        return Err(table.err(table.header_line, 0, "", "no data rows"));
-    }
+    let required = |name: &str| table.required(name, "run log");
+    table.require_rows()?;
     let mut used = vec![false; table.header.len()];
     let mut missing = BTreeMap::new();
     let mut take = |idx: usize, used: &mut Vec<bool>| -> Result<Vec<f64>, MeasuredError> {
@@ -672,19 +681,8 @@ fn run_from_table(table: Table) -> Result<RunLog, MeasuredError> {
 pub const RELEASED_SHARE: f64 = 0.05;
 
 fn friction_from_table(table: Table) -> Result<FrictionTest, MeasuredError> {
-    let required = |name: &str| -> Result<usize, MeasuredError> {
-        table.column(name).ok_or_else(|| {
-            table.err(
-                table.header_line,
-                0,
-                name,
-                "required column is missing (see measured-data.md, friction test)",
-            )
-        })
-    };
-    if table.rows.is_empty() {
-        return Err(table.err(table.header_line, 0, "", "no data rows"));
-    }
+    let required = |name: &str| table.required(name, "friction test");
+    table.require_rows()?;
     let mut used = vec![false; table.header.len()];
     let i_v = required("v_friction_mps")?;
     let i_t = required("t_disc_c")?;

@@ -45,7 +45,11 @@ impl<F: Real> DiscPadFriction<F> {
     /// often than every step.
     #[inline(always)]
     pub fn temperature_factor(&self, t_d: F) -> F {
-        if self.variable { self.n_t * (-self.m_t * t_d).exp() + F::ONE } else { F::ONE }
+        if self.variable {
+            self.n_t * (-self.m_t * t_d).exp() + F::ONE
+        } else {
+            F::ONE
+        }
     }
 
     /// mu_d at friction speed `v_d` with a precomputed [`Self::temperature_factor`].

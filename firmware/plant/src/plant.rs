@@ -126,6 +126,48 @@ pub struct WheelsetOutput<F> {
     pub contact_power: F,
 }
 
+impl<F: Copy> WheelsetOutput<F> {
+    /// Names of [`Self::values`], in order (units in the names).
+    pub const NAMES: [&'static str; 15] = [
+        "omega_radps",
+        "speed_mps",
+        "slip_velocity_mps",
+        "creepage",
+        "axle_load_n",
+        "adhesion_force_n",
+        "adhesion",
+        "rail_mu",
+        "mu_d",
+        "clamp_force_n",
+        "brake_torque_nm",
+        "brake_force_n",
+        "disc_temp_c",
+        "brake_power_w",
+        "contact_power_w",
+    ];
+
+    /// Every value, in the order of [`Self::NAMES`] (for checks and trace formats).
+    pub fn values(&self) -> [F; 15] {
+        [
+            self.omega,
+            self.speed,
+            self.slip_velocity,
+            self.creepage,
+            self.axle_load,
+            self.adhesion_force,
+            self.adhesion,
+            self.rail_mu,
+            self.mu_d,
+            self.clamp_force,
+            self.brake_torque,
+            self.brake_force,
+            self.disc_temp,
+            self.brake_power,
+            self.contact_power,
+        ]
+    }
+}
+
 /// Outputs of a step.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Outputs<F> {
@@ -645,7 +687,9 @@ impl<F: Real> Plant<F> {
             s.slip[j] = u_new;
 
             // Disc heat balance, Eqs (3)-(6) (explicit: time constant of minutes).
-            let rate = k.thermal.rate_with(w.brake_power, s.disc_temp[j], s.heat_loss[j]);
+            let rate = k
+                .thermal
+                .rate_with(w.brake_power, s.disc_temp[j], s.heat_loss[j]);
             s.disc_temp[j] += dt * rate;
             w.disc_temp = s.disc_temp[j];
         }

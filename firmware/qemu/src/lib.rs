@@ -18,7 +18,7 @@
 #![forbid(unsafe_code)]
 
 use hils_brake_unit::{BrakeDemand, ClosedLoop, LoopError, UnitOutputs, Valve};
-use hils_plant::{FrictionModel, Outputs, Params, Real, WHEELSETS};
+use hils_plant::{FrictionModel, Outputs, Params, Real, WHEELSETS, WheelsetOutput};
 
 /// Record every this many plant steps: 10 ms at the 0.1 ms step.
 pub const RECORD_EVERY: u32 = 100;
@@ -120,24 +120,20 @@ pub const SCALAR_COLUMNS: [&str; 7] = [
     "demand_pressure_pa",
 ];
 
-/// Names of the per-wheelset values of a [`TraceRow`] (wheelset number appended), in order.
-pub const WHEELSET_COLUMNS: [&str; 15] = [
-    "omega_radps",
-    "speed_mps",
-    "slip_velocity_mps",
-    "creepage",
-    "axle_load_n",
-    "adhesion_force_n",
-    "adhesion",
-    "rail_mu",
-    "mu_d",
-    "clamp_force_n",
-    "brake_torque_nm",
-    "brake_force_n",
-    "disc_temp_c",
-    "brake_power_w",
-    "cylinder_pressure_pa",
-];
+/// Names of the per-wheelset values of a [`TraceRow`] (wheelset number appended), in order:
+/// the plant's wheelset outputs ([`WheelsetOutput::NAMES`]), then the unit's cylinder
+/// pressure.
+pub const WHEELSET_COLUMNS: [&str; 16] = {
+    let names = WheelsetOutput::<f32>::NAMES;
+    let mut out = [""; 16];
+    let mut k = 0;
+    while k < names.len() {
+        out[k] = names[k];
+        k += 1;
+    }
+    out[15] = "cylinder_pressure_pa";
+    out
+};
 
 /// Number of f32 values in a [`TraceRow`].
 pub const VALUES: usize = SCALAR_COLUMNS.len() + WHEELSETS * WHEELSET_COLUMNS.len();
@@ -188,23 +184,7 @@ impl TraceRow {
         let mut valves = 0u32;
         for j in 0..WHEELSETS {
             let w = &o.wheelsets[j];
-            let per = [
-                w.omega,
-                w.speed,
-                w.slip_velocity,
-                w.creepage,
-                w.axle_load,
-                w.adhesion_force,
-                w.adhesion,
-                w.rail_mu,
-                w.mu_d,
-                w.clamp_force,
-                w.brake_torque,
-                w.brake_force,
-                w.disc_temp,
-                w.brake_power,
-                u.cylinder_pressure[j],
-            ];
+            let per = w.values().into_iter().chain([u.cylinder_pressure[j]]);
             for x in per {
                 values[k] = x.to_bits();
                 k += 1;
