@@ -764,6 +764,27 @@ struct Search {
 }
 
 /// Forward selection from `start` (a fitted single effect), then backward elimination.
+/// Linearised probes (in parallel) of every applicable effect not in `current`, each
+/// started from its own single fit where there is one.
+fn probe_others(
+    d: &Diagnoser,
+    current: &SetFit,
+    singles: &[SetFit],
+    applicable: &[Effect],
+) -> Vec<Probe> {
+    let hint = |a: Effect| {
+        singles
+            .iter()
+            .find(|s| s.effects == [a])
+            .map(|s| s.x[0].as_slice())
+    };
+    applicable
+        .par_iter()
+        .filter(|a| !current.effects.iter().any(|c| c.name() == a.name()))
+        .filter_map(|a| d.probe(current, *a, hint(*a)))
+        .collect()
+}
+
 fn grow(
     d: &Diagnoser,
     start: SetFit,
@@ -779,21 +800,7 @@ fn grow(
         let Some(j_s) = current.jacobian.clone() else {
             break;
         };
-        let candidates: Vec<Effect> = applicable
-            .iter()
-            .copied()
-            .filter(|a| !current.effects.iter().any(|c| c.name() == a.name()))
-            .collect();
-        let hint = |a: Effect| {
-            singles
-                .iter()
-                .find(|s| s.effects == [a])
-                .map(|s| s.x[0].as_slice())
-        };
-        let probes: Vec<Probe> = candidates
-            .par_iter()
-            .filter_map(|a| d.probe(&current, *a, hint(*a)))
-            .collect();
+        let probes = probe_others(d, &current, singles, applicable);
         let mut ranked: Vec<(f64, &Probe, Vec<f64>)> = probes
             .iter()
             .map(|p| {
@@ -831,7 +838,9 @@ fn grow(
             .map(|(_, p, delta)| (p.effect, probe_start(p, delta)))
             .collect();
         for factor in [Effect::FrictionSpeed, Effect::FrictionTemperature] {
-            if candidates.contains(&factor) && !chosen.iter().any(|(e, _)| *e == factor) {
+            let candidate = applicable.contains(&factor)
+                && !current.effects.iter().any(|c| c.name() == factor.name());
+            if candidate && !chosen.iter().any(|(e, _)| *e == factor) {
                 let single = singles
                     .iter()
                     .find(|s| s.effects == [factor])
@@ -992,21 +1001,7 @@ fn search(d: &Diagnoser, base: &SetFit, started: Instant) -> Search {
     // linearised fit, confirm the promising ones with a real fit on validation data.
     let mut confounded = Vec::new();
     if let (false, Some(j_s)) = (current.effects.is_empty(), current.jacobian.clone()) {
-        let others: Vec<Effect> = applicable
-            .iter()
-            .copied()
-            .filter(|a| !current.effects.iter().any(|c| c.name() == a.name()))
-            .collect();
-        let hint = |a: Effect| {
-            singles
-                .iter()
-                .find(|s| s.effects == [a])
-                .map(|s| s.x[0].as_slice())
-        };
-        let probes: Vec<Probe> = others
-            .par_iter()
-            .filter_map(|a| d.probe(&current, *a, hint(*a)))
-            .collect();
+        let probes = probe_others(d, &current, &singles, &applicable);
         let ssr_s: f64 = current.residuals.iter().map(|r| r * r).sum();
         let mut swaps: Vec<(usize, &Probe, Vec<f64>, Vec<Vec<f64>>)> = Vec::new();
         for k in 0..current.effects.len() {
