@@ -75,13 +75,10 @@ impl Metadata {
             None => Ok(None),
             Some(v) => match v.trim().parse::<f64>() {
                 Ok(x) if x.is_finite() => Ok(Some(x)),
-                _ => Err(MeasuredError {
-                    file: file.to_path_buf(),
-                    line: 0,
-                    row: 0,
-                    column: String::new(),
-                    message: format!("metadata `{key}: {v}` is not a finite number"),
-                }),
+                _ => Err(file_error(
+                    file,
+                    format!("metadata `{key}: {v}` is not a finite number"),
+                )),
             },
         }
     }
@@ -390,14 +387,20 @@ fn parse_table(path: &Path, text: &str) -> Result<Table, MeasuredError> {
 /// Reads a measured file of either kind (decided by its columns: `v_friction_mps` makes a
 /// friction test, `v_ref_mps` a run log).
 pub fn read(path: &Path) -> Result<Measured, MeasuredError> {
-    let text = std::fs::read_to_string(path).map_err(|e| MeasuredError {
+    let text =
+        std::fs::read_to_string(path).map_err(|e| file_error(path, format!("cannot read: {e}")))?;
+    parse(path, &text)
+}
+
+/// An error about a whole file (no line, row or column).
+fn file_error(path: &Path, message: impl Into<String>) -> MeasuredError {
+    MeasuredError {
         file: path.to_path_buf(),
         line: 0,
         row: 0,
         column: String::new(),
-        message: format!("cannot read: {e}"),
-    })?;
-    parse(path, &text)
+        message: message.into(),
+    }
 }
 
 /// Parses the text of a measured file of either kind (`path` names it in messages).
@@ -418,60 +421,46 @@ pub fn parse(path: &Path, text: &str) -> Result<Measured, MeasuredError> {
     }
 }
 
+/// A run log, or the error for a file of the other kind.
+fn run_log(path: &Path, measured: Measured) -> Result<RunLog, MeasuredError> {
+    match measured {
+        Measured::Run(r) => Ok(r),
+        Measured::Friction(_) => Err(file_error(
+            path,
+            "is a friction test (has `v_friction_mps`), not a run log",
+        )),
+    }
+}
+
+/// A friction test, or the error for a file of the other kind.
+fn friction_test(path: &Path, measured: Measured) -> Result<FrictionTest, MeasuredError> {
+    match measured {
+        Measured::Friction(f) => Ok(f),
+        Measured::Run(_) => Err(file_error(
+            path,
+            "is a run log, not a friction test (needs `v_friction_mps`)",
+        )),
+    }
+}
+
 /// Reads a run log (an error if the file is a friction test).
 pub fn read_run_log(path: &Path) -> Result<RunLog, MeasuredError> {
-    match read(path)? {
-        Measured::Run(r) => Ok(r),
-        Measured::Friction(_) => Err(MeasuredError {
-            file: path.to_path_buf(),
-            line: 0,
-            row: 0,
-            column: String::new(),
-            message: "is a friction test (has `v_friction_mps`), not a run log".into(),
-        }),
-    }
+    run_log(path, read(path)?)
 }
 
 /// Parses a run log's text.
 pub fn parse_run_log(path: &Path, text: &str) -> Result<RunLog, MeasuredError> {
-    match parse(path, text)? {
-        Measured::Run(r) => Ok(r),
-        Measured::Friction(_) => Err(MeasuredError {
-            file: path.to_path_buf(),
-            line: 0,
-            row: 0,
-            column: String::new(),
-            message: "is a friction test (has `v_friction_mps`), not a run log".into(),
-        }),
-    }
+    run_log(path, parse(path, text)?)
 }
 
 /// Reads a friction test (an error if the file is a run log).
 pub fn read_friction_test(path: &Path) -> Result<FrictionTest, MeasuredError> {
-    match read(path)? {
-        Measured::Friction(f) => Ok(f),
-        Measured::Run(_) => Err(MeasuredError {
-            file: path.to_path_buf(),
-            line: 0,
-            row: 0,
-            column: String::new(),
-            message: "is a run log, not a friction test (needs `v_friction_mps`)".into(),
-        }),
-    }
+    friction_test(path, read(path)?)
 }
 
 /// Parses a friction test's text.
 pub fn parse_friction_test(path: &Path, text: &str) -> Result<FrictionTest, MeasuredError> {
-    match parse(path, text)? {
-        Measured::Friction(f) => Ok(f),
-        Measured::Run(_) => Err(MeasuredError {
-            file: path.to_path_buf(),
-            line: 0,
-            row: 0,
-            column: String::new(),
-            message: "is a run log, not a friction test (needs `v_friction_mps`)".into(),
-        }),
-    }
+    friction_test(path, parse(path, text)?)
 }
 
 /// Every cell of a required column must be measured.

@@ -177,29 +177,15 @@ impl<F: Real> BrakeUnit<F> {
         self.demand = demand;
     }
 
-    pub fn demand(&self) -> BrakeDemand {
-        self.demand
-    }
-
     /// The open-loop EB pressure, Pa.
     pub fn eb_pressure(&self) -> F {
         self.eb_pressure
-    }
-
-    /// Control cycle length, s.
-    pub fn control_period(&self) -> f64 {
-        self.cycle_s
     }
 
     /// Time of each wheelset's first WSP vent command since the unit started, s.
     pub fn first_vent_time(&self) -> [Option<f64>; WHEELSETS] {
         let period = self.cycle_s;
         self.first_vent_cycle.map(|c| c.map(|c| c as f64 * period))
-    }
-
-    /// Number of vent commands per wheelset so far.
-    pub fn vent_counts(&self) -> [u32; WHEELSETS] {
-        [0, 1, 2, 3].map(|j| self.channels[j].vent_count)
     }
 
     fn demand_pressure(&self) -> F {

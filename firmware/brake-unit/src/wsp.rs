@@ -185,8 +185,6 @@ pub struct WspChannel<F> {
     initialised: bool,
     /// Cycles spent in the current valve state.
     cycles_in_state: u32,
-    /// Number of vent commands so far.
-    pub vent_count: u32,
     /// Cycles left during which the channel may not vent (after the vent timer expired).
     inhibit_cycles: u32,
 }
@@ -257,9 +255,6 @@ impl<F: Real> WspChannel<F> {
         if next == self.valve {
             self.cycles_in_state = self.cycles_in_state.saturating_add(1);
         } else {
-            if next == Valve::Vent {
-                self.vent_count = self.vent_count.saturating_add(1);
-            }
             self.cycles_in_state = 0;
             self.valve = next;
         }

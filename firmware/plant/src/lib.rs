@@ -26,8 +26,3 @@ pub mod thermal;
 pub use params::{FrictionModel, ParamError, Params, Rail};
 pub use plant::{BrakeInput, Energy, Flags, Outputs, Plant, WHEELSETS, WheelsetOutput};
 pub use real::Real;
-
-/// km/h to m/s.
-pub fn kmh_to_mps(kmh: f64) -> f64 {
-    kmh / 3.6
-}
