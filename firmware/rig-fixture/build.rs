@@ -2,10 +2,4 @@
 //! (STM32G474RE map: flash 0x0800_0000, RAM 0x2000_0000), which also fits QEMU's
 //! netduinoplus2 machine (STM32F405: 1 MiB flash at 0x0800_0000, 128 KiB SRAM).
 
-fn main() {
-    println!("cargo:rustc-link-arg-bins=--nmagic");
-    println!("cargo:rustc-link-arg-bins=-Tlink.x");
-    println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
-    println!("cargo:rerun-if-changed=../../memory.x");
-    println!("cargo:rerun-if-changed=build.rs");
-}
+include!("../link-stm32.rs");

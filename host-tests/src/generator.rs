@@ -1,7 +1,7 @@
 //! Measured-data generator for the hidden-effect tests of the diagnosis (issue 3, item 4).
 //!
 //! A case runs the plant in a closed loop with the simulated brake unit
-//! ([`hils_brake_unit::ClosedLoop`], 0.1 ms, f64) with ONE effect switched on that the
+//! ([`hils_sil::ClosedLoop`], 0.1 ms, f64) with ONE effect switched on that the
 //! diagnosis does not know, and writes only a run-log CSV (spec `measured-data.md`). The
 //! effect, its magnitude, the scenario (speed 100-160 km/h, wet or dry rail, emergency or
 //! stepped service brake, coasting before the brake command), the sample rate (100 Hz to
@@ -19,8 +19,15 @@
 
 use std::fmt::Write as _;
 
-use hils_brake_unit::{BrakeDemand, BrakeUnit, ClosedLoop, UnitConfig};
-use hils_plant::{FrictionModel, Params, Rail, WHEELSETS};
+use hils::runlog;
+use hils_brake_unit::{BrakeDemand, BrakeUnit, UnitConfig};
+use hils_plant::{FrictionModel, Params, Rail, STEP_S, WHEELSETS};
+use hils_sil::record::Channel;
+use hils_sil::record::run_log::{
+    self, A_X, CMD, F_BRAKE, F_CLAMP, OMEGA, P_CYL, Q, T, T_DISC, V_REF, WSP,
+};
+use hils_sil::scenario::{AFTER_STOP_S, MAX_TIME_S};
+use hils_sil::{ClosedLoop, Cmd, KMH_PER_MPS, RunRecord, StopRule};
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 
@@ -374,18 +381,94 @@ pub fn case_with(kind: Kind, seed: u64, tweak: impl FnOnce(&mut Scenario)) -> Ca
     }
 }
 
-struct Row {
-    t: f64,
-    v: f64,
-    omega: [f64; 4],
-    p: [f64; 4],
-    f: [f64; 4],
-    fb: [f64; 4],
-    td: [f64; 4],
-    q: [f64; 4],
-    wsp: [bool; 4],
-    a_x: f64,
-    cmd: &'static str,
+/// The truth run: the closed loop sampled at the scenario's rate (uniform or jittered),
+/// with its brake schedule, until the stop rule of `hils_sil` ends it.
+fn run_truth(truth: &Params, nominal: &Params, s: &Scenario, rng: &mut StdRng) -> Vec<RunRecord> {
+    let dt = STEP_S;
+    let config = UnitConfig::new(dt);
+    let v0 = s.speed_kmh / KMH_PER_MPS;
+    let mut sim =
+        ClosedLoop::<f64>::with_config(truth, s.rail, v0, &config).expect("valid truth parameters");
+    // The brake unit knows only the nominal vehicle.
+    sim.unit = BrakeUnit::new(nominal, &config).expect("valid unit");
+
+    // Sample steps (uniform or jittered).
+    let period_steps = 1.0 / (s.sample_rate_hz * dt);
+    let mut rows: Vec<RunRecord> = Vec::new();
+    let mut next_sample = 0.0f64;
+    let mut step = 0u32;
+    let mut rule = StopRule::new(dt, AFTER_STOP_S, MAX_TIME_S);
+    let coast_steps = (s.coast_s / dt).round() as u32;
+    let mut schedule: Vec<(u32, BrakeDemand)> = Vec::new();
+    let mut at = coast_steps;
+    let eb_deceleration_mps2 = config.params.eb_deceleration_mps2;
+    for &(share, dur) in &s.service_steps {
+        let deceleration_mps2 = (share * eb_deceleration_mps2) as f32;
+        schedule.push((at, BrakeDemand::Service { deceleration_mps2 }));
+        at += (dur / dt).round() as u32;
+    }
+    schedule.push((at, BrakeDemand::Emergency));
+    let mut cmd = Cmd::Release;
+    loop {
+        if let Some(&(when, demand)) = schedule.first() {
+            if step >= when {
+                sim.set_demand(demand);
+                cmd = Cmd::of(demand);
+                schedule.remove(0);
+            }
+        }
+        if step as f64 >= next_sample {
+            let mut r = RunRecord::of(&sim, cmd);
+            r.t_s = step as f64 * dt;
+            rows.push(r);
+            let jitter = if s.jitter {
+                rng.random_range(-0.3..0.3)
+            } else {
+                0.0
+            };
+            next_sample = (rows.len() as f64 + jitter) * period_steps;
+            next_sample = next_sample.max(step as f64 + 1.0);
+        }
+        let v = sim.step().vehicle_speed;
+        step += 1;
+        if rule.observe(step, v) {
+            break;
+        }
+    }
+    rows
+}
+
+/// The logged channels of a scenario, in the schema's order (then shuffled by the caller).
+fn logged_channels(s: &Scenario) -> Vec<Channel> {
+    let logged = |c: Channel| match c {
+        P_CYL => s.inputs != Inputs::ClampForce,
+        F_CLAMP => s.inputs != Inputs::Pressure,
+        F_BRAKE => s.log_f_brake,
+        T_DISC => s.log_t_disc,
+        Q => s.log_q,
+        WSP => s.log_wsp,
+        A_X => s.log_a_x,
+        CMD => s.log_cmd,
+        _ => true,
+    };
+    run_log::SPEC.into_iter().filter(|&c| logged(c)).collect()
+}
+
+/// A measured cell: the value with the sensor's noise, at the logger's resolution.
+fn noisy_cell(r: &RunRecord, c: Channel, j: usize, n: &[f64; 8], rng: &mut StdRng) -> String {
+    match c {
+        T => format!("{:.6}", r.t_s),
+        V_REF => format!("{:.5}", r.v_ref_mps + n[0] * gauss(rng)),
+        OMEGA => format!("{:.5}", r.omega_radps[j] + n[1] * gauss(rng)),
+        P_CYL => format!("{:.1}", r.p_cyl_pa[j] + n[2] * gauss(rng)),
+        F_CLAMP => format!("{:.2}", r.f_clamp_n[j] + n[3] * gauss(rng)),
+        F_BRAKE => format!("{:.2}", r.f_brake_n[j] + n[4] * gauss(rng)),
+        T_DISC => format!("{:.3}", r.t_disc_c[j] + n[5] * gauss(rng)),
+        WSP => (if r.wsp[j] { "1" } else { "0" }).to_string(),
+        Q => format!("{:.1}", r.q_n[j] + n[6] * gauss(rng)),
+        A_X => format!("{:.4}", r.a_x_mps2 + n[7] * gauss(rng)),
+        _ => r.cmd.text().to_string(),
+    }
 }
 
 fn simulate(
@@ -397,86 +480,13 @@ fn simulate(
     sensor: Option<(Sensor, usize)>,
     rng: &mut StdRng,
 ) -> String {
-    let dt = 1.0e-4;
-    let config = UnitConfig::new(dt);
-    let v0 = s.speed_kmh / 3.6;
-    let mut sim =
-        ClosedLoop::<f64>::with_config(truth, s.rail, v0, &config).expect("valid truth parameters");
-    // The brake unit knows only the nominal vehicle.
-    sim.unit = BrakeUnit::new(nominal, &config).expect("valid unit");
-
-    // Sample steps (uniform or jittered).
-    let period_steps = 1.0 / (s.sample_rate_hz * dt);
-    let mut rows: Vec<Row> = Vec::new();
-    let mut next_sample = 0.0f64;
-    let mut step = 0u64;
-    let mut stop_step: Option<u64> = None;
-    let coast_steps = (s.coast_s / dt).round() as u64;
-    let mut schedule: Vec<(u64, BrakeDemand, &'static str)> = Vec::new();
-    let mut at = coast_steps;
-    for &(share, dur) in &s.service_steps {
-        schedule.push((
-            at,
-            BrakeDemand::Service((share * nominal.brake_unit.eb_deceleration) as f32),
-            "SB",
-        ));
-        at += (dur / dt).round() as u64;
-    }
-    schedule.push((at, BrakeDemand::Emergency, "EB"));
-    let mut cmd = "REL";
-    let max_steps = (150.0 / dt) as u64;
-    loop {
-        if let Some(&(when, demand, name)) = schedule.first() {
-            if step >= when {
-                sim.set_demand(demand);
-                cmd = name;
-                schedule.remove(0);
-            }
-        }
-        if step as f64 >= next_sample {
-            let o = sim.outputs();
-            let u = sim.unit_outputs();
-            rows.push(Row {
-                t: step as f64 * dt,
-                v: o.vehicle_speed,
-                omega: o.wheelsets.map(|w| w.omega),
-                p: u.cylinder_pressure,
-                f: o.wheelsets.map(|w| w.clamp_force),
-                fb: o.wheelsets.map(|w| w.brake_force),
-                td: o.wheelsets.map(|w| w.disc_temp),
-                q: o.wheelsets.map(|w| w.axle_load),
-                wsp: u.venting,
-                a_x: o.carbody_accel,
-                cmd,
-            });
-            let jitter = if s.jitter {
-                rng.random_range(-0.3..0.3)
-            } else {
-                0.0
-            };
-            next_sample = (rows.len() as f64 + jitter) * period_steps;
-            next_sample = next_sample.max(step as f64 + 1.0);
-        }
-        let o = sim.step();
-        step += 1;
-        if stop_step.is_none() && o.vehicle_speed <= 0.01 {
-            stop_step = Some(step);
-        }
-        if let Some(st) = stop_step {
-            if step >= st + (1.0 / dt) as u64 {
-                break;
-            }
-        }
-        if step >= max_steps {
-            break;
-        }
-    }
+    let mut rows = run_truth(truth, nominal, s, rng);
 
     // Unlisted: the speed reference drifts.
     if kind == Kind::Unlisted {
         let drift = params[0].1;
         for r in &mut rows {
-            r.v += drift * r.t;
+            r.v_ref_mps += drift * r.t_s;
         }
     }
     // Sensor gain: one sensor reads scaled.
@@ -484,108 +494,52 @@ fn simulate(
         let g = params[0].1;
         for r in &mut rows {
             match which {
-                Sensor::Pressure => r.p[j] *= g,
-                Sensor::ClampForce => r.f[j] *= g,
+                Sensor::Pressure => r.p_cyl_pa[j] *= g,
+                Sensor::ClampForce => r.f_clamp_n[j] *= g,
             }
         }
     }
 
     // Columns (shuffled order).
-    let mut cols: Vec<String> = vec!["t_s".into(), "v_ref_mps".into()];
-    let per = |cols: &mut Vec<String>, pre: &str, suf: &str| {
-        for j in 1..=4 {
-            cols.push(format!("{pre}{j}{suf}"));
-        }
-    };
-    per(&mut cols, "omega", "_radps");
-    if s.inputs != Inputs::ClampForce {
-        per(&mut cols, "p_cyl", "_pa");
-    }
-    if s.inputs != Inputs::Pressure {
-        per(&mut cols, "f_clamp", "_n");
-    }
-    if s.log_f_brake {
-        per(&mut cols, "f_brake", "_n");
-    }
-    if s.log_t_disc {
-        per(&mut cols, "t_disc", "_c");
-    }
-    if s.log_q {
-        per(&mut cols, "q", "_n");
-    }
-    if s.log_wsp {
-        per(&mut cols, "wsp", "");
-    }
-    if s.log_a_x {
-        cols.push("a_x_mps2".into());
-    }
-    if s.log_cmd {
-        cols.push("cmd".into());
-    }
+    let mut cols = runlog::column_names(&logged_channels(s));
     for i in (1..cols.len()).rev() {
         let k = rng.random_range(0..=i);
         cols.swap(i, k);
     }
-
-    let mut out = String::new();
-    let _ = writeln!(
-        out,
-        "# source: hidden-effect generator (seeded), not to be trusted by the diagnosis"
-    );
-    let _ = writeln!(
-        out,
-        "# rail: {}",
-        if s.rail == Rail::Wet { "wet" } else { "dry" }
-    );
-    let _ = writeln!(out, "# initial_speed_kmh: {:.0}", s.speed_kmh);
-    let _ = writeln!(out, "# eb_command_s: {:.3}", s.coast_s);
+    let metadata = vec![
+        (
+            "source",
+            "hidden-effect generator (seeded), not to be trusted by the diagnosis".to_string(),
+        ),
+        (
+            "rail",
+            if s.rail == Rail::Wet { "wet" } else { "dry" }.to_string(),
+        ),
+        ("initial_speed_kmh", format!("{:.0}", s.speed_kmh)),
+        ("eb_command_s", format!("{:.3}", s.coast_s)),
+    ];
+    let mut metadata = metadata;
     if !s.jitter {
-        let _ = writeln!(out, "# sample_rate_hz: {}", s.sample_rate_hz);
+        metadata.push(("sample_rate_hz", format!("{}", s.sample_rate_hz)));
     }
-    let _ = writeln!(out, "# notes: case {kind:?}");
-    let mut w = csv::WriterBuilder::new().from_writer(Vec::new());
-    w.write_record(&cols).expect("header");
+    metadata.push(("notes", format!("case {kind:?}")));
+    let cells: Vec<(Channel, usize)> = cols
+        .iter()
+        .map(|c| Channel::find(&run_log::SPEC, c).expect("a column of the schema"))
+        .collect();
     let n = s.noise;
-    let r_w = truth.vehicle.wheel_radius;
-    let _ = r_w;
-    for r in &rows {
-        let mut rec: Vec<String> = Vec::with_capacity(cols.len());
-        for c in &cols {
-            let wj = |prefix: &str| -> usize {
-                c[prefix.len()..prefix.len() + 1]
-                    .parse::<usize>()
-                    .expect("wheelset digit")
-                    - 1
-            };
-            let cell = if c == "t_s" {
-                format!("{:.6}", r.t)
-            } else if c == "v_ref_mps" {
-                format!("{:.5}", r.v + n[0] * gauss(rng))
-            } else if c.starts_with("omega") {
-                format!("{:.5}", r.omega[wj("omega")] + n[1] * gauss(rng))
-            } else if c.starts_with("p_cyl") {
-                format!("{:.1}", r.p[wj("p_cyl")] + n[2] * gauss(rng))
-            } else if c.starts_with("f_clamp") {
-                format!("{:.2}", r.f[wj("f_clamp")] + n[3] * gauss(rng))
-            } else if c.starts_with("f_brake") {
-                format!("{:.2}", r.fb[wj("f_brake")] + n[4] * gauss(rng))
-            } else if c.starts_with("t_disc") {
-                format!("{:.3}", r.td[wj("t_disc")] + n[5] * gauss(rng))
-            } else if c.starts_with("wsp") {
-                (if r.wsp[wj("wsp")] { "1" } else { "0" }).to_string()
-            } else if c.starts_with('q') {
-                format!("{:.1}", r.q[wj("q")] + n[6] * gauss(rng))
-            } else if c == "a_x_mps2" {
-                format!("{:.4}", r.a_x + n[7] * gauss(rng))
-            } else {
-                r.cmd.to_string()
-            };
-            rec.push(cell);
-        }
-        w.write_record(&rec).expect("row");
-    }
-    out += &String::from_utf8(w.into_inner().expect("csv buffer")).expect("utf-8");
-    out
+    let table: Vec<Vec<String>> = rows
+        .iter()
+        .map(|r| {
+            cells
+                .iter()
+                .map(|&(c, j)| noisy_cell(r, c, j, &n, rng))
+                .collect()
+        })
+        .collect();
+    let mut out = Vec::new();
+    runlog::write_table(&mut out, &metadata, &cols, table).expect("in-memory CSV");
+    String::from_utf8(out).expect("utf-8")
 }
 
 /// Noise-free friction points of Eq (2) (the plant's implementation) with Gaussian noise of

@@ -1,4 +1,6 @@
 //! Shared helpers of the host integration tests (`tests/`).
+// Test support, not an interface: no docs required.
+#![allow(missing_docs)]
 
 use std::path::PathBuf;
 

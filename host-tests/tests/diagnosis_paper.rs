@@ -19,7 +19,7 @@ use hils_plant::{FrictionModel, Params};
 fn variable_run() -> &'static Run {
     static R: OnceLock<Run> = OnceLock::new();
     R.get_or_init(|| {
-        let p = Params::default();
+        let p = hils_sil::ParamFile::default();
         run_eb::<f32>(&p, &EbOptions::paper(&p)).expect("runs")
     })
 }
@@ -66,10 +66,10 @@ fn run_log_round_trip_keeps_every_sample_and_column() {
     let log = variable_log();
     assert_eq!(log.len(), run.samples.len());
     for (s, i) in run.samples.iter().zip(0..) {
-        assert!((log.t_s[i] - s.t).abs() < 1e-6);
-        assert!((log.v_ref_mps[i] - s.v_ref).abs() < 1e-6);
-        assert!((log.omega_radps[3][i] - s.omega[3]).abs() < 1e-5);
-        assert!((log.p_cyl_pa[1].as_ref().unwrap()[i] - s.p_cyl[1]).abs() < 0.06);
+        assert!((log.t_s[i] - s.t_s).abs() < 1e-6);
+        assert!((log.v_ref_mps[i] - s.v_ref_mps).abs() < 1e-6);
+        assert!((log.omega_radps[3][i] - s.omega_radps[3]).abs() < 1e-5);
+        assert!((log.p_cyl_pa[1].as_ref().unwrap()[i] - s.p_cyl_pa[1]).abs() < 0.06);
     }
     assert!(log.f_brake_n.iter().all(|c| c.is_some()) && log.q_n.iter().all(|c| c.is_some()));
     assert!(

@@ -5,12 +5,13 @@
 use std::sync::OnceLock;
 
 use hils::scenario::{EbOptions, Run, run_eb};
-use hils_brake_unit::{BrakeDemand, ClosedLoop};
+use hils_brake_unit::BrakeDemand;
 use hils_plant::{FrictionModel, Params, Rail};
+use hils_sil::{ClosedLoop, ParamFile};
 
-fn params(model: FrictionModel) -> Params {
-    let mut p = Params::default();
-    p.friction.model = model;
+fn params(model: FrictionModel) -> ParamFile {
+    let mut p = ParamFile::default();
+    p.plant.friction.model = model;
     p
 }
 
@@ -21,26 +22,27 @@ fn run<F: hils_plant::Real>(model: FrictionModel) -> Run {
     run_eb::<F>(&p, &opts).expect("run")
 }
 
-fn variable_f32() -> &'static Run {
-    static R: OnceLock<Run> = OnceLock::new();
-    R.get_or_init(|| run::<f32>(FrictionModel::Variable))
+/// The four runs (variable and constant friction, f32 and f64), made once for every test.
+struct Runs {
+    variable_f32: Run,
+    variable_f64: Run,
+    constant_f32: Run,
+    constant_f64: Run,
 }
-fn variable_f64() -> &'static Run {
-    static R: OnceLock<Run> = OnceLock::new();
-    R.get_or_init(|| run::<f64>(FrictionModel::Variable))
-}
-fn constant_f32() -> &'static Run {
-    static R: OnceLock<Run> = OnceLock::new();
-    R.get_or_init(|| run::<f32>(FrictionModel::Constant))
-}
-fn constant_f64() -> &'static Run {
-    static R: OnceLock<Run> = OnceLock::new();
-    R.get_or_init(|| run::<f64>(FrictionModel::Constant))
+
+fn runs() -> &'static Runs {
+    static R: OnceLock<Runs> = OnceLock::new();
+    R.get_or_init(|| Runs {
+        variable_f32: run::<f32>(FrictionModel::Variable),
+        variable_f64: run::<f64>(FrictionModel::Variable),
+        constant_f32: run::<f32>(FrictionModel::Constant),
+        constant_f64: run::<f64>(FrictionModel::Constant),
+    })
 }
 
 #[test]
 fn constant_friction_no_wheelset_slides() {
-    for run in [constant_f32(), constant_f64()] {
+    for run in [&runs().constant_f32, &runs().constant_f64] {
         let s = &run.summary;
         assert!(s.slides.is_empty(), "slides {:?}", s.slides);
         assert_eq!(s.slide_onset_s, [None; 4]);
@@ -52,7 +54,7 @@ fn constant_friction_no_wheelset_slides() {
 
 #[test]
 fn variable_friction_slides_on_wheelsets_2_and_4_only() {
-    for run in [variable_f32(), variable_f64()] {
+    for run in [&runs().variable_f32, &runs().variable_f64] {
         let s = &run.summary;
         assert_eq!(s.slides, vec![2, 4], "onsets {:?}", s.slide_onset_s);
         for j in [1, 3] {
@@ -71,8 +73,8 @@ fn variable_friction_slides_on_wheelsets_2_and_4_only() {
         let max_deficit = |j: usize| {
             run.samples
                 .iter()
-                .filter(|x| x.v_ref > 5.0)
-                .map(|x| 1.0 - x.omega[j] * 0.43 / x.v_ref)
+                .filter(|x| x.v_ref_mps > 5.0)
+                .map(|x| 1.0 - x.omega_radps[j] * 0.43 / x.v_ref_mps)
                 .fold(0.0f64, f64::max)
         };
         assert!(max_deficit(1) > 0.06 && max_deficit(3) > 0.06);
@@ -86,13 +88,13 @@ fn variable_friction_slides_on_wheelsets_2_and_4_only() {
 
 #[test]
 fn variable_mu_d_is_above_mu_d0_and_dips_in_the_middle() {
-    let run = variable_f32();
+    let run = &runs().variable_f32;
     let stop = run.summary.stop_time_s.unwrap();
-    let braking: Vec<_> = run.samples.iter().filter(|s| s.t <= stop).collect();
+    let braking: Vec<_> = run.samples.iter().filter(|s| s.t_s <= stop).collect();
     let mu_d0 = 0.38;
     for s in &braking {
         for mu in s.mu_d {
-            assert!(mu > mu_d0, "mu_d {mu} at {} s", s.t);
+            assert!(mu > mu_d0, "mu_d {mu} at {} s", s.t_s);
         }
     }
     // Fig 9: high at the start (cold disc), high at the end (low friction speed), lower in
@@ -105,7 +107,7 @@ fn variable_mu_d_is_above_mu_d0_and_dips_in_the_middle() {
         .fold((0, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
     let start = mean(braking[0]);
     let end = mean(braking.last().unwrap());
-    let t_min = braking[i_min].t;
+    let t_min = braking[i_min].t_s;
     assert!(
         start > min + 0.015 && end > min + 0.03,
         "start {start}, min {min}, end {end}"
@@ -121,7 +123,7 @@ fn variable_mu_d_is_above_mu_d0_and_dips_in_the_middle() {
 
 #[test]
 fn axle_loads_during_braking_are_lightest_on_wheelsets_2_and_4() {
-    for run in [variable_f32(), constant_f32()] {
+    for run in [&runs().variable_f32, &runs().constant_f32] {
         let q = run.summary.axle_loads_3s_n;
         let mut order = [0usize, 1, 2, 3];
         order.sort_by(|&a, &b| q[a].partial_cmp(&q[b]).unwrap());
@@ -131,12 +133,12 @@ fn axle_loads_during_braking_are_lightest_on_wheelsets_2_and_4() {
         let weight = Params::default().total_mass() * 9.81;
         assert!((total - weight).abs() < 0.01 * weight, "total {total}");
         // During steady braking (10-20 s) the order holds throughout.
-        for s in run.samples.iter().filter(|s| s.t > 10.0 && s.t < 20.0) {
+        for s in run.samples.iter().filter(|s| s.t_s > 10.0 && s.t_s < 20.0) {
             assert!(
-                s.q[1].max(s.q[3]) < s.q[0].min(s.q[2]),
+                s.q_n[1].max(s.q_n[3]) < s.q_n[0].min(s.q_n[2]),
                 "{:?} at {}",
-                s.q,
-                s.t
+                s.q_n,
+                s.t_s
             );
         }
     }
@@ -145,8 +147,8 @@ fn axle_loads_during_braking_are_lightest_on_wheelsets_2_and_4() {
 #[test]
 fn f32_run_matches_f64_run() {
     for (a, b) in [
-        (variable_f32(), variable_f64()),
-        (constant_f32(), constant_f64()),
+        (&runs().variable_f32, &runs().variable_f64),
+        (&runs().constant_f32, &runs().constant_f64),
     ] {
         let (sa, sb) = (&a.summary, &b.summary);
         let (da, db) = (
@@ -168,11 +170,11 @@ fn f32_run_matches_f64_run() {
         // The whole trajectory: vehicle speed within 0.05 % of the initial speed.
         for (x, y) in a.samples.iter().zip(&b.samples) {
             assert!(
-                (x.v_ref - y.v_ref).abs() < 5e-4 * 41.67,
+                (x.v_ref_mps - y.v_ref_mps).abs() < 5e-4 * 41.67,
                 "{} vs {} at {}",
-                x.v_ref,
-                y.v_ref,
-                x.t
+                x.v_ref_mps,
+                y.v_ref_mps,
+                x.t_s
             );
         }
     }
@@ -182,7 +184,7 @@ fn f32_run_matches_f64_run() {
 /// change), integrated over the run in f64.
 fn energy_balance(model: FrictionModel) -> (f64, f64, f64, f64) {
     let p = params(model);
-    let mut sim = ClosedLoop::<f64>::new(&p, Rail::Wet, 150.0 / 3.6).unwrap();
+    let mut sim = ClosedLoop::<f64>::from_file(&p, Rail::Wet, 150.0 / 3.6).unwrap();
     sim.set_demand(BrakeDemand::Emergency);
     let e0 = sim.plant.energy();
     let dt = sim.plant.dt();
@@ -222,7 +224,7 @@ fn energy_balance_closes_within_one_percent() {
 
 #[test]
 fn summary_has_the_documented_keys() {
-    let json = serde_json::to_value(&variable_f32().summary).unwrap();
+    let json = serde_json::to_value(&&runs().variable_f32.summary).unwrap();
     let keys: Vec<&str> = json
         .as_object()
         .unwrap()

@@ -87,16 +87,8 @@ fn fixture_decodes_to_the_scripted_run_bit_for_bit() {
             pressure_channels: 0
         }
     );
-    let host_records: Vec<TelemetryRecord> = events
-        .iter()
-        .filter_map(|e| {
-            if let TelemetryEvent::Record(r) = e {
-                Some(*r)
-            } else {
-                None
-            }
-        })
-        .collect();
+    let host_records: Vec<TelemetryRecord> =
+        events.iter().filter_map(TelemetryEvent::record).collect();
     assert_eq!(run.records.len(), host_records.len());
     assert_eq!(run.records.len() as u32, script::STEPS / 100 + 1);
     for (target, host) in run.records.iter().zip(&host_records) {

@@ -96,7 +96,7 @@ fn cost_figures_are_complete_and_consistent() {
                 .unwrap_or_else(|| panic!("{}: no {p} cost", run.friction))
         };
         let step = part("step");
-        for p in hils_qemu::PARTS {
+        for p in hils_sil::trace::PARTS {
             assert_eq!(
                 part(p).n,
                 run.steps as u64,

@@ -4,7 +4,8 @@
 
 use hils::target_cost::{check_against_simulate, compare, host_trace};
 use hils_plant::FrictionModel;
-use hils_qemu::{EbScenario, LINE_LEN, RECORD_EVERY, TraceRow};
+use hils_sil::TraceRow;
+use hils_sil::trace::{LINE_LEN, RECORD_EVERY};
 
 /// The emulator's scenario driver, run on the host in f32, records the same samples as
 /// `hils simulate` (every 10 ms) with every shared value equal, for both friction models:
@@ -92,14 +93,4 @@ fn comparison_is_exact_and_can_fail() {
     assert!(!cmp.identical);
     // Row 0 is the initial state; mu_d differs there already (Eq 2 vs mu_d0).
     assert_eq!(cmp.first_mismatch.expect("a difference").row, 0);
-}
-
-/// A scenario whose step function does not advance the plant ends at once instead of
-/// recording the same state forever (the driver counts the plant's steps).
-#[test]
-fn driver_stops_when_the_plant_does_not_advance() {
-    let mut sc = EbScenario::<f32>::paper(FrictionModel::Variable).expect("scenario");
-    let adv = sc.advance(|_| {});
-    assert!(adv.done && !adv.record);
-    assert_eq!(sc.steps(), 0);
 }

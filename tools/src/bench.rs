@@ -10,8 +10,12 @@ use std::time::Instant;
 
 use anyhow::{Result, anyhow};
 use clap::Args;
-use hils_brake_unit::{BrakeDemand, ClosedLoop};
-use hils_plant::{BrakeInput, Params, Plant, Real};
+use hils_brake_unit::BrakeDemand;
+use hils_plant::{BrakeInput, Plant, Real};
+use hils_sil::{ClosedLoop, KMH_PER_MPS, ParamFile};
+
+/// Initial speed of the benchmark run: the paper's 150 km/h, m/s.
+const PAPER_SPEED_MPS: f64 = 150.0 / KMH_PER_MPS;
 use serde::Serialize;
 
 #[derive(Args, Debug, Clone)]
@@ -44,8 +48,9 @@ pub struct BenchFigures {
 }
 
 /// Cylinder pressures of the paper's EB, one per step (closed loop, f32).
-fn recorded_inputs(params: &Params, steps: usize) -> Result<Vec<[f32; 4]>> {
-    let mut sim = ClosedLoop::<f32>::new(params, params.scenario.paper_eb.rail, 150.0 / 3.6)
+fn recorded_inputs(params: &ParamFile, steps: usize) -> Result<Vec<[f32; 4]>> {
+    let rail = params.scenario.paper_eb.rail;
+    let mut sim = ClosedLoop::<f32>::from_file(params, rail, PAPER_SPEED_MPS as f32)
         .map_err(|e| anyhow!("{e}"))?;
     sim.set_demand(BrakeDemand::Emergency);
     Ok((0..steps)
@@ -56,15 +61,17 @@ fn recorded_inputs(params: &Params, steps: usize) -> Result<Vec<[f32; 4]>> {
         .collect())
 }
 
-fn time_plant<F: Real>(params: &Params, inputs: &[[f32; 4]], repeat: usize) -> Result<f64> {
+fn time_plant<F: Real>(params: &ParamFile, inputs: &[[f32; 4]], repeat: usize) -> Result<f64> {
     let inputs: Vec<[BrakeInput<F>; 4]> = inputs
         .iter()
         .map(|p| p.map(|x| BrakeInput::CylinderPressure(F::of(x as f64))))
         .collect();
     let mut best = f64::INFINITY;
     for _ in 0..repeat {
-        let mut plant = Plant::<F>::new(params, params.scenario.paper_eb.rail, F::of(150.0 / 3.6))
-            .map_err(|e| anyhow!("{e}"))?;
+        let sc = &params.scenario.paper_eb;
+        let mut plant =
+            Plant::<F>::with_step(&params.plant, sc.rail, F::of(PAPER_SPEED_MPS), sc.step_s)
+                .map_err(|e| anyhow!("{e}"))?;
         let start = Instant::now();
         for input in &inputs {
             black_box(plant.step(black_box(input)));
@@ -75,10 +82,11 @@ fn time_plant<F: Real>(params: &Params, inputs: &[[f32; 4]], repeat: usize) -> R
     Ok(inputs.len() as f64 / best)
 }
 
-fn time_closed_loop(params: &Params, steps: usize, repeat: usize) -> Result<f64> {
+fn time_closed_loop(params: &ParamFile, steps: usize, repeat: usize) -> Result<f64> {
     let mut best = f64::INFINITY;
     for _ in 0..repeat {
-        let mut sim = ClosedLoop::<f32>::new(params, params.scenario.paper_eb.rail, 150.0 / 3.6)
+        let rail = params.scenario.paper_eb.rail;
+        let mut sim = ClosedLoop::<f32>::from_file(params, rail, PAPER_SPEED_MPS as f32)
             .map_err(|e| anyhow!("{e}"))?;
         sim.set_demand(BrakeDemand::Emergency);
         let start = Instant::now();
@@ -91,9 +99,9 @@ fn time_closed_loop(params: &Params, steps: usize, repeat: usize) -> Result<f64>
 }
 
 /// Measures the figures (single thread).
-pub fn measure(params: &Params, steps: usize, repeat: usize) -> Result<BenchFigures> {
+pub fn measure(params: &ParamFile, steps: usize, repeat: usize) -> Result<BenchFigures> {
     let inputs = recorded_inputs(params, steps)?;
-    let rate = 1.0 / params.scenario.paper_eb.step;
+    let rate = 1.0 / params.scenario.paper_eb.step_s;
     let f32_rate = time_plant::<f32>(params, &inputs, repeat)?;
     let f64_rate = time_plant::<f64>(params, &inputs, repeat)?;
     let closed = time_closed_loop(params, steps, repeat)?;
@@ -113,7 +121,7 @@ pub fn measure(params: &Params, steps: usize, repeat: usize) -> Result<BenchFigu
 }
 
 pub fn main(args: BenchArgs) -> Result<()> {
-    let params = Params::default();
+    let params = ParamFile::default();
     let f = measure(&params, args.steps.max(1), args.repeat.max(1))?;
     if args.json {
         println!("{}", serde_json::to_string(&f)?);

@@ -15,14 +15,20 @@
 //! a missing end line are counted, printed, and written into the metadata; a malformed
 //! telemetry line is an error naming its line.
 
-use std::fmt::Write as _;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, anyhow, bail};
 use clap::Args;
 pub use hils_rig_core as rig_core;
+use hils_rig_core::Code;
+use hils_rig_core::can::RigState;
 use hils_rig_core::telemetry::{Line, RunHeader, TelemetryRecord, WSP_KNOWN, parse_line};
+use hils_sil::Cmd;
+use hils_sil::record::Channel;
+use hils_sil::record::run_log::{self, *};
+
+use crate::runlog;
 
 /// Arguments of `hils decode`.
 #[derive(Args, Debug, Clone)]
@@ -147,23 +153,20 @@ pub fn parse_runs<'a>(lines: impl IntoIterator<Item = &'a str>) -> Result<Vec<Ru
     Ok(runs)
 }
 
+/// The `cmd` cell of a telemetry command code (empty for none).
 fn cmd_text(code: u8) -> &'static str {
-    match code {
-        0 => "REL",
-        1 => "EB",
-        2 => "SB",
-        _ => "",
-    }
+    Cmd::try_from(code).map_or("", Cmd::text)
 }
 
+/// The `state` cell of a run-state code.
 fn state_text(code: u8) -> &'static str {
-    match code {
-        0 => "idle",
-        1 => "running",
-        2 => "finished",
-        3 => "stopped",
-        4 => "fault",
-        _ => "unknown",
+    match RigState::from_raw(code) {
+        Some(RigState::Idle) => "idle",
+        Some(RigState::Running) => "running",
+        Some(RigState::Finished) => "finished",
+        Some(RigState::Stopped) => "stopped",
+        Some(RigState::Fault) => "fault",
+        None => "unknown",
     }
 }
 
@@ -197,42 +200,21 @@ impl Run {
         self.records.iter().any(|r| r.wsp & WSP_KNOWN != 0)
     }
 
+    /// The logged channels, in the schema's order.
+    pub fn channels(&self) -> Vec<Channel> {
+        let logged = |c: Channel| match c {
+            P_CYL => self.has_pressure(),
+            F_CLAMP => self.has_clamp(),
+            WSP => self.has_wsp(),
+            CREEPAGE | ADHESION | X | V_REF_EST => false,
+            _ => true,
+        };
+        run_log::ALL.into_iter().filter(|&c| logged(c)).collect()
+    }
+
     /// Column names of the CSV, in order.
     pub fn columns(&self) -> Vec<String> {
-        let mut c = vec!["t_s".to_string(), "v_ref_mps".to_string()];
-        let per = |c: &mut Vec<String>, pre: &str, suf: &str| {
-            for j in 1..=4 {
-                c.push(format!("{pre}{j}{suf}"));
-            }
-        };
-        per(&mut c, "omega", "_radps");
-        if self.has_pressure() {
-            per(&mut c, "p_cyl", "_pa");
-        }
-        if self.has_clamp() {
-            per(&mut c, "f_clamp", "_n");
-        }
-        per(&mut c, "f_brake", "_n");
-        per(&mut c, "t_disc", "_c");
-        per(&mut c, "q", "_n");
-        if self.has_wsp() {
-            per(&mut c, "wsp", "");
-        }
-        c.push("a_x_mps2".into());
-        c.push("cmd".into());
-        per(&mut c, "mu_d", "");
-        for extra in [
-            "state",
-            "faults",
-            "sensor_faults",
-            "step_max_us",
-            "step_mean_us",
-            "overruns",
-            "missed_ticks",
-        ] {
-            c.push(extra.into());
-        }
-        c
+        runlog::column_names(&self.channels())
     }
 
     /// `# key: value` metadata of the CSV.
@@ -302,62 +284,49 @@ impl Run {
         m
     }
 
-    /// Writes the run as a run-log CSV.
-    pub fn write_csv<W: Write>(&self, out: W, source: &str) -> Result<()> {
-        let mut out = std::io::BufWriter::new(out);
-        for (k, v) in self.metadata(source) {
-            writeln!(out, "# {k}: {v}")?;
-        }
-        let columns = self.columns();
-        let mut w = csv::WriterBuilder::new().from_writer(out);
-        w.write_record(&columns)?;
-        let (p, c, wsp) = (self.has_pressure(), self.has_clamp(), self.has_wsp());
+    /// The cell of channel `c`, wheelset `j`, of a record.
+    fn cell(&self, r: &TelemetryRecord, c: Channel, j: usize) -> String {
         let us = |cycles: u32| {
             format!(
                 "{:.3}",
                 cycles as f64 * 1e6 / self.header.cpu_hz.max(1) as f64
             )
         };
-        let mut row: Vec<String> = Vec::with_capacity(columns.len());
-        for r in &self.records {
-            row.clear();
-            row.push(format!("{:.6}", self.time_s(r)));
-            row.push(cell(r.v_ref));
-            row.extend(r.omega.iter().map(|&x| cell(x)));
-            if p {
-                row.extend(r.p_cyl.iter().map(|&x| cell(x)));
-            }
-            if c {
-                row.extend(r.f_clamp.iter().map(|&x| cell(x)));
-            }
-            for a in [r.f_brake, r.t_disc, r.q] {
-                row.extend(a.iter().map(|&x| cell(x)));
-            }
-            if wsp {
-                for j in 0..4 {
-                    row.push(if r.wsp & WSP_KNOWN == 0 {
-                        String::new()
-                    } else {
-                        ((r.wsp >> j) & 1).to_string()
-                    });
-                }
-            }
-            row.push(cell(r.a_x));
-            row.push(cmd_text(r.cmd).to_string());
-            row.extend(r.mu_d.iter().map(|&x| cell(x)));
-            row.push(state_text(r.state).to_string());
-            let mut faults = String::new();
-            let _ = write!(faults, "0x{:08x}", r.faults);
-            row.push(faults);
-            row.push(format!("0x{:04x}", r.sensor_faults));
-            row.push(us(r.step_max_cycles));
-            row.push(us(r.step_mean_cycles));
-            row.push(r.overruns.to_string());
-            row.push(r.missed_ticks.to_string());
-            w.write_record(&row)?;
+        match c {
+            T => format!("{:.6}", self.time_s(r)),
+            V_REF => cell(r.v_ref),
+            OMEGA => cell(r.omega[j]),
+            P_CYL => cell(r.p_cyl[j]),
+            F_CLAMP => cell(r.f_clamp[j]),
+            F_BRAKE => cell(r.f_brake[j]),
+            T_DISC => cell(r.t_disc[j]),
+            Q => cell(r.q[j]),
+            WSP if r.wsp & WSP_KNOWN == 0 => String::new(),
+            WSP => ((r.wsp >> j) & 1).to_string(),
+            A_X => cell(r.a_x),
+            CMD => cmd_text(r.cmd).to_string(),
+            MU_D => cell(r.mu_d[j]),
+            STATE => state_text(r.state).to_string(),
+            FAULTS => format!("0x{:08x}", r.faults),
+            SENSOR_FAULTS => format!("0x{:04x}", r.sensor_faults),
+            STEP_MAX => us(r.step_max_cycles),
+            STEP_MEAN => us(r.step_mean_cycles),
+            OVERRUNS => r.overruns.to_string(),
+            MISSED_TICKS => r.missed_ticks.to_string(),
+            _ => String::new(),
         }
-        w.flush()?;
-        Ok(())
+    }
+
+    /// Writes the run as a run-log CSV.
+    pub fn write_csv<W: Write>(&self, out: W, source: &str) -> Result<()> {
+        let channels = self.channels();
+        let rows = self.records.iter().map(|r| {
+            channels
+                .iter()
+                .flat_map(|&c| (0..c.width()).map(move |j| self.cell(r, c, j)))
+                .collect()
+        });
+        runlog::write_table(out, &self.metadata(source), &self.columns(), rows)
     }
 }
 

@@ -245,7 +245,7 @@ impl Diagnoser {
                     log.len()
                 );
             }
-            let rail = log.rail.unwrap_or(baseline.scenario.paper_eb.rail);
+            let rail = log.rail.unwrap_or_default();
             let mut dt = step_s;
             if hils_plant::Plant::<f64>::with_step(baseline, rail, 10.0, dt).is_err() {
                 dt = replay::replay_step(baseline, rail);
@@ -1416,7 +1416,7 @@ pub fn main(args: DiagnoseArgs) -> Result<()> {
     let baseline = load_params(&args.baseline)?;
     let logs = read_logs(&args.files)?;
     let name = args.baseline.display().to_string();
-    let out = diagnose(&baseline, &name, &logs, args.step_s)?;
+    let out = diagnose(&baseline.plant, &name, &logs, args.step_s)?;
     print_summary(&out);
     if let Some(path) = &args.json {
         write_json(path, &out.report)?;

@@ -210,7 +210,7 @@ pub fn fit_points(v: &[f64], t: &[f64], mu: &[f64], c: f64) -> Result<FrictionFi
 /// `hils fit-friction`.
 pub fn main(args: FitFrictionArgs) -> Result<()> {
     let params = params_or_default(args.params.as_deref())?;
-    let c = params.friction.correction_c;
+    let c = params.plant.friction.correction_c;
     let mut tests = Vec::new();
     for f in &args.files {
         let t = read_friction_test(f)?;
@@ -273,6 +273,35 @@ fn quantile(x: &[f64], q: f64) -> f64 {
     s[((s.len() - 1) as f64 * q).round() as usize]
 }
 
+/// One band of a Fig 2 panel: the measured points of the band (`symbol` near `at`) and
+/// Eq (2) at the band's value over `0..x_hi`.
+fn band_series(
+    chart: &mut Chart,
+    k: usize,
+    points: Vec<(f64, f64)>,
+    symbol: &str,
+    at: &str,
+    x_hi: f64,
+    eq2_at: &dyn Fn(f64) -> f64,
+) {
+    chart.series.push(Series::new(
+        format!("measured, {symbol} near {at}"),
+        points,
+        Style::Points,
+        k,
+    ));
+    let curve = (0..=200).map(|i| {
+        let x = x_hi * i as f64 / 200.0;
+        (x, eq2_at(x))
+    });
+    chart.series.push(Series::new(
+        format!("Eq (2) at {at}"),
+        curve.collect(),
+        Style::Solid,
+        k,
+    ));
+}
+
 /// Fig 2 of the paper for this data: mu vs disc temperature (curves at low, median and high
 /// friction speed of the points) and mu vs friction speed (curves at low, median and high
 /// temperature); measured points coloured by the band of the other variable.
@@ -312,46 +341,17 @@ pub fn write_report(
         "mu_d",
     );
     for k in 0..3 {
-        let pts: Vec<(f64, f64)> = (0..mu.len())
-            .filter(|&i| band_of(v[i], &vb) == k)
-            .map(|i| (t[i], mu[i]))
-            .collect();
-        a.series.push(Series::new(
-            format!("measured, v_d near {:.1} m/s", vb[k]),
-            pts,
-            Style::Points,
-            k,
-        ));
-        let curve = (0..=200).map(|i| {
-            let x = t_hi * i as f64 / 200.0;
-            (x, eq2(&p, vb[k], x))
+        // (a): against temperature, one speed band per colour; (b): the other way round.
+        let in_band = |x: &[f64], b: &[f64; 3]| -> Vec<usize> {
+            (0..mu.len()).filter(|&i| band_of(x[i], b) == k).collect()
+        };
+        let pts_a = in_band(v, &vb).iter().map(|&i| (t[i], mu[i])).collect();
+        let pts_b = in_band(t, &tb).iter().map(|&i| (v[i], mu[i])).collect();
+        let (speed, temp) = (format!("{:.1} m/s", vb[k]), format!("{:.0} degC", tb[k]));
+        band_series(&mut a, k, pts_a, "v_d", &speed, t_hi, &|x| {
+            eq2(&p, vb[k], x)
         });
-        a.series.push(Series::new(
-            format!("Eq (2) at {:.1} m/s", vb[k]),
-            curve.collect(),
-            Style::Solid,
-            k,
-        ));
-        let pts: Vec<(f64, f64)> = (0..mu.len())
-            .filter(|&i| band_of(t[i], &tb) == k)
-            .map(|i| (v[i], mu[i]))
-            .collect();
-        b.series.push(Series::new(
-            format!("measured, T_d near {:.0} degC", tb[k]),
-            pts,
-            Style::Points,
-            k,
-        ));
-        let curve = (0..=200).map(|i| {
-            let x = v_hi * i as f64 / 200.0;
-            (x, eq2(&p, x, tb[k]))
-        });
-        b.series.push(Series::new(
-            format!("Eq (2) at {:.0} degC", tb[k]),
-            curve.collect(),
-            Style::Solid,
-            k,
-        ));
+        band_series(&mut b, k, pts_b, "T_d", &temp, v_hi, &|x| eq2(&p, x, tb[k]));
     }
     files.push(dir.join("fig2a_mu_vs_temperature.svg"));
     a.save_svg(files.last().unwrap())?;

@@ -1,34 +1,18 @@
-//! Closed-loop scenarios (plant + simulated brake unit): the paper's emergency brake.
+//! Closed-loop scenarios (plant + simulated brake unit): the paper's emergency brake, run
+//! on the host with [`hils_sil::EbScenario`] (its stop rule) and summarised.
 
 use std::time::Instant;
 
 use anyhow::{Result, anyhow};
-use hils_brake_unit::{BrakeDemand, ClosedLoop, UnitConfig};
-use hils_plant::{FrictionModel, Params, Rail, Real, WHEELSETS};
+use hils_brake_unit::UnitConfig;
+use hils_plant::{FrictionModel, Rail, Real, WHEELSETS};
+use hils_sil::scenario::{AFTER_STOP_S, MAX_TIME_S};
+use hils_sil::{ClosedLoop, Cmd, EbScenario, KMH_PER_MPS, ParamFile, RunRecord, StopRule};
 use serde::Serialize;
 
-/// One recorded sample of a run (SI units, f64 whatever the plant's precision).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Sample {
-    pub t: f64,
-    /// Carbody (true vehicle) speed, m/s.
-    pub v_ref: f64,
-    pub distance: f64,
-    pub a_x: f64,
-    pub eb: bool,
-    pub omega: [f64; 4],
-    pub p_cyl: [f64; 4],
-    pub f_clamp: [f64; 4],
-    pub f_brake: [f64; 4],
-    pub t_disc: [f64; 4],
-    pub q: [f64; 4],
-    pub wsp: [bool; 4],
-    pub mu_d: [f64; 4],
-    pub creepage: [f64; 4],
-    pub adhesion: [f64; 4],
-    /// The brake unit's reference-speed estimate, m/s.
-    pub v_ref_estimate: f64,
-}
+/// One recorded sample of a run: the run record of `hils_sil` (column names and units of
+/// the run log).
+pub type Sample = RunRecord;
 
 /// Options of a closed-loop EB run.
 #[derive(Clone, Debug)]
@@ -48,14 +32,14 @@ pub struct EbOptions {
 
 impl EbOptions {
     /// The paper's scenario as the parameter file describes it.
-    pub fn paper(params: &Params) -> Self {
-        let sc = &params.scenario.paper_eb;
+    pub fn paper(file: &ParamFile) -> Self {
+        let sc = &file.scenario.paper_eb;
         Self {
             rail: sc.rail,
-            initial_speed_mps: sc.initial_speed_kmh / 3.6,
+            initial_speed_mps: sc.initial_speed_kmh / KMH_PER_MPS,
             record_every: 10,
-            after_stop_s: 1.0,
-            max_time_s: 120.0,
+            after_stop_s: AFTER_STOP_S,
+            max_time_s: MAX_TIME_S,
             progress: false,
             unit: None,
         }
@@ -97,59 +81,80 @@ pub struct Run {
     pub plant_flags: u32,
 }
 
-fn record<F: Real>(sim: &ClosedLoop<F>, eb: bool) -> Sample {
-    let o = sim.outputs();
-    let u = sim.unit_outputs();
-    let f = |x: F| x.to_f64();
-    let w = |g: &dyn Fn(usize) -> f64| [g(0), g(1), g(2), g(3)];
-    Sample {
-        t: f(sim.plant.time()),
-        v_ref: f(o.vehicle_speed),
-        distance: f(o.distance),
-        a_x: f(o.carbody_accel),
-        eb,
-        omega: w(&|j| f(o.wheelsets[j].omega)),
-        p_cyl: w(&|j| f(u.cylinder_pressure[j])),
-        f_clamp: w(&|j| f(o.wheelsets[j].clamp_force)),
-        f_brake: w(&|j| f(o.wheelsets[j].brake_force)),
-        t_disc: w(&|j| f(o.wheelsets[j].disc_temp)),
-        q: w(&|j| f(o.wheelsets[j].axle_load)),
-        wsp: [0, 1, 2, 3].map(|j| u.venting[j]),
-        mu_d: w(&|j| f(o.wheelsets[j].mu_d)),
-        creepage: w(&|j| f(o.wheelsets[j].creepage)),
-        adhesion: w(&|j| f(o.wheelsets[j].adhesion)),
-        v_ref_estimate: f(u.reference_speed),
+/// Speed above which a wheel below half the vehicle speed counts as locked, m/s (5 km/h).
+const LOCK_MIN_SPEED_MPS: f64 = 5.0 / KMH_PER_MPS;
+/// Time at which the summary takes the axle loads, s (paper Fig 8B).
+const AXLE_LOADS_AT_S: f64 = 3.0;
+/// Steps between progress-bar updates.
+const PROGRESS_EVERY: u32 = 10_000;
+
+/// What a run keeps of every step (not only the recorded ones) for its summary.
+struct Tracker {
+    dt: f64,
+    radius: f64,
+    steps_3s: u32,
+    at_3s: Option<[f64; WHEELSETS]>,
+    /// (time, distance) of the stop.
+    stop: Option<(f64, f64)>,
+    peak_temp: [f64; WHEELSETS],
+    mu_d_min: f64,
+    lock_run: [f64; WHEELSETS],
+    longest_lock: [f64; WHEELSETS],
+}
+
+impl Tracker {
+    fn new(dt: f64, radius: f64) -> Self {
+        Self {
+            dt,
+            radius,
+            steps_3s: (AXLE_LOADS_AT_S / dt).round() as u32,
+            at_3s: None,
+            stop: None,
+            peak_temp: [0.0; WHEELSETS],
+            mu_d_min: f64::INFINITY,
+            lock_run: [0.0; WHEELSETS],
+            longest_lock: [0.0; WHEELSETS],
+        }
+    }
+
+    fn observe<F: Real>(&mut self, o: &hils_plant::Outputs<F>, steps: u32, stop_step: Option<u32>) {
+        let v = o.vehicle_speed.to_f64();
+        let mut mu_sum = 0.0;
+        for j in 0..WHEELSETS {
+            let w = &o.wheelsets[j];
+            self.peak_temp[j] = self.peak_temp[j].max(w.disc_temp.to_f64());
+            mu_sum += w.mu_d.to_f64();
+            // Lock: the wheel below half the vehicle speed while the vehicle runs > 5 km/h.
+            let wheel = w.omega.to_f64() * self.radius;
+            if v > LOCK_MIN_SPEED_MPS && wheel < 0.5 * v {
+                self.lock_run[j] += self.dt;
+                self.longest_lock[j] = self.longest_lock[j].max(self.lock_run[j]);
+            } else {
+                self.lock_run[j] = 0.0;
+            }
+        }
+        if self.stop.is_none() {
+            self.mu_d_min = self.mu_d_min.min(mu_sum / WHEELSETS as f64);
+            if stop_step == Some(steps) {
+                self.stop = Some((steps as f64 * self.dt, o.distance.to_f64()));
+            }
+        }
+        if steps == self.steps_3s {
+            self.at_3s = Some(o.wheelsets.map(|w| w.axle_load.to_f64()));
+        }
     }
 }
 
-/// Runs an emergency brake: EB command at t = 0 from `opts.initial_speed_mps`, until the
-/// carbody speed falls to 0.01 m/s, plus `after_stop_s`.
-pub fn run_eb<F: Real>(params: &Params, opts: &EbOptions) -> Result<Run> {
-    let started = Instant::now();
-    let config = opts
-        .unit
-        .unwrap_or_else(|| UnitConfig::new(params.scenario.paper_eb.step));
-    let mut sim =
-        ClosedLoop::<F>::with_config(params, opts.rail, F::of(opts.initial_speed_mps), &config)
-            .map_err(|e| anyhow!("cannot build the simulation: {e}"))?;
-    let dt = config.dt;
-    let static_loads = sim.outputs().wheelsets.map(|w| w.axle_load.to_f64());
-    sim.set_demand(BrakeDemand::Emergency);
+/// The progress bar of a long run; it appears only once a run has taken a second.
+struct Progress {
+    bar: indicatif::ProgressBar,
+    shown: bool,
+}
 
-    let max_steps = (opts.max_time_s / dt).ceil() as u64;
-    let after_steps = (opts.after_stop_s / dt).ceil() as u64;
-    let mut samples = vec![record(&sim, true)];
-    let mut stop: Option<(u64, f64, f64)> = None;
-    let mut at_3s = None;
-    let steps_3s = (3.0 / dt).round() as u64;
-    let mut peak_temp = [0.0f64; 4];
-    let mut mu_d_min = f64::INFINITY;
-    let mut lock_run = [0.0f64; 4];
-    let mut longest_lock = [0.0f64; 4];
-    // The bar appears only once a run has taken a second (short runs stay quiet).
-    let bar = opts.progress.then(|| {
+impl Progress {
+    fn new(max_steps: u32) -> Self {
         let bar = indicatif::ProgressBar::with_draw_target(
-            Some(max_steps),
+            Some(max_steps as u64),
             indicatif::ProgressDrawTarget::hidden(),
         );
         bar.set_style(
@@ -158,77 +163,99 @@ pub fn run_eb<F: Real>(params: &Params, opts: &EbOptions) -> Result<Run> {
             )
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
         );
-        bar
-    });
-    let mut bar_shown = false;
-    let mut steps = 0u64;
-    let radius = sim.plant.wheel_radius().to_f64();
-    while steps < max_steps {
-        let o = sim.step();
-        steps += 1;
-        let v = o.vehicle_speed.to_f64();
-        let mut mu_sum = 0.0;
-        for j in 0..WHEELSETS {
-            let w = &o.wheelsets[j];
-            peak_temp[j] = peak_temp[j].max(w.disc_temp.to_f64());
-            mu_sum += w.mu_d.to_f64();
-            // Lock: the wheel below half the vehicle speed while the vehicle runs > 5 km/h.
-            let wheel = w.omega.to_f64() * radius;
-            if v > 5.0 / 3.6 && wheel < 0.5 * v {
-                lock_run[j] += dt;
-                longest_lock[j] = longest_lock[j].max(lock_run[j]);
-            } else {
-                lock_run[j] = 0.0;
-            }
-        }
-        if stop.is_none() {
-            mu_d_min = mu_d_min.min(mu_sum / 4.0);
-            if v <= 0.01 {
-                stop = Some((steps, steps as f64 * dt, o.distance.to_f64()));
-            }
-        }
-        if steps == steps_3s {
-            at_3s = Some(o.wheelsets.map(|w| w.axle_load.to_f64()));
-        }
-        if steps % opts.record_every as u64 == 0 {
-            samples.push(record(&sim, true));
-        }
-        if let Some(bar) = &bar {
-            if steps % 10_000 == 0 {
-                if !bar_shown && started.elapsed().as_secs_f64() > 1.0 {
-                    bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
-                    bar_shown = true;
-                }
-                bar.set_position(steps);
-                bar.set_message(format!("{:.1} s, {:.1} km/h", steps as f64 * dt, v * 3.6));
-            }
-        }
-        if let Some((s, _, _)) = stop {
-            if steps >= s + after_steps {
-                break;
-            }
-        }
-    }
-    if let Some(bar) = bar {
-        bar.finish_and_clear();
+        Self { bar, shown: false }
     }
 
+    fn update(&mut self, started: Instant, steps: u32, dt: f64, v: f64) {
+        if steps % PROGRESS_EVERY != 0 {
+            return;
+        }
+        if !self.shown && started.elapsed().as_secs_f64() > 1.0 {
+            self.bar
+                .set_draw_target(indicatif::ProgressDrawTarget::stderr());
+            self.shown = true;
+        }
+        self.bar.set_position(steps as u64);
+        self.bar.set_message(format!(
+            "{:.1} s, {:.1} km/h",
+            steps as f64 * dt,
+            v * KMH_PER_MPS
+        ));
+    }
+}
+
+/// Runs an emergency brake: EB command at t = 0 from `opts.initial_speed_mps`, until the
+/// stop rule of `hils_sil` ends it (carbody at 0.01 m/s, plus `after_stop_s`).
+pub fn run_eb<F: Real>(file: &ParamFile, opts: &EbOptions) -> Result<Run> {
+    let started = Instant::now();
+    let config = opts.unit.unwrap_or_else(|| file.unit_config());
+    let sim = ClosedLoop::<F>::with_config(
+        &file.plant,
+        opts.rail,
+        F::of(opts.initial_speed_mps),
+        &config,
+    )
+    .map_err(|e| anyhow!("cannot build the simulation: {e}"))?;
+    let dt = config.step_s;
+    let static_loads = sim.outputs().wheelsets.map(|w| w.axle_load.to_f64());
+    let rule = StopRule::new(dt, opts.after_stop_s, opts.max_time_s);
+    let mut sc = EbScenario::from_loop(sim, rule, opts.record_every);
+    let mut samples = vec![RunRecord::of(&sc.sim, Cmd::Emergency)];
+    let mut tracker = Tracker::new(dt, sc.sim.plant.wheel_radius().to_f64());
+    let mut progress = opts.progress.then(|| Progress::new(rule.max_steps()));
+    loop {
+        let advance = sc.advance(|s| {
+            s.step();
+        });
+        let steps = sc.steps();
+        tracker.observe(sc.sim.outputs(), steps, sc.stop_step());
+        if advance.record {
+            samples.push(RunRecord::of(&sc.sim, Cmd::Emergency));
+        }
+        if let Some(p) = &mut progress {
+            p.update(started, steps, dt, sc.sim.outputs().vehicle_speed.to_f64());
+        }
+        if advance.done {
+            break;
+        }
+    }
+    if let Some(p) = progress {
+        p.bar.finish_and_clear();
+    }
+    let summary = summarise(&sc.sim, &samples, &tracker, static_loads, started);
+    Ok(Run {
+        samples,
+        summary,
+        dt,
+        friction: file.plant.friction.model,
+        rail: opts.rail,
+        initial_speed_mps: opts.initial_speed_mps,
+        longest_lock_s: tracker.longest_lock,
+        plant_flags: sc.sim.plant.sticky_flags().0,
+    })
+}
+
+/// The summary of a finished run.
+fn summarise<F: Real>(
+    sim: &ClosedLoop<F>,
+    samples: &[Sample],
+    tracker: &Tracker,
+    static_loads: [f64; WHEELSETS],
+    started: Instant,
+) -> Summary {
     let mean_mu_at = |t: f64| -> f64 {
         let i = samples
-            .partition_point(|s| s.t < t - 1e-9)
+            .partition_point(|s| s.t_s < t - 1e-9)
             .min(samples.len() - 1);
-        samples[i].mu_d.iter().sum::<f64>() / 4.0
+        samples[i].mean_mu_d()
     };
-    let stop_time = stop.map(|s| s.1);
+    let stop_time = tracker.stop.map(|s| s.0);
     let mu_d_end = match stop_time {
         Some(t) => mean_mu_at(t),
-        None => samples
-            .last()
-            .map(|s| s.mu_d.iter().sum::<f64>() / 4.0)
-            .unwrap_or(f64::NAN),
+        None => samples.last().map(|s| s.mean_mu_d()).unwrap_or(f64::NAN),
     };
     let onsets = sim.unit.first_vent_time();
-    let slides: Vec<usize> = (0..4)
+    let slides: Vec<usize> = (0..WHEELSETS)
         .filter(|&j| onsets[j].is_some())
         .map(|j| j + 1)
         .collect();
@@ -236,29 +263,19 @@ pub fn run_eb<F: Real>(params: &Params, opts: &EbOptions) -> Result<Run> {
     for t in [0.0, 10.0, 20.0] {
         mu_at.insert(format!("{}", t as u32), mean_mu_at(t));
     }
-    let summary = Summary {
+    Summary {
         stop_time_s: stop_time,
-        stopping_distance_m: stop.map(|s| s.2),
+        stopping_distance_m: tracker.stop.map(|s| s.1),
         slides,
         slide_onset_s: onsets,
         axle_loads_static_n: static_loads,
-        axle_loads_3s_n: at_3s.unwrap_or([f64::NAN; 4]),
+        axle_loads_3s_n: tracker.at_3s.unwrap_or([f64::NAN; WHEELSETS]),
         mu_d_at_s: mu_at,
-        mu_d_min,
+        mu_d_min: tracker.mu_d_min,
         mu_d_end,
-        peak_disc_temp_rise_c: peak_temp,
+        peak_disc_temp_rise_c: tracker.peak_temp,
         eb_pressure_pa: sim.unit.eb_pressure().to_f64(),
-        steps,
+        steps: sim.outputs().steps as u64,
         wall_s: started.elapsed().as_secs_f64(),
-    };
-    Ok(Run {
-        samples,
-        summary,
-        dt,
-        friction: params.friction.model,
-        rail: opts.rail,
-        initial_speed_mps: opts.initial_speed_mps,
-        longest_lock_s: longest_lock,
-        plant_flags: sim.plant.sticky_flags().0,
-    })
+    }
 }

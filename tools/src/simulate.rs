@@ -6,6 +6,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use hils_plant::contact::Polach;
 use hils_plant::{FrictionModel, Params, Rail};
+use hils_sil::{KMH_PER_MPS, ParamFile};
 
 use crate::params_file::params_or_default;
 use crate::plots::{Chart, Series, Style};
@@ -88,10 +89,10 @@ pub struct SimulateArgs {
 }
 
 /// Builds the parameters and options of a run from the arguments.
-pub fn setup(args: &SimulateArgs) -> Result<(Params, EbOptions)> {
+pub fn setup(args: &SimulateArgs) -> Result<(ParamFile, EbOptions)> {
     let mut params = params_or_default(args.params.as_deref())?;
     if let Some(f) = args.friction {
-        params.friction.model = f.into();
+        params.plant.friction.model = f.into();
     }
     let mut opts = EbOptions::paper(&params);
     if let Some(r) = args.rail {
@@ -101,9 +102,9 @@ pub fn setup(args: &SimulateArgs) -> Result<(Params, EbOptions)> {
         if !(v > 0.0 && v <= 400.0) {
             bail!("--speed-kmh {v}: must be in (0, 400] km/h");
         }
-        opts.initial_speed_mps = v / 3.6;
+        opts.initial_speed_mps = v / KMH_PER_MPS;
     }
-    let dt = params.scenario.paper_eb.step;
+    let dt = params.scenario.paper_eb.step_s;
     let every = 1.0 / (args.sample_rate_hz * dt);
     if !(every >= 1.0) || (every - every.round()).abs() > 1e-6 {
         bail!(
@@ -116,7 +117,7 @@ pub fn setup(args: &SimulateArgs) -> Result<(Params, EbOptions)> {
     Ok((params, opts))
 }
 
-fn run(params: &Params, opts: &EbOptions, precision: PrecisionArg) -> Result<Run> {
+fn run(params: &ParamFile, opts: &EbOptions, precision: PrecisionArg) -> Result<Run> {
     match precision {
         PrecisionArg::F32 => run_eb::<f32>(params, opts),
         PrecisionArg::F64 => run_eb::<f64>(params, opts),
@@ -130,7 +131,7 @@ pub fn main(args: SimulateArgs) -> Result<()> {
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     opts.progress = true;
     let main_run = run(&params, &opts, args.precision)?;
-    let friction = match params.friction.model {
+    let friction = match params.plant.friction.model {
         FrictionModel::Variable => "variable",
         FrictionModel::Constant => "constant",
     };
@@ -147,7 +148,7 @@ pub fn main(args: SimulateArgs) -> Result<()> {
         ("rail", rail.to_string()),
         (
             "initial_speed_kmh",
-            format!("{}", opts.initial_speed_mps * 3.6),
+            format!("{}", opts.initial_speed_mps * KMH_PER_MPS),
         ),
         ("eb_command_s", "0".to_string()),
         ("friction", friction.to_string()),
@@ -176,7 +177,7 @@ pub fn main(args: SimulateArgs) -> Result<()> {
     let s = &main_run.summary;
     println!(
         "{friction} friction, {rail} rail, {:.0} km/h:",
-        opts.initial_speed_mps * 3.6
+        opts.initial_speed_mps * KMH_PER_MPS
     );
     match (s.stop_time_s, s.stopping_distance_m) {
         (Some(t), Some(d)) => println!("  stop after {t:.2} s and {d:.1} m"),
@@ -197,12 +198,12 @@ pub fn main(args: SimulateArgs) -> Result<()> {
     if !args.no_plots {
         // The paper overlays the other friction model (Figs 10, 11).
         let mut other_params = params;
-        other_params.friction.model = match params.friction.model {
+        other_params.plant.friction.model = match params.plant.friction.model {
             FrictionModel::Variable => FrictionModel::Constant,
             FrictionModel::Constant => FrictionModel::Variable,
         };
         let other = run(&other_params, &opts, args.precision)?;
-        let files = draw_figures(&args.out, &params, &main_run, &other)?;
+        let files = draw_figures(&args.out, &params.plant, &main_run, &other)?;
         for f in files {
             println!("  figure {}", f.display());
         }
@@ -231,7 +232,7 @@ pub fn draw_figures(dir: &Path, params: &Params, main: &Run, other: &Run) -> Res
         FrictionModel::Constant => (other, main),
     };
     let series_of = |run: &Run, f: &dyn Fn(&crate::scenario::Sample) -> f64| -> Vec<(f64, f64)> {
-        run.samples.iter().map(|s| (s.t, f(s))).collect()
+        run.samples.iter().map(|s| (s.t_s, f(s))).collect()
     };
 
     // Fig 8A: circumferential wheel speeds.
@@ -242,14 +243,14 @@ pub fn draw_figures(dir: &Path, params: &Params, main: &Run, other: &Run) -> Res
     );
     chart.series.push(Series::new(
         "vehicle",
-        series_of(main, &|s| s.v_ref * 3.6),
+        series_of(main, &|s| s.v_ref_mps * KMH_PER_MPS),
         Style::Dashed,
         7,
     ));
     for j in 0..4 {
         chart.series.push(Series::new(
             format!("wheelset {}", j + 1),
-            series_of(main, &|s| s.omega[j] * r * 3.6),
+            series_of(main, &|s| s.omega_radps[j] * r * KMH_PER_MPS),
             Style::Solid,
             j,
         ));
@@ -266,7 +267,7 @@ pub fn draw_figures(dir: &Path, params: &Params, main: &Run, other: &Run) -> Res
     for j in 0..4 {
         chart.series.push(Series::new(
             format!("wheelset {}", j + 1),
-            series_of(main, &|s| s.q[j] / 1e3),
+            series_of(main, &|s| s.q_n[j] / 1e3),
             Style::Solid,
             j,
         ));
@@ -281,13 +282,13 @@ pub fn draw_figures(dir: &Path, params: &Params, main: &Run, other: &Run) -> Res
         "variable mu_d (Eq 2), mean of wheelsets",
         var.samples
             .iter()
-            .filter(|s| s.t <= stop)
-            .map(|s| (s.t, s.mu_d.iter().sum::<f64>() / 4.0))
+            .filter(|s| s.t_s <= stop)
+            .map(|s| (s.t_s, s.mean_mu_d()))
             .collect(),
         Style::Solid,
         0,
     ));
-    let t_end = var.samples.last().map(|s| s.t).unwrap_or(30.0).min(stop);
+    let t_end = var.samples.last().map(|s| s.t_s).unwrap_or(30.0).min(stop);
     chart.series.push(Series::new(
         "constant mu_d0",
         vec![(0.0, params.friction.mu_d0), (t_end, params.friction.mu_d0)],
@@ -306,13 +307,13 @@ pub fn draw_figures(dir: &Path, params: &Params, main: &Run, other: &Run) -> Res
     );
     chart.series.push(Series::new(
         "variable mu_d",
-        series_of(var, &|s| s.f_brake[3] / 1e3),
+        series_of(var, &|s| s.f_brake_n[3] / 1e3),
         Style::Solid,
         0,
     ));
     chart.series.push(Series::new(
         "constant mu_d0",
-        series_of(con, &|s| s.f_brake[3] / 1e3),
+        series_of(con, &|s| s.f_brake_n[3] / 1e3),
         Style::Dotted,
         2,
     ));
@@ -330,16 +331,16 @@ pub fn draw_figures(dir: &Path, params: &Params, main: &Run, other: &Run) -> Res
 /// (T_b - I_w a / r) / r (Eq 7 with omega' = a / r), over the axle load (Eq 13).
 pub fn required_adhesion(params: &Params, s: &crate::scenario::Sample, j: usize) -> f64 {
     let v = &params.vehicle;
-    let torque = s.f_brake[j] * params.brake.friction_radius;
-    let spin_torque = v.wheelset_spin_inertia * s.a_x / v.wheel_radius;
-    (torque + spin_torque) / v.wheel_radius / s.q[j]
+    let torque = s.f_brake_n[j] * params.brake.friction_radius;
+    let spin_torque = v.wheelset_spin_inertia * s.a_x_mps2 / v.wheel_radius;
+    (torque + spin_torque) / v.wheel_radius / s.q_n[j]
 }
 
 fn fig11(path: &Path, params: &Params, rail: Rail, var: &Run, con: &Run) -> Result<()> {
     let at = |run: &Run| {
         let i = run
             .samples
-            .partition_point(|s| s.t < 3.0)
+            .partition_point(|s| s.t_s < 3.0)
             .min(run.samples.len() - 1);
         run.samples[i]
     };
@@ -348,7 +349,7 @@ fn fig11(path: &Path, params: &Params, rail: Rail, var: &Run, con: &Run) -> Resu
     let curve: Vec<(f64, f64)> = (0..=400)
         .map(|i| {
             let s = 0.25 * i as f64 / 400.0;
-            (s, polach.adhesion_coefficient(s, sv.v_ref, sv.q[3]))
+            (s, polach.adhesion_coefficient(s, sv.v_ref_mps, sv.q_n[3]))
         })
         .collect();
     let limit_v = required_adhesion(params, &sv, 3);
@@ -356,7 +357,7 @@ fn fig11(path: &Path, params: &Params, rail: Rail, var: &Run, con: &Run) -> Resu
     let mut chart = Chart::new(
         &format!(
             "Fig 11: adhesion vs creepage at 3 s ({:.0} km/h), wheelset 4",
-            sv.v_ref * 3.6
+            sv.v_ref_mps * KMH_PER_MPS
         ),
         "creepage s",
         "adhesion coefficient F/Q",
@@ -380,7 +381,7 @@ fn fig11(path: &Path, params: &Params, rail: Rail, var: &Run, con: &Run) -> Resu
     let path_of = |run: &Run| -> Vec<(f64, f64)> {
         run.samples
             .iter()
-            .filter(|s| s.t <= 8.0 && s.creepage[3] <= 0.25)
+            .filter(|s| s.t_s <= 8.0 && s.creepage[3] <= 0.25)
             .map(|s| (s.creepage[3], s.adhesion[3]))
             .collect()
     };

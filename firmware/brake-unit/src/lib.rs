@@ -4,14 +4,16 @@
 //! (self-test mode). An EB command sets the cylinder pressure open-loop (load-weighing,
 //! [`eb_pressure`]); the pressure reaches the cylinders after a pneumatic dead time with
 //! first-order fill and vent lags; per-wheelset wheel slide protection ([`wsp`]) vents,
-//! holds and reapplies each cylinder in the style of EN 15595.
+//! holds and reapplies each cylinder in the style of EN 15595. The unit owns its section of
+//! the parameter file, `[brake_unit]` ([`BrakeUnitParams`]); the loop with the plant is
+//! `hils-sil`'s.
 #![no_std]
 #![forbid(unsafe_code)]
 
-pub mod closed_loop;
 pub mod unit;
 pub mod wsp;
 
-pub use closed_loop::{ClosedLoop, LoopError};
-pub use unit::{BrakeDemand, BrakeUnit, UnitConfig, UnitError, UnitOutputs, eb_pressure};
+pub use unit::{
+    BrakeDemand, BrakeUnit, BrakeUnitParams, UnitConfig, UnitError, UnitOutputs, eb_pressure,
+};
 pub use wsp::{Valve, WspTuning};

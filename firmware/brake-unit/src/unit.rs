@@ -1,8 +1,10 @@
 //! The simulated brake unit: brake demand (ECU), pneumatic delay and cylinder lags (BOU),
 //! and the WSP valves of the four wheelsets.
 
-use hils_plant::params::Params;
+use hils_plant::params::{ParamError, Params, check};
 use hils_plant::{Real, WHEELSETS};
+#[cfg(feature = "serde")]
+use serde::Deserialize;
 
 use crate::wsp::{ReferenceSpeed, Valve, WspChannel, WspConstants, WspTuning};
 
@@ -14,30 +16,100 @@ pub enum BrakeDemand {
     Release,
     /// Emergency brake: the open-loop EB pressure.
     Emergency,
-    /// Service brake for a deceleration (m/s^2), pressure in proportion to EB's.
-    Service(f32),
+    /// Service brake for a deceleration, pressure in proportion to EB's.
+    Service {
+        /// Demanded deceleration, m/s^2 (limited to the EB deceleration).
+        deceleration_mps2: f32,
+    },
+}
+
+/// `[brake_unit]` of the parameter file: the simulated ECU / BOU / WSP. Field names carry
+/// their units; the file's keys are the reference file's (`eb_deceleration`, ...).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(Deserialize), serde(deny_unknown_fields))]
+pub struct BrakeUnitParams {
+    /// EB deceleration the open-loop pressure is set for, m/s^2 (paper: 5 km/h/s).
+    #[cfg_attr(feature = "serde", serde(rename = "eb_deceleration"))]
+    pub eb_deceleration_mps2: f64,
+    /// Cylinder pressure first-order lag on fill, s.
+    #[cfg_attr(feature = "serde", serde(rename = "fill_time_constant"))]
+    pub fill_time_constant_s: f64,
+    /// Lag when a WSP valve vents, s.
+    #[cfg_attr(feature = "serde", serde(rename = "vent_time_constant"))]
+    pub vent_time_constant_s: f64,
+    /// Pneumatic transport delay, s.
+    #[cfg_attr(feature = "serde", serde(rename = "dead_time"))]
+    pub dead_time_s: f64,
+}
+
+impl Default for BrakeUnitParams {
+    fn default() -> Self {
+        Self {
+            eb_deceleration_mps2: 1.3889,
+            fill_time_constant_s: 0.5,
+            vent_time_constant_s: 0.15,
+            dead_time_s: 0.05,
+        }
+    }
+}
+
+impl BrakeUnitParams {
+    /// Checks every value against its range (NaN and inf are out of range); the error names
+    /// the file's key.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        check(
+            "brake_unit.eb_deceleration",
+            self.eb_deceleration_mps2,
+            0.01,
+            10.0,
+        )?;
+        check(
+            "brake_unit.fill_time_constant",
+            self.fill_time_constant_s,
+            1e-3,
+            100.0,
+        )?;
+        check(
+            "brake_unit.vent_time_constant",
+            self.vent_time_constant_s,
+            1e-3,
+            100.0,
+        )?;
+        check("brake_unit.dead_time", self.dead_time_s, 0.0, 1.0)
+    }
 }
 
 /// Capacity of the dead-time delay line, in control cycles.
 pub const DELAY_CAPACITY: usize = 1024;
 
-/// Configuration of the unit (from [`Params`] and a WSP tuning).
+/// Configuration of the unit: its `[brake_unit]` parameters, the plant step and a WSP tuning.
 #[derive(Clone, Copy, Debug)]
 pub struct UnitConfig {
     /// Plant step, s.
-    pub dt: f64,
+    pub step_s: f64,
     /// Control cycle of the ECU/WSP, s (rounded to whole plant steps).
-    pub control_period: f64,
+    pub control_period_s: f64,
+    /// The `[brake_unit]` section of the parameter file.
+    pub params: BrakeUnitParams,
+    /// WSP thresholds and times.
     pub wsp: WspTuning,
     /// Whether the WSP acts (off: valves always apply).
     pub wsp_enabled: bool,
 }
 
 impl UnitConfig {
-    pub fn new(dt: f64) -> Self {
+    /// The reference unit (default `[brake_unit]`, 1 ms control cycle, WSP on) at plant
+    /// step `step_s`.
+    pub fn new(step_s: f64) -> Self {
+        Self::with_params(step_s, BrakeUnitParams::default())
+    }
+
+    /// The unit of a parameter file's `[brake_unit]` section at plant step `step_s`.
+    pub fn with_params(step_s: f64, params: BrakeUnitParams) -> Self {
         Self {
-            dt,
-            control_period: 1.0e-3,
+            step_s,
+            control_period_s: 1.0e-3,
+            params,
             wsp: WspTuning::default(),
             wsp_enabled: true,
         }
@@ -46,9 +118,17 @@ impl UnitConfig {
 
 /// Why a unit cannot be built.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum UnitError {
+    /// A `[brake_unit]` value outside its range.
+    Params(ParamError),
     /// The dead time needs more control cycles than the delay line holds.
-    DeadTimeTooLong { dead_time_s: f64, max_s: f64 },
+    DeadTimeTooLong {
+        /// The dead time asked for, s.
+        dead_time_s: f64,
+        /// The longest the delay line holds at this control cycle, s.
+        max_s: f64,
+    },
     /// The control period or plant step is not positive and finite.
     BadPeriod,
 }
@@ -56,6 +136,7 @@ pub enum UnitError {
 impl core::fmt::Display for UnitError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
+            UnitError::Params(e) => e.fmt(f),
             UnitError::DeadTimeTooLong { dead_time_s, max_s } => write!(
                 f,
                 "brake_unit.dead_time = {dead_time_s} s exceeds the delay line ({max_s} s)"
@@ -67,12 +148,12 @@ impl core::fmt::Display for UnitError {
 
 /// Open-loop (load-weighing) EB cylinder pressure, Pa: the pressure at which the four
 /// wheelsets' brake torques with the constant mu_d0 decelerate the vehicle, rotating
-/// inertia included, at `brake_unit.eb_deceleration` on a level track (reference file),
-/// through Eq (1): sum T_b = M_eff a r, T_b = mu_d0 (A_c P_c - K_r) r_c l_p N_d.
+/// inertia included, at `eb_deceleration_mps2` (`[brake_unit]`) on a level track, through
+/// Eq (1): sum T_b = M_eff a r, T_b = mu_d0 (A_c P_c - K_r) r_c l_p N_d.
 /// Limited to the supply pressure.
-pub fn eb_pressure(p: &Params) -> f64 {
+pub fn eb_pressure(p: &Params, eb_deceleration_mps2: f64) -> f64 {
     let torque_per_wheelset =
-        p.effective_mass() * p.brake_unit.eb_deceleration * p.vehicle.wheel_radius / 4.0;
+        p.effective_mass() * eb_deceleration_mps2 * p.vehicle.wheel_radius / 4.0;
     let b = &p.brake;
     let clamp =
         torque_per_wheelset / (p.friction.mu_d0 * b.friction_radius * b.friction_faces as f64);
@@ -132,17 +213,18 @@ pub struct UnitOutputs<F> {
 
 impl<F: Real> BrakeUnit<F> {
     pub fn new(params: &Params, config: &UnitConfig) -> Result<Self, UnitError> {
-        let dt = config.dt;
-        if !(dt > 0.0 && dt.is_finite() && config.control_period > 0.0) {
+        let dt = config.step_s;
+        if !(dt > 0.0 && dt.is_finite() && config.control_period_s > 0.0) {
             return Err(UnitError::BadPeriod);
         }
-        let steps_per_cycle = ((config.control_period / dt) + 0.5).max(1.0) as u32;
+        let u = &config.params;
+        u.validate().map_err(UnitError::Params)?;
+        let steps_per_cycle = ((config.control_period_s / dt) + 0.5).max(1.0) as u32;
         let cycle = steps_per_cycle as f64 * dt;
-        let u = &params.brake_unit;
-        let delay = (u.dead_time / cycle + 0.5) as usize;
+        let delay = (u.dead_time_s / cycle + 0.5) as usize;
         if delay >= DELAY_CAPACITY {
             return Err(UnitError::DeadTimeTooLong {
-                dead_time_s: u.dead_time,
+                dead_time_s: u.dead_time_s,
                 max_s: (DELAY_CAPACITY - 1) as f64 * cycle,
             });
         }
@@ -150,10 +232,10 @@ impl<F: Real> BrakeUnit<F> {
             steps_per_cycle,
             cycle_s: cycle,
             step_in_cycle: 0,
-            fill_gain: F::of(1.0 - hils_plant::math::exp_f64(-dt / u.fill_time_constant)),
-            vent_gain: F::of(1.0 - hils_plant::math::exp_f64(-dt / u.vent_time_constant)),
-            eb_pressure: F::of(eb_pressure(params)),
-            eb_deceleration: F::of(u.eb_deceleration),
+            fill_gain: F::of(1.0 - hils_plant::math::exp_f64(-dt / u.fill_time_constant_s)),
+            vent_gain: F::of(1.0 - hils_plant::math::exp_f64(-dt / u.vent_time_constant_s)),
+            eb_pressure: F::of(eb_pressure(params, u.eb_deceleration_mps2)),
+            eb_deceleration: F::of(u.eb_deceleration_mps2),
             supply_pressure: F::of(params.brake.supply_pressure),
             wsp_enabled: config.wsp_enabled,
             wsp_k: WspConstants::new(&config.wsp, cycle),
@@ -192,7 +274,9 @@ impl<F: Real> BrakeUnit<F> {
         match self.demand {
             BrakeDemand::Release => F::ZERO,
             BrakeDemand::Emergency => self.eb_pressure,
-            BrakeDemand::Service(decel) => {
+            BrakeDemand::Service {
+                deceleration_mps2: decel,
+            } => {
                 let d = F::of(decel as f64);
                 let d = if d.is_finite() {
                     d.clamp_to(F::ZERO, self.eb_deceleration)

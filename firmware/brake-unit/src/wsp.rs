@@ -42,23 +42,26 @@
 
 use hils_plant::Real;
 
-/// Valve state of one wheelset's WSP dump valve.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+/// Valve state of one wheelset's WSP dump valve (2 bits: 0 apply, 1 hold, 2 vent; `u8`
+/// conversions derived, an undefined code reads as `Apply`).
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Default, num_enum::IntoPrimitive, num_enum::FromPrimitive,
+)]
 #[repr(u8)]
 pub enum Valve {
+    /// The cylinder follows the demand (fill and exhaust through the relay valve).
     #[default]
-    Apply = 0,
-    Hold = 1,
-    Vent = 2,
+    Apply,
+    /// The cylinder pressure is held.
+    Hold,
+    /// The dump valve vents the cylinder.
+    Vent,
 }
 
 impl Valve {
+    /// The valve of the low 2 bits of `bits` (3 reads as `Apply`).
     pub fn from_bits(bits: u8) -> Valve {
-        match bits & 3 {
-            1 => Valve::Hold,
-            2 => Valve::Vent,
-            _ => Valve::Apply,
-        }
+        Valve::from(bits & 3)
     }
 }
 

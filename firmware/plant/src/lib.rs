@@ -23,6 +23,6 @@ pub mod plant;
 pub mod real;
 pub mod thermal;
 
-pub use params::{FrictionModel, ParamError, Params, Rail};
+pub use params::{FrictionModel, ParamError, Params, Rail, STEP_S};
 pub use plant::{BrakeInput, Energy, Flags, Outputs, Plant, WHEELSETS, WheelsetOutput};
 pub use real::Real;

@@ -1,7 +1,10 @@
-//! Parameters of the vehicle, rig and simulated brake unit.
+//! Parameters of the plant: the vehicle, contact, brake, friction, thermal, track and
+//! resistance sections of the parameter file.
 //!
 //! The structs mirror `spec/reference-parameters.toml` section by section and key by key;
-//! [`Params::default`] equals that file (a host test loads the file and compares). With
+//! [`Params::default`] equals those sections of the file (a host test loads the file and
+//! compares). The other sections belong to the crates that use them (`[brake_unit]`:
+//! `hils-brake-unit`; `[scenario.paper_eb]`: `hils-sil`, which also owns the whole file). With
 //! the `serde` feature every section derives `Deserialize` and rejects unknown keys, so a
 //! misspelt key in a parameter file is an error, not a silently ignored value.
 //!
@@ -38,27 +41,6 @@ pub enum FrictionModel {
     Variable,
     /// mu_d = mu_d0, the conventional assumption the paper questions.
     Constant,
-}
-
-/// A free-text description in a parameter file (kept for people, ignored by the model).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub struct Description;
-
-#[cfg(feature = "serde")]
-impl<'de> Deserialize<'de> for Description {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        struct V;
-        impl serde::de::Visitor<'_> for V {
-            type Value = Description;
-            fn expecting(&self, f: &mut core::fmt::Formatter) -> core::fmt::Result {
-                f.write_str("a text")
-            }
-            fn visit_str<E: serde::de::Error>(self, _: &str) -> Result<Description, E> {
-                Ok(Description)
-            }
-        }
-        d.deserialize_str(V)
-    }
 }
 
 macro_rules! section {
@@ -251,34 +233,10 @@ section!(
 );
 
 section!(
-    /// `[brake_unit]`: the simulated ECU / BOU / WSP.
-    BrakeUnitParams {
-        eb_deceleration: f64 = 1.3889,
-        fill_time_constant: f64 = 0.5,
-        vent_time_constant: f64 = 0.15,
-        dead_time: f64 = 0.05,
-    }
-);
-
-section!(
-    /// `[scenario.paper_eb]`: the paper's HILS scenario.
-    PaperEbScenario {
-        initial_speed_kmh: f64 = 150.0,
-        rail: Rail = Rail::Wet,
-        track: Description = Description,
-        step: f64 = 1.0e-4,
-    }
-);
-
-section!(
-    /// `[scenario]`.
-    ScenarioParams {
-        paper_eb: PaperEbScenario = PaperEbScenario::default(),
-    }
-);
-
-section!(
-    /// The whole parameter file.
+    /// The plant's sections of the parameter file (the vehicle, its contact, brakes and
+    /// discs, the track). The brake unit and the scenario own their own sections
+    /// (`hils_brake_unit::BrakeUnitParams`, `hils_sil::ScenarioParams`); the whole file is
+    /// `hils_sil::ParamFile`.
     Params {
         vehicle: VehicleParams = VehicleParams::default(),
         suspension: SuspensionParams = SuspensionParams::default(),
@@ -288,13 +246,16 @@ section!(
         thermal: ThermalParams = ThermalParams::default(),
         track: TrackParams = TrackParams::default(),
         resistance: ResistanceParams = ResistanceParams::default(),
-        brake_unit: BrakeUnitParams = BrakeUnitParams::default(),
-        scenario: ScenarioParams = ScenarioParams::default(),
     }
 );
 
+/// The plant's fixed step on the real-time board and in the paper's scenario, s (10 kHz,
+/// paper text: 0.1 ms sampling of the vehicle model).
+pub const STEP_S: f64 = 1.0e-4;
+
 /// A parameter outside its physical range: names the key, the value and the range.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ParamError {
     /// `section.key` as in the parameter file.
     pub key: &'static str,
@@ -313,7 +274,9 @@ impl core::fmt::Display for ParamError {
     }
 }
 
-fn check(key: &'static str, value: f64, min: f64, max: f64) -> Result<(), ParamError> {
+/// Checks that `value` lies in `[min, max]` (NaN fails); the error names `key`
+/// (`section.key` as in the parameter file). Every section's validation uses it.
+pub fn check(key: &'static str, value: f64, min: f64, max: f64) -> Result<(), ParamError> {
     // `!(a && b)` also rejects NaN.
     if value >= min && value <= max {
         Ok(())
@@ -329,6 +292,43 @@ fn check(key: &'static str, value: f64, min: f64, max: f64) -> Result<(), ParamE
 
 fn check_count(key: &'static str, value: u32) -> Result<(), ParamError> {
     check(key, value as f64, 1.0, 16.0)
+}
+
+#[cfg(feature = "serde")]
+impl Params {
+    /// The plant's section names in a parameter file, in file order.
+    pub const SECTIONS: [&'static str; 8] = [
+        "vehicle",
+        "suspension",
+        "contact",
+        "brake",
+        "friction",
+        "thermal",
+        "track",
+        "resistance",
+    ];
+
+    /// Reads the plant section `SECTIONS[index]` from the next value of a parameter file's
+    /// map (the whole file's deserializer, `hils_sil::ParamFile`, hands each plant section
+    /// here). An index outside `SECTIONS` reads nothing.
+    pub fn read_section<'de, A: serde::de::MapAccess<'de>>(
+        &mut self,
+        index: usize,
+        map: &mut A,
+    ) -> Result<(), A::Error> {
+        match index {
+            0 => self.vehicle = map.next_value()?,
+            1 => self.suspension = map.next_value()?,
+            2 => self.contact = map.next_value()?,
+            3 => self.brake = map.next_value()?,
+            4 => self.friction = map.next_value()?,
+            5 => self.thermal = map.next_value()?,
+            6 => self.track = map.next_value()?,
+            7 => self.resistance = map.next_value()?,
+            _ => {}
+        }
+        Ok(())
+    }
 }
 
 impl Params {
@@ -542,31 +542,6 @@ impl Params {
             0.0,
             1e5,
         )?;
-
-        let u = &self.brake_unit;
-        check("brake_unit.eb_deceleration", u.eb_deceleration, 0.01, 10.0)?;
-        check(
-            "brake_unit.fill_time_constant",
-            u.fill_time_constant,
-            1e-3,
-            100.0,
-        )?;
-        check(
-            "brake_unit.vent_time_constant",
-            u.vent_time_constant,
-            1e-3,
-            100.0,
-        )?;
-        check("brake_unit.dead_time", u.dead_time, 0.0, 1.0)?;
-
-        let p = &self.scenario.paper_eb;
-        check(
-            "scenario.paper_eb.initial_speed_kmh",
-            p.initial_speed_kmh,
-            0.0,
-            500.0,
-        )?;
-        check("scenario.paper_eb.step", p.step, 1e-6, 1e-2)?;
 
         // Geometry: the wheelsets of a bogie must fit between the bogie centres.
         check("vehicle.wheel_base", v.wheel_base, 0.1, v.bogie_base)?;

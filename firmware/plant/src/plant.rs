@@ -303,10 +303,10 @@ fn kahan_add<F: Real>(sum: &mut F, comp: &mut F, x: F) {
 
 impl<F: Real> Plant<F> {
     /// A plant at rest in static equilibrium, rolling at `initial_speed` (m/s), with the
-    /// parameters' fixed step (`scenario.paper_eb.step`). Refuses invalid parameters;
+    /// real-time step [`crate::params::STEP_S`] (10 kHz). Refuses invalid parameters;
     /// clamps (and flags) an initial speed outside [0, 140] m/s.
     pub fn new(params: &Params, rail: Rail, initial_speed: F) -> Result<Self, ParamError> {
-        Self::with_step(params, rail, initial_speed, params.scenario.paper_eb.step)
+        Self::with_step(params, rail, initial_speed, crate::params::STEP_S)
     }
 
     /// As [`Plant::new`] with another fixed step `dt` (s).

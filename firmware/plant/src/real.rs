@@ -67,84 +67,41 @@ pub trait Real:
     }
 }
 
-impl Real for f32 {
-    const ZERO: f32 = 0.0;
-    const ONE: f32 = 1.0;
-    #[inline(always)]
-    fn of(x: f64) -> f32 {
-        x as f32
-    }
-    #[inline(always)]
-    fn to_f64(self) -> f64 {
-        self as f64
-    }
-    #[inline(always)]
-    fn exp(self) -> f32 {
-        math::exp_f32(self)
-    }
-    #[inline(always)]
-    fn ln(self) -> f32 {
-        math::ln_f32(self)
-    }
-    #[inline(always)]
-    fn atan(self) -> f32 {
-        math::atan_f32(self)
-    }
-    #[inline(always)]
-    fn sqrt(self) -> f32 {
-        math::sqrt_f32(self)
-    }
-    #[inline(always)]
-    fn is_finite(self) -> bool {
-        (self.to_bits() & 0x7f80_0000) != 0x7f80_0000
-    }
-    #[inline(always)]
-    fn is_nan(self) -> bool {
-        f32::is_nan(self)
-    }
-    #[inline(always)]
-    fn abs(self) -> f32 {
-        f32::from_bits(self.to_bits() & 0x7fff_ffff)
-    }
+/// `Real` for a float type: its math functions and its exponent and sign masks.
+macro_rules! impl_real {
+    ($t:ty, [$($name:ident = $f:path),*], $exp_mask:expr, $abs_mask:expr) => {
+        impl Real for $t {
+            const ZERO: $t = 0.0;
+            const ONE: $t = 1.0;
+            #[inline(always)]
+            fn of(x: f64) -> $t {
+                x as $t
+            }
+            #[inline(always)]
+            fn to_f64(self) -> f64 {
+                self as f64
+            }
+            $(
+                #[inline(always)]
+                fn $name(self) -> $t {
+                    $f(self)
+                }
+            )*
+            #[inline(always)]
+            fn is_finite(self) -> bool {
+                (self.to_bits() & $exp_mask) != $exp_mask
+            }
+            #[inline(always)]
+            fn is_nan(self) -> bool {
+                <$t>::is_nan(self)
+            }
+            #[inline(always)]
+            fn abs(self) -> $t {
+                <$t>::from_bits(self.to_bits() & $abs_mask)
+            }
+        }
+    };
 }
 
-impl Real for f64 {
-    const ZERO: f64 = 0.0;
-    const ONE: f64 = 1.0;
-    #[inline(always)]
-    fn of(x: f64) -> f64 {
-        x
-    }
-    #[inline(always)]
-    fn to_f64(self) -> f64 {
-        self
-    }
-    #[inline(always)]
-    fn exp(self) -> f64 {
-        math::exp_f64(self)
-    }
-    #[inline(always)]
-    fn ln(self) -> f64 {
-        math::ln_f64(self)
-    }
-    #[inline(always)]
-    fn atan(self) -> f64 {
-        math::atan_f64(self)
-    }
-    #[inline(always)]
-    fn sqrt(self) -> f64 {
-        math::sqrt_f64(self)
-    }
-    #[inline(always)]
-    fn is_finite(self) -> bool {
-        (self.to_bits() & 0x7ff0_0000_0000_0000) != 0x7ff0_0000_0000_0000
-    }
-    #[inline(always)]
-    fn is_nan(self) -> bool {
-        f64::is_nan(self)
-    }
-    #[inline(always)]
-    fn abs(self) -> f64 {
-        f64::from_bits(self.to_bits() & 0x7fff_ffff_ffff_ffff)
-    }
-}
+impl_real! { f32, [exp = math::exp_f32, ln = math::ln_f32, atan = math::atan_f32, sqrt = math::sqrt_f32], 0x7f80_0000, 0x7fff_ffff }
+impl_real! { f64, [exp = math::exp_f64, ln = math::ln_f64, atan = math::atan_f64, sqrt = math::sqrt_f64], 0x7ff0_0000_0000_0000, 0x7fff_ffff_ffff_ffff }

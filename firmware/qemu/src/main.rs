@@ -1,15 +1,15 @@
 //! The plant on the emulated Cortex-M4F: QEMU `-machine mps2-an386 -cpu cortex-m4`.
 //!
-//! Runs [`hils_qemu::EbScenario`] (the paper's EB, wet rail, 150 km/h) in f32 for both
+//! Runs [`hils_sil::EbScenario`] (the paper's EB, wet rail, 150 km/h) in f32 for both
 //! disc-pad friction models and prints over semihosting, one line each:
 //!
 //! * `H key=value ...`: the header: math implementation, the SysTick calibration;
 //! * `K n=N instructions=I`: calibration points (a loop of exactly N instructions, measured);
 //! * `F fn=NAME n= sum= max=`: instructions per call of the plant's math functions;
 //! * `B friction=F`: a run starts;
-//! * `R ...`: a [`hils_qemu::TraceRow`] every 10 ms (f32 bit patterns, hex);
+//! * `R ...`: a [`hils_sil::TraceRow`] every 10 ms (f32 bit patterns, hex);
 //! * `C friction=F part=P n= sum= max= max_step= p50= p99=`: instructions per step of a part
-//!   (see [`hils_qemu::PARTS`]);
+//!   (see [`hils_sil::trace::PARTS`]);
 //! * `E friction=F steps= stop_step= rows=`: the run ended;
 //! * `X message`: an error (then the program exits with failure).
 //!
@@ -25,6 +25,8 @@
 //! the result against loops of known length.
 
 #![cfg_attr(target_os = "none", no_std, no_main)]
+// A binary: nothing public to document.
+#![allow(missing_docs)]
 
 #[cfg(not(target_os = "none"))]
 fn main() {
@@ -46,8 +48,9 @@ mod emulator {
     use cortex_m_semihosting::{debug, hio};
     use hils_plant::friction::DiscPadFriction;
     use hils_plant::thermal::DiscThermal;
-    use hils_plant::{BrakeInput, FrictionModel, Params, WHEELSETS};
-    use hils_qemu::{EbScenario, LINE_LEN, PARTS, TraceRow};
+    use hils_plant::{BrakeInput, FrictionModel, WHEELSETS};
+    use hils_sil::trace::{LINE_LEN, PARTS, RECORD_EVERY};
+    use hils_sil::{EbScenario, ParamFile, TraceRow};
 
     /// SysTick current value register.
     const SYST_CVR: u32 = 0xE000_E018;
@@ -365,9 +368,10 @@ mod emulator {
 
     fn run(host: &mut Host, timer: &Timer, friction: FrictionModel) {
         let name = friction_name(friction);
-        let mut params = Params::default();
-        params.friction.model = friction;
-        let Ok(mut sc) = EbScenario::<f32>::new(&params) else {
+        let mut file = ParamFile::default();
+        file.plant.friction.model = friction;
+        let params = &file.plant;
+        let Ok(mut sc) = EbScenario::<f32>::new(&file, RECORD_EVERY) else {
             host.line(format_args!(
                 "X friction={name}: cannot build the closed loop"
             ));

@@ -25,6 +25,11 @@
 use embedded_can::{Frame, Id, StandardId};
 use hils_plant::{FrictionModel, Rail};
 
+use num_enum::{IntoPrimitive, TryFromPrimitive};
+
+use crate::Code;
+
+pub use crate::sensor::InjectedFault;
 use crate::sensor::{SensorFault, SensorKind};
 
 /// Identifier of `RIG_WHEEL_SPEED`.
@@ -197,14 +202,14 @@ pub fn put_bits(data: &mut [u8; 8], start: u32, len: u32, value: u64) {
 
 /// Finishes a frame: counter in the low nibble of byte 7, checksum in the high nibble.
 fn seal<F: Frame>(id: u16, mut data: [u8; 8], counter: u8) -> Option<F> {
-    put_bits(&mut data, 56, 4, (counter & 0x0F) as u64);
+    sealed::COUNTER.put_raw(&mut data, (counter & 0x0F) as u64);
     let crc = checksum(id, &data);
-    put_bits(&mut data, 60, 4, crc as u64);
+    sealed::CHECKSUM.put_raw(&mut data, crc as u64);
     F::new(StandardId::new(id)?, &data)
 }
 
-/// Checks identifier, kind, length and checksum; returns the data and the counter.
-fn open<F: Frame>(frame: &F, id: u16) -> Result<([u8; 8], u8), DecodeError> {
+/// Checks identifier, kind and length; returns the data.
+fn data_of<F: Frame>(frame: &F, id: u16) -> Result<[u8; 8], DecodeError> {
     let Id::Standard(sid) = frame.id() else {
         return Err(DecodeError::NotStandardData);
     };
@@ -215,15 +220,20 @@ fn open<F: Frame>(frame: &F, id: u16) -> Result<([u8; 8], u8), DecodeError> {
         return Err(DecodeError::WrongId);
     }
     let bytes = frame.data();
-    let data: [u8; 8] = bytes
+    bytes
         .try_into()
-        .map_err(|_| DecodeError::WrongLength(bytes.len() as u8))?;
+        .map_err(|_| DecodeError::WrongLength(bytes.len() as u8))
+}
+
+/// Checks identifier, kind, length and checksum; returns the data and the counter.
+fn open<F: Frame>(frame: &F, id: u16) -> Result<([u8; 8], u8), DecodeError> {
+    let data = data_of(frame, id)?;
     let expected = checksum(id, &data);
-    let received = (data[7] >> 4) & 0x0F;
+    let received = sealed::CHECKSUM.get_raw(&data) as u8;
     if expected != received {
         return Err(DecodeError::Checksum { expected, received });
     }
-    Ok((data, data[7] & 0x0F))
+    Ok((data, sealed::COUNTER.get_raw(&data) as u8))
 }
 
 /// Round-to-nearest of a non-negative finite value into `0..=max` (NaN -> 0).
@@ -235,6 +245,12 @@ fn quantize(value: f32, resolution: f32, max: u32) -> u32 {
     } else {
         0
     }
+}
+
+/// An enum signal's value (derived `u8` conversion); an undefined code is an error naming
+/// the signal.
+fn decode_enum<T: TryFrom<u8>>(d: &[u8; 8], signal: Signal) -> Result<T, DecodeError> {
+    T::try_from(signal.get_raw(d) as u8).map_err(|_| DecodeError::BadValue(signal.name))
 }
 
 /// Signed round-to-nearest into `min..=max` (NaN -> 0).
@@ -255,6 +271,268 @@ fn quantize_signed(value: f32, resolution: f32, min: i32, max: i32) -> i32 {
 }
 
 // ---------------------------------------------------------------------------------------
+// Signal layouts: one table per frame, the same data for encode, decode and the DBC check.
+
+/// One signal of a frame (Intel byte order, bit 0 = LSB of byte 0): `len` bits from
+/// `start`; physical value = raw x `scale` + `offset`. `hils.dbc` describes the same
+/// signals under the same names (a test compares every field).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Signal {
+    /// The signal's name in `hils.dbc`.
+    pub name: &'static str,
+    /// Start bit.
+    pub start: u32,
+    /// Length, bits.
+    pub len: u32,
+    /// Physical units per bit.
+    pub scale: f32,
+    /// Physical value at raw 0.
+    pub offset: f32,
+    /// Two's complement raw value.
+    pub signed: bool,
+}
+
+impl Signal {
+    const fn raw(name: &'static str, start: u32, len: u32) -> Self {
+        Self::scaled(name, start, len, 1.0)
+    }
+
+    const fn scaled(name: &'static str, start: u32, len: u32, scale: f32) -> Self {
+        Self {
+            name,
+            start,
+            len,
+            scale,
+            offset: 0.0,
+            signed: false,
+        }
+    }
+
+    const fn signed(self) -> Self {
+        Self {
+            signed: true,
+            ..self
+        }
+    }
+
+    /// The raw bits of the signal.
+    pub fn get_raw(&self, data: &[u8; 8]) -> u64 {
+        get_bits(data, self.start, self.len)
+    }
+
+    /// Writes raw bits (bits above `len` are dropped).
+    pub fn put_raw(&self, data: &mut [u8; 8], raw: u64) {
+        put_bits(data, self.start, self.len, raw);
+    }
+
+    /// The physical value.
+    pub fn get(&self, data: &[u8; 8]) -> f32 {
+        let raw = self.get_raw(data);
+        let x = if self.signed {
+            let shift = 64 - self.len;
+            (((raw << shift) as i64) >> shift) as f32
+        } else {
+            raw as f32
+        };
+        x * self.scale + self.offset
+    }
+
+    /// Writes a physical value, rounded to the nearest step and limited to the signal's
+    /// range (NaN -> raw 0).
+    pub fn put(&self, data: &mut [u8; 8], value: f32) {
+        let v = value - self.offset;
+        let raw = if self.signed {
+            let max = (1i32 << (self.len - 1)) - 1;
+            quantize_signed(v, self.scale, -max - 1, max) as i64 as u64
+        } else {
+            quantize(v, self.scale, self.max_raw()) as u64
+        };
+        self.put_raw(data, raw);
+    }
+
+    /// The largest raw value of an unsigned signal.
+    pub const fn max_raw(&self) -> u32 {
+        if self.len >= 32 {
+            u32::MAX
+        } else {
+            (1u32 << self.len) - 1
+        }
+    }
+}
+
+/// The alive counter and checksum of the sealed frames (same bits in each).
+pub mod sealed {
+    use super::Signal;
+    /// Alive counter, low nibble of byte 7.
+    pub const COUNTER: Signal = Signal::raw("Alive", 56, 4);
+    /// CRC-4, high nibble of byte 7.
+    pub const CHECKSUM: Signal = Signal::raw("Checksum", 60, 4);
+}
+
+/// `RIG_WHEEL_SPEED` (0x100).
+pub mod wheel_speed {
+    use super::Signal;
+    /// `WheelSpeed1..4`, km/h (14 bits at 0.01; 0x3FFF = not available).
+    pub const SPEEDS: [Signal; 4] = [
+        Signal::scaled("WheelSpeed1", 0, 14, 0.01),
+        Signal::scaled("WheelSpeed2", 14, 14, 0.01),
+        Signal::scaled("WheelSpeed3", 28, 14, 0.01),
+        Signal::scaled("WheelSpeed4", 42, 14, 0.01),
+    ];
+    /// Every signal of the frame.
+    pub const ALL: [Signal; 6] = [
+        SPEEDS[0],
+        SPEEDS[1],
+        SPEEDS[2],
+        SPEEDS[3],
+        Signal::raw("WheelSpeedAlive", 56, 4),
+        Signal::raw("WheelSpeedChecksum", 60, 4),
+    ];
+}
+
+/// `RIG_STATUS` (0x110).
+pub mod status {
+    use super::Signal;
+    /// Vehicle speed, km/h.
+    pub const VEHICLE_SPEED: Signal = Signal::scaled("VehicleSpeed", 0, 16, 0.01);
+    /// Deceleration, m/s^2 (signed).
+    pub const DECELERATION: Signal = Signal::scaled("Deceleration", 16, 16, 0.001).signed();
+    /// [`super::RigState`].
+    pub const STATE: Signal = Signal::raw("RigState", 32, 4);
+    /// [`super::RigMode`].
+    pub const MODE: Signal = Signal::raw("RigMode", 36, 2);
+    /// [`super::CommandResult`].
+    pub const COMMAND_RESULT: Signal = Signal::raw("CommandResult", 38, 2);
+    /// Low 16 bits of the fault flags.
+    pub const FAULTS: Signal = Signal::raw("FaultFlags", 40, 16);
+    /// Every signal of the frame.
+    pub const ALL: [Signal; 8] = [
+        VEHICLE_SPEED,
+        DECELERATION,
+        STATE,
+        MODE,
+        COMMAND_RESULT,
+        FAULTS,
+        Signal::raw("StatusAlive", 56, 4),
+        Signal::raw("StatusChecksum", 60, 4),
+    ];
+}
+
+/// `RIG_DIAG` (0x120).
+pub mod diag {
+    use super::Signal;
+    /// Longest step, us.
+    pub const STEP_MAX: Signal = Signal::scaled("StepTimeMax", 0, 16, 0.01);
+    /// Mean step, us.
+    pub const STEP_MEAN: Signal = Signal::scaled("StepTimeMean", 16, 16, 0.01);
+    /// Overruns.
+    pub const OVERRUNS: Signal = Signal::raw("Overruns", 32, 16);
+    /// Sensor fault code of channel 1..4.
+    pub const SENSOR_FAULTS: [Signal; 4] = [
+        Signal::raw("SensorFault1", 48, 3),
+        Signal::raw("SensorFault2", 51, 3),
+        Signal::raw("SensorFault3", 54, 3),
+        Signal::raw("SensorFault4", 57, 3),
+    ];
+    /// Bus-off events (saturating).
+    pub const BUS_OFF_COUNT: Signal = Signal::raw("BusOffCount", 60, 4);
+    /// Every signal of the frame.
+    pub const ALL: [Signal; 8] = [
+        STEP_MAX,
+        STEP_MEAN,
+        OVERRUNS,
+        SENSOR_FAULTS[0],
+        SENSOR_FAULTS[1],
+        SENSOR_FAULTS[2],
+        SENSOR_FAULTS[3],
+        BUS_OFF_COUNT,
+    ];
+}
+
+/// `RIG_COMMAND` (0x200): the multiplexor `Opcode` and each opcode's signals.
+pub mod command {
+    use super::Signal;
+    /// The multiplexor ([`super::Opcode`]).
+    pub const OPCODE: Signal = Signal::raw("Opcode", 0, 8);
+    /// Start: [`super::RigMode`].
+    pub const START_MODE: Signal = Signal::raw("StartMode", 8, 2);
+    /// Start: 0 wet, 1 dry.
+    pub const START_RAIL: Signal = Signal::raw("StartRail", 10, 1);
+    /// Start: 0 variable, 1 constant friction.
+    pub const START_FRICTION: Signal = Signal::raw("StartFriction", 11, 1);
+    /// Start: EB at t = 0 (self-test).
+    pub const START_EMERGENCY: Signal = Signal::raw("StartEmergency", 12, 1);
+    /// Start: initial speed, km/h.
+    pub const START_SPEED: Signal = Signal::scaled("StartSpeed", 16, 16, 0.01);
+    /// Brake: [`super::BrakeCommand::code`].
+    pub const BRAKE_DEMAND: Signal = Signal::raw("BrakeDemand", 8, 2);
+    /// Brake: service deceleration, m/s^2.
+    pub const SERVICE_DECELERATION: Signal = Signal::scaled("ServiceDeceleration", 16, 16, 0.001);
+    /// Fault injection: channel 0-3.
+    pub const FAULT_CHANNEL: Signal = Signal::raw("FaultChannel", 8, 8);
+    /// Fault injection: [`crate::Code::code`].
+    pub const INJECTED_FAULT: Signal = Signal::raw("InjectedFault", 16, 8);
+    /// Calibration: channel 0-3.
+    pub const CAL_CHANNEL: Signal = Signal::raw("CalChannel", 8, 8);
+    /// Calibration: action (0 tare, 1 gain, 2 offset, 3 kind).
+    pub const CAL_ACTION: Signal = Signal::raw("CalAction", 16, 8);
+    /// Calibration: value, IEEE f32 bits.
+    pub const CAL_VALUE: Signal = Signal::raw("CalValue", 24, 32).signed();
+    /// Configuration: item (0 telemetry divider, 1 teeth).
+    pub const CONFIG_ITEM: Signal = Signal::raw("ConfigItem", 8, 8);
+    /// Configuration: value.
+    pub const CONFIG_VALUE: Signal = Signal::raw("ConfigValue", 16, 16);
+    /// Every signal of the frame, multiplexed ones included.
+    pub const ALL: [Signal; 17] = [
+        OPCODE,
+        START_MODE,
+        START_RAIL,
+        START_FRICTION,
+        START_EMERGENCY,
+        START_SPEED,
+        BRAKE_DEMAND,
+        SERVICE_DECELERATION,
+        FAULT_CHANNEL,
+        INJECTED_FAULT,
+        CAL_CHANNEL,
+        CAL_ACTION,
+        CAL_VALUE,
+        CONFIG_ITEM,
+        CONFIG_VALUE,
+        Signal::raw("CommandAlive", 56, 4),
+        Signal::raw("CommandChecksum", 60, 4),
+    ];
+}
+
+/// Every frame's identifier and signal table (what `hils.dbc` must describe).
+pub const FRAMES: [(u16, &[Signal]); 4] = [
+    (ID_WHEEL_SPEED, &wheel_speed::ALL),
+    (ID_STATUS, &status::ALL),
+    (ID_DIAG, &diag::ALL),
+    (ID_COMMAND, &command::ALL),
+];
+
+/// The opcodes of `RIG_COMMAND` (byte 0), in one place: 1-7 in declaration order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, IntoPrimitive, TryFromPrimitive)]
+#[repr(u8)]
+pub enum Opcode {
+    /// [`Command::Start`].
+    Start = 1,
+    /// [`Command::Stop`].
+    Stop,
+    /// [`Command::Brake`].
+    Brake,
+    /// [`Command::InjectFault`].
+    InjectFault,
+    /// [`Command::Calibrate`].
+    Calibrate,
+    /// [`Command::ClearFaults`].
+    ClearFaults,
+    /// [`Command::Configure`].
+    Configure,
+}
+
+// ---------------------------------------------------------------------------------------
 // RIG_WHEEL_SPEED
 
 /// `RIG_WHEEL_SPEED` (0x100, every 1 ms): the four wheelsets' circumferential speeds
@@ -266,9 +544,6 @@ pub struct WheelSpeedFrame {
 }
 
 impl WheelSpeedFrame {
-    /// Start bits of `WheelSpeed1..4` (14 bits each).
-    pub const STARTS: [u32; 4] = [0, 14, 28, 42];
-
     /// Raw value of a speed: rounded to 0.01 km/h, limited to 0..=163.82 km/h; negative
     /// speeds are sent as 0 (a speed sensor has no direction); `None`, NaN -> not available.
     /// Returns the raw value and whether the speed was above the range.
@@ -287,20 +562,19 @@ impl WheelSpeedFrame {
 
     pub fn encode<F: Frame>(&self) -> Option<F> {
         let mut data = [0u8; 8];
-        for (j, s) in self.speeds_kmh.iter().enumerate() {
-            put_bits(&mut data, Self::STARTS[j], 14, Self::raw_speed(*s).0 as u64);
+        for (signal, s) in wheel_speed::SPEEDS.iter().zip(self.speeds_kmh) {
+            signal.put_raw(&mut data, Self::raw_speed(s).0 as u64);
         }
         seal(ID_WHEEL_SPEED, data, self.counter)
     }
 
     pub fn decode<F: Frame>(frame: &F) -> Result<Self, DecodeError> {
         let (data, counter) = open(frame, ID_WHEEL_SPEED)?;
-        let speeds_kmh = Self::STARTS.map(|s| {
-            let raw = get_bits(&data, s, 14) as u16;
-            if raw == WHEEL_SPEED_NOT_AVAILABLE {
+        let speeds_kmh = wheel_speed::SPEEDS.map(|s| {
+            if s.get_raw(&data) as u16 == WHEEL_SPEED_NOT_AVAILABLE {
                 None
             } else {
-                Some(raw as f32 * WHEEL_SPEED_RESOLUTION_KMH)
+                Some(s.get(&data))
             }
         });
         Ok(Self {
@@ -313,79 +587,45 @@ impl WheelSpeedFrame {
 // ---------------------------------------------------------------------------------------
 // RIG_STATUS
 
-/// Run state of the board (4 bits in `RIG_STATUS`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+/// Run state of the board (4 bits in `RIG_STATUS`; codes 0-4 in declaration order).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, IntoPrimitive, TryFromPrimitive)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[repr(u8)]
 pub enum RigState {
     /// No run: outputs in the safe state (silent, speeds not available).
     #[default]
-    Idle = 0,
+    Idle,
     /// A run is being stepped at 10 kHz.
-    Running = 1,
+    Running,
     /// The run ended at standstill (vehicle speed <= 0.01 m/s).
-    Finished = 2,
+    Finished,
     /// The run was stopped by command.
-    Stopped = 3,
+    Stopped,
     /// A fault latched during a run: safe state (see [`crate::rig`]).
-    Fault = 4,
+    Fault,
 }
 
-impl RigState {
-    pub fn from_raw(raw: u8) -> Option<Self> {
-        Some(match raw {
-            0 => RigState::Idle,
-            1 => RigState::Running,
-            2 => RigState::Finished,
-            3 => RigState::Stopped,
-            4 => RigState::Fault,
-            _ => return None,
-        })
-    }
-}
-
-/// What closes the loop (2 bits in `RIG_STATUS`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+/// What closes the loop (2 bits in `RIG_STATUS`; 0 rig, 1 self-test).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, IntoPrimitive, TryFromPrimitive)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[repr(u8)]
 pub enum RigMode {
     /// The real brake controller on the rig: brake inputs from the ADC channels.
     #[default]
-    Rig = 0,
-    /// No rig: the simulated brake unit (`hils_brake_unit::ClosedLoop`) closes the loop.
-    SelfTest = 1,
+    Rig,
+    /// No rig: the simulated brake unit (`hils_sil::ClosedLoop`) closes the loop.
+    SelfTest,
 }
 
-impl RigMode {
-    pub fn from_raw(raw: u8) -> Option<Self> {
-        match raw {
-            0 => Some(RigMode::Rig),
-            1 => Some(RigMode::SelfTest),
-            _ => None,
-        }
-    }
-}
-
-/// Result of the last command (2 bits in `RIG_STATUS`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+/// Result of the last command (2 bits in `RIG_STATUS`; 0 none, 1 accepted, 2 rejected).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, IntoPrimitive, TryFromPrimitive)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[repr(u8)]
 pub enum CommandResult {
     #[default]
-    None = 0,
-    Accepted = 1,
-    Rejected = 2,
-}
-
-impl CommandResult {
-    pub fn from_raw(raw: u8) -> Option<Self> {
-        match raw {
-            0 => Some(CommandResult::None),
-            1 => Some(CommandResult::Accepted),
-            2 => Some(CommandResult::Rejected),
-            _ => None,
-        }
-    }
+    None,
+    Accepted,
+    Rejected,
 }
 
 /// `RIG_STATUS` (0x110, every 10 ms).
@@ -406,33 +646,24 @@ pub struct StatusFrame {
 impl StatusFrame {
     pub fn encode<F: Frame>(&self) -> Option<F> {
         let mut d = [0u8; 8];
-        put_bits(
-            &mut d,
-            0,
-            16,
-            quantize(self.vehicle_speed_kmh, 0.01, 0xFFFF) as u64,
-        );
-        let decel = quantize_signed(self.deceleration_mps2, 0.001, -32768, 32767);
-        put_bits(&mut d, 16, 16, decel as i16 as u16 as u64);
-        put_bits(&mut d, 32, 4, self.state as u64);
-        put_bits(&mut d, 36, 2, self.mode as u64);
-        put_bits(&mut d, 38, 2, self.command_result as u64);
-        put_bits(&mut d, 40, 16, self.faults as u64);
+        status::VEHICLE_SPEED.put(&mut d, self.vehicle_speed_kmh);
+        status::DECELERATION.put(&mut d, self.deceleration_mps2);
+        status::STATE.put_raw(&mut d, u8::from(self.state) as u64);
+        status::MODE.put_raw(&mut d, u8::from(self.mode) as u64);
+        status::COMMAND_RESULT.put_raw(&mut d, u8::from(self.command_result) as u64);
+        status::FAULTS.put_raw(&mut d, self.faults as u64);
         seal(ID_STATUS, d, self.counter)
     }
 
     pub fn decode<F: Frame>(frame: &F) -> Result<Self, DecodeError> {
         let (d, counter) = open(frame, ID_STATUS)?;
         Ok(Self {
-            vehicle_speed_kmh: get_bits(&d, 0, 16) as f32 * 0.01,
-            deceleration_mps2: (get_bits(&d, 16, 16) as u16 as i16) as f32 * 0.001,
-            state: RigState::from_raw(get_bits(&d, 32, 4) as u8)
-                .ok_or(DecodeError::BadValue("RigState"))?,
-            mode: RigMode::from_raw(get_bits(&d, 36, 2) as u8)
-                .ok_or(DecodeError::BadValue("RigMode"))?,
-            command_result: CommandResult::from_raw(get_bits(&d, 38, 2) as u8)
-                .ok_or(DecodeError::BadValue("CommandResult"))?,
-            faults: get_bits(&d, 40, 16) as u16,
+            vehicle_speed_kmh: status::VEHICLE_SPEED.get(&d),
+            deceleration_mps2: status::DECELERATION.get(&d),
+            state: decode_enum(&d, status::STATE)?,
+            mode: decode_enum(&d, status::MODE)?,
+            command_result: decode_enum(&d, status::COMMAND_RESULT)?,
+            faults: status::FAULTS.get_raw(&d) as u16,
             counter,
         })
     }
@@ -451,67 +682,38 @@ pub struct DiagFrame {
     pub step_mean_us: f32,
     /// Overruns since the run started (saturates at 65535).
     pub overruns: u16,
-    /// Latched fault of each sensor channel (3 bits each, [`SensorFault::code`]).
+    /// Latched fault of each sensor channel (3 bits each, [`crate::Code::code`]).
     pub sensor_faults: [Option<SensorFault>; 4],
     /// Bus-off events since power-up (saturates at 15).
     pub bus_off_count: u8,
 }
 
 impl DiagFrame {
-    pub const SENSOR_STARTS: [u32; 4] = [48, 51, 54, 57];
-
     pub fn encode<F: Frame>(&self) -> Option<F> {
         let mut d = [0u8; 8];
-        put_bits(
-            &mut d,
-            0,
-            16,
-            quantize(self.step_max_us, 0.01, 0xFFFF) as u64,
-        );
-        put_bits(
-            &mut d,
-            16,
-            16,
-            quantize(self.step_mean_us, 0.01, 0xFFFF) as u64,
-        );
-        put_bits(&mut d, 32, 16, self.overruns as u64);
-        for (j, f) in self.sensor_faults.iter().enumerate() {
-            put_bits(
-                &mut d,
-                Self::SENSOR_STARTS[j],
-                3,
-                SensorFault::code(*f) as u64,
-            );
+        diag::STEP_MAX.put(&mut d, self.step_max_us);
+        diag::STEP_MEAN.put(&mut d, self.step_mean_us);
+        diag::OVERRUNS.put_raw(&mut d, self.overruns as u64);
+        for (s, f) in diag::SENSOR_FAULTS.iter().zip(self.sensor_faults) {
+            s.put_raw(&mut d, SensorFault::code(f) as u64);
         }
-        put_bits(&mut d, 60, 4, self.bus_off_count.min(15) as u64);
+        diag::BUS_OFF_COUNT.put_raw(&mut d, self.bus_off_count.min(15) as u64);
         F::new(StandardId::new(ID_DIAG)?, &d)
     }
 
     pub fn decode<F: Frame>(frame: &F) -> Result<Self, DecodeError> {
-        let Id::Standard(sid) = frame.id() else {
-            return Err(DecodeError::NotStandardData);
-        };
-        if frame.is_remote_frame() {
-            return Err(DecodeError::NotStandardData);
-        }
-        if sid.as_raw() != ID_DIAG {
-            return Err(DecodeError::WrongId);
-        }
-        let bytes = frame.data();
-        let d: [u8; 8] = bytes
-            .try_into()
-            .map_err(|_| DecodeError::WrongLength(bytes.len() as u8))?;
+        let d = data_of(frame, ID_DIAG)?;
         let mut sensor_faults = [None; 4];
-        for (j, s) in Self::SENSOR_STARTS.iter().enumerate() {
-            sensor_faults[j] = SensorFault::from_code(get_bits(&d, *s, 3) as u8)
+        for (j, s) in diag::SENSOR_FAULTS.iter().enumerate() {
+            sensor_faults[j] = SensorFault::from_code(s.get_raw(&d) as u8)
                 .ok_or(DecodeError::BadValue("SensorFault"))?;
         }
         Ok(Self {
-            step_max_us: get_bits(&d, 0, 16) as f32 * 0.01,
-            step_mean_us: get_bits(&d, 16, 16) as f32 * 0.01,
-            overruns: get_bits(&d, 32, 16) as u16,
+            step_max_us: diag::STEP_MAX.get(&d),
+            step_mean_us: diag::STEP_MEAN.get(&d),
+            overruns: diag::OVERRUNS.get_raw(&d) as u16,
             sensor_faults,
-            bus_off_count: get_bits(&d, 60, 4) as u8,
+            bus_off_count: diag::BUS_OFF_COUNT.get_raw(&d) as u8,
         })
     }
 }
@@ -539,42 +741,6 @@ impl BrakeCommand {
             BrakeCommand::Emergency => 1,
             BrakeCommand::Service { .. } => 2,
         }
-    }
-}
-
-/// A sensor fault to inject (tests the plausibility chain and the safe state on the rig).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum InjectedFault {
-    /// The channel reads 0 counts (open wire with the input pull-down).
-    Open,
-    /// The channel reads full scale (short to the supply).
-    Short,
-    /// The channel's oversampled reading freezes at its present value.
-    Stuck,
-    /// The channel reads 10 % of the span above its plausible range.
-    OutOfRange,
-}
-
-impl InjectedFault {
-    fn code(f: Option<InjectedFault>) -> u8 {
-        match f {
-            None => 0,
-            Some(InjectedFault::Open) => 1,
-            Some(InjectedFault::Short) => 2,
-            Some(InjectedFault::Stuck) => 3,
-            Some(InjectedFault::OutOfRange) => 4,
-        }
-    }
-    fn from_code(c: u8) -> Option<Option<InjectedFault>> {
-        Some(match c {
-            0 => None,
-            1 => Some(InjectedFault::Open),
-            2 => Some(InjectedFault::Short),
-            3 => Some(InjectedFault::Stuck),
-            4 => Some(InjectedFault::OutOfRange),
-            _ => return None,
-        })
     }
 }
 
@@ -647,14 +813,19 @@ impl Command {
 
     /// The opcode of the command (byte 0 of `RIG_COMMAND`).
     pub fn opcode(&self) -> u8 {
+        self.kind().into()
+    }
+
+    /// The command's [`Opcode`].
+    pub fn kind(&self) -> Opcode {
         match self {
-            Command::Start { .. } => 1,
-            Command::Stop => 2,
-            Command::Brake(_) => 3,
-            Command::InjectFault { .. } => 4,
-            Command::Calibrate { .. } => 5,
-            Command::ClearFaults => 6,
-            Command::Configure(_) => 7,
+            Command::Start { .. } => Opcode::Start,
+            Command::Stop => Opcode::Stop,
+            Command::Brake(_) => Opcode::Brake,
+            Command::InjectFault { .. } => Opcode::InjectFault,
+            Command::Calibrate { .. } => Opcode::Calibrate,
+            Command::ClearFaults => Opcode::ClearFaults,
+            Command::Configure(_) => Opcode::Configure,
         }
     }
 }
@@ -666,14 +837,16 @@ pub struct CommandFrame {
     pub counter: u8,
 }
 
-fn rail_code(r: Rail) -> u8 {
+/// The code of a rail condition in frames and telemetry: 0 wet, 1 dry.
+pub fn rail_code(r: Rail) -> u8 {
     match r {
         Rail::Wet => 0,
         Rail::Dry => 1,
     }
 }
 
-fn friction_code(f: FrictionModel) -> u8 {
+/// The code of a friction model in frames and telemetry: 0 variable (Eq 2), 1 constant.
+pub fn friction_code(f: FrictionModel) -> u8 {
     match f {
         FrictionModel::Variable => 0,
         FrictionModel::Constant => 1,
@@ -681,9 +854,11 @@ fn friction_code(f: FrictionModel) -> u8 {
 }
 
 impl CommandFrame {
+    /// The frame (`None` if the HAL frame type refuses it).
     pub fn encode<F: Frame>(&self) -> Option<F> {
+        use command::*;
         let mut d = [0u8; 8];
-        let f32_bits = |d: &mut [u8; 8], x: f32| put_bits(d, 24, 32, x.to_bits() as u64);
+        OPCODE.put_raw(&mut d, self.command.opcode() as u64);
         match self.command {
             Command::Start {
                 mode,
@@ -692,166 +867,150 @@ impl CommandFrame {
                 emergency,
                 initial_speed_kmh,
             } => {
-                put_bits(&mut d, 0, 8, 1);
-                put_bits(&mut d, 8, 2, mode as u64);
-                put_bits(&mut d, 10, 1, rail_code(rail) as u64);
-                put_bits(&mut d, 11, 1, friction_code(friction) as u64);
-                put_bits(&mut d, 12, 1, emergency as u64);
-                put_bits(
-                    &mut d,
-                    16,
-                    16,
-                    quantize(initial_speed_kmh, 0.01, 0xFFFF) as u64,
-                );
+                START_MODE.put_raw(&mut d, u8::from(mode) as u64);
+                START_RAIL.put_raw(&mut d, rail_code(rail) as u64);
+                START_FRICTION.put_raw(&mut d, friction_code(friction) as u64);
+                START_EMERGENCY.put_raw(&mut d, emergency as u64);
+                START_SPEED.put(&mut d, initial_speed_kmh);
             }
-            Command::Stop => put_bits(&mut d, 0, 8, 2),
+            Command::Stop | Command::ClearFaults => {}
             Command::Brake(b) => {
-                put_bits(&mut d, 0, 8, 3);
-                put_bits(&mut d, 8, 2, b.code() as u64);
+                BRAKE_DEMAND.put_raw(&mut d, b.code() as u64);
                 if let BrakeCommand::Service { deceleration_mps2 } = b {
-                    put_bits(
-                        &mut d,
-                        16,
-                        16,
-                        quantize(deceleration_mps2, 0.001, 0xFFFF) as u64,
-                    );
+                    SERVICE_DECELERATION.put(&mut d, deceleration_mps2);
                 }
             }
             Command::InjectFault { channel, fault } => {
-                put_bits(&mut d, 0, 8, 4);
-                put_bits(&mut d, 8, 8, channel as u64);
-                put_bits(&mut d, 16, 8, InjectedFault::code(fault) as u64);
+                FAULT_CHANNEL.put_raw(&mut d, channel as u64);
+                INJECTED_FAULT.put_raw(&mut d, InjectedFault::code(fault) as u64);
             }
             Command::Calibrate { channel, action } => {
-                put_bits(&mut d, 0, 8, 5);
-                put_bits(&mut d, 8, 8, channel as u64);
-                match action {
-                    Calibration::Tare => put_bits(&mut d, 16, 8, 0),
-                    Calibration::SetGain(g) => {
-                        put_bits(&mut d, 16, 8, 1);
-                        f32_bits(&mut d, g);
-                    }
-                    Calibration::SetOffset(o) => {
-                        put_bits(&mut d, 16, 8, 2);
-                        f32_bits(&mut d, o);
-                    }
-                    Calibration::SetKind(k) => {
-                        put_bits(&mut d, 16, 8, 3);
-                        f32_bits(&mut d, k as u8 as f32);
-                    }
+                CAL_CHANNEL.put_raw(&mut d, channel as u64);
+                let (code, value) = match action {
+                    Calibration::Tare => (0, None),
+                    Calibration::SetGain(g) => (1, Some(g)),
+                    Calibration::SetOffset(o) => (2, Some(o)),
+                    Calibration::SetKind(k) => (3, Some(k as u8 as f32)),
+                };
+                CAL_ACTION.put_raw(&mut d, code);
+                if let Some(x) = value {
+                    CAL_VALUE.put_raw(&mut d, x.to_bits() as u64);
                 }
             }
-            Command::ClearFaults => put_bits(&mut d, 0, 8, 6),
             Command::Configure(item) => {
-                put_bits(&mut d, 0, 8, 7);
                 let (code, value) = match item {
                     ConfigItem::TelemetryDivider(v) => (0, v),
                     ConfigItem::Teeth(v) => (1, v),
                 };
-                put_bits(&mut d, 8, 8, code);
-                put_bits(&mut d, 16, 16, value as u64);
+                CONFIG_ITEM.put_raw(&mut d, code);
+                CONFIG_VALUE.put_raw(&mut d, value as u64);
             }
         }
         seal(ID_COMMAND, d, self.counter)
     }
 
+    /// Decodes and checks a received frame: identifier, length, checksum, opcode and every
+    /// field's range.
     pub fn decode<F: Frame>(frame: &F) -> Result<Self, DecodeError> {
         let (d, counter) = open(frame, ID_COMMAND)?;
-        let opcode = get_bits(&d, 0, 8) as u8;
-        let channel = || -> Result<u8, DecodeError> {
-            let c = get_bits(&d, 8, 8) as u8;
-            if (c as usize) < crate::CHANNELS {
-                Ok(c)
-            } else {
-                Err(DecodeError::BadValue("Channel"))
-            }
-        };
-        let f32_value = || f32::from_bits(get_bits(&d, 24, 32) as u32);
+        let raw_opcode = command::OPCODE.get_raw(&d) as u8;
+        let opcode =
+            Opcode::try_from(raw_opcode).map_err(|_| DecodeError::UnknownOpcode(raw_opcode))?;
         let command = match opcode {
-            1 => {
-                let mode = RigMode::from_raw(get_bits(&d, 8, 2) as u8)
-                    .ok_or(DecodeError::BadValue("StartMode"))?;
-                let rail = if get_bits(&d, 10, 1) == 0 {
-                    Rail::Wet
-                } else {
-                    Rail::Dry
-                };
-                let friction = if get_bits(&d, 11, 1) == 0 {
-                    FrictionModel::Variable
-                } else {
-                    FrictionModel::Constant
-                };
-                let emergency = get_bits(&d, 12, 1) == 1;
-                let initial_speed_kmh = get_bits(&d, 16, 16) as f32 * 0.01;
-                Command::Start {
-                    mode,
-                    rail,
-                    friction,
-                    emergency,
-                    initial_speed_kmh,
-                }
-            }
-            2 => Command::Stop,
-            3 => Command::Brake(match get_bits(&d, 8, 2) {
-                0 => BrakeCommand::Release,
-                1 => BrakeCommand::Emergency,
-                2 => {
-                    let a = get_bits(&d, 16, 16) as f32 * 0.001;
-                    if a > 10.0 {
-                        return Err(DecodeError::BadValue("ServiceDeceleration"));
-                    }
-                    BrakeCommand::Service {
-                        deceleration_mps2: a,
-                    }
-                }
-                _ => return Err(DecodeError::BadValue("BrakeDemand")),
-            }),
-            4 => Command::InjectFault {
-                channel: channel()?,
-                fault: InjectedFault::from_code(get_bits(&d, 16, 8) as u8)
+            Opcode::Start => decode_start(&d)?,
+            Opcode::Stop => Command::Stop,
+            Opcode::Brake => Command::Brake(decode_brake(&d)?),
+            Opcode::InjectFault => Command::InjectFault {
+                channel: decode_channel(&d, command::FAULT_CHANNEL)?,
+                fault: InjectedFault::from_code(command::INJECTED_FAULT.get_raw(&d) as u8)
                     .ok_or(DecodeError::BadValue("InjectedFault"))?,
             },
-            5 => {
-                let channel = channel()?;
-                let action = match get_bits(&d, 16, 8) {
-                    0 => Calibration::Tare,
-                    1 => {
-                        let g = f32_value();
-                        if !(g.is_finite() && g != 0.0) {
-                            return Err(DecodeError::BadValue("CalibrationValue"));
-                        }
-                        Calibration::SetGain(g)
-                    }
-                    2 => {
-                        let o = f32_value();
-                        if !(o.is_finite() && (0.0..=4095.0).contains(&o)) {
-                            return Err(DecodeError::BadValue("CalibrationValue"));
-                        }
-                        Calibration::SetOffset(o)
-                    }
-                    3 => Calibration::SetKind(match f32_value() {
-                        0.0 => SensorKind::LoadCell,
-                        1.0 => SensorKind::PressureTransducer,
-                        _ => return Err(DecodeError::BadValue("SensorKind")),
-                    }),
-                    _ => return Err(DecodeError::BadValue("CalibrationAction")),
-                };
-                Command::Calibrate { channel, action }
-            }
-            6 => Command::ClearFaults,
-            7 => {
-                let v = get_bits(&d, 16, 16) as u16;
-                Command::Configure(match get_bits(&d, 8, 8) {
-                    0 if (1..=10_000).contains(&v) => ConfigItem::TelemetryDivider(v),
-                    1 if (1..=1000).contains(&v) => ConfigItem::Teeth(v),
-                    0 | 1 => return Err(DecodeError::BadValue("ConfigValue")),
-                    _ => return Err(DecodeError::BadValue("ConfigItem")),
-                })
-            }
-            op => return Err(DecodeError::UnknownOpcode(op)),
+            Opcode::Calibrate => Command::Calibrate {
+                channel: decode_channel(&d, command::CAL_CHANNEL)?,
+                action: decode_calibration(&d)?,
+            },
+            Opcode::ClearFaults => Command::ClearFaults,
+            Opcode::Configure => Command::Configure(decode_config(&d)?),
         };
         Ok(Self { command, counter })
     }
+}
+
+/// A channel number 0-3.
+fn decode_channel(d: &[u8; 8], signal: Signal) -> Result<u8, DecodeError> {
+    let c = signal.get_raw(d) as u8;
+    if (c as usize) < crate::CHANNELS {
+        Ok(c)
+    } else {
+        Err(DecodeError::BadValue("Channel"))
+    }
+}
+
+fn decode_start(d: &[u8; 8]) -> Result<Command, DecodeError> {
+    use command::*;
+    let mode =
+        RigMode::from_raw(START_MODE.get_raw(d) as u8).ok_or(DecodeError::BadValue("StartMode"))?;
+    let rail = if START_RAIL.get_raw(d) == 0 {
+        Rail::Wet
+    } else {
+        Rail::Dry
+    };
+    let friction = if START_FRICTION.get_raw(d) == 0 {
+        FrictionModel::Variable
+    } else {
+        FrictionModel::Constant
+    };
+    Ok(Command::Start {
+        mode,
+        rail,
+        friction,
+        emergency: START_EMERGENCY.get_raw(d) == 1,
+        initial_speed_kmh: START_SPEED.get(d),
+    })
+}
+
+fn decode_brake(d: &[u8; 8]) -> Result<BrakeCommand, DecodeError> {
+    Ok(match command::BRAKE_DEMAND.get_raw(d) {
+        0 => BrakeCommand::Release,
+        1 => BrakeCommand::Emergency,
+        2 => {
+            let a = command::SERVICE_DECELERATION.get(d);
+            if a > 10.0 {
+                return Err(DecodeError::BadValue("ServiceDeceleration"));
+            }
+            BrakeCommand::Service {
+                deceleration_mps2: a,
+            }
+        }
+        _ => return Err(DecodeError::BadValue("BrakeDemand")),
+    })
+}
+
+fn decode_calibration(d: &[u8; 8]) -> Result<Calibration, DecodeError> {
+    let value = f32::from_bits(command::CAL_VALUE.get_raw(d) as u32);
+    let bad = DecodeError::BadValue("CalibrationValue");
+    Ok(match command::CAL_ACTION.get_raw(d) {
+        0 => Calibration::Tare,
+        1 if value.is_finite() && value != 0.0 => Calibration::SetGain(value),
+        2 if value.is_finite() && (0.0..=4095.0).contains(&value) => Calibration::SetOffset(value),
+        1 | 2 => return Err(bad),
+        3 => Calibration::SetKind(match value {
+            0.0 => SensorKind::LoadCell,
+            1.0 => SensorKind::PressureTransducer,
+            _ => return Err(DecodeError::BadValue("SensorKind")),
+        }),
+        _ => return Err(DecodeError::BadValue("CalibrationAction")),
+    })
+}
+
+fn decode_config(d: &[u8; 8]) -> Result<ConfigItem, DecodeError> {
+    let v = command::CONFIG_VALUE.get_raw(d) as u16;
+    Ok(match command::CONFIG_ITEM.get_raw(d) {
+        0 if (1..=10_000).contains(&v) => ConfigItem::TelemetryDivider(v),
+        1 if (1..=1000).contains(&v) => ConfigItem::Teeth(v),
+        0 | 1 => return Err(DecodeError::BadValue("ConfigValue")),
+        _ => return Err(DecodeError::BadValue("ConfigItem")),
+    })
 }
 
 #[cfg(test)]

@@ -18,6 +18,14 @@ pub enum TelemetryEvent {
 }
 
 impl TelemetryEvent {
+    /// The record of a `Record` event.
+    pub fn record(&self) -> Option<TelemetryRecord> {
+        match self {
+            TelemetryEvent::Record(r) => Some(*r),
+            _ => None,
+        }
+    }
+
     /// Logs the event with defmt (in the logging task, not in the step).
     #[cfg(feature = "defmt")]
     pub fn log(&self) {

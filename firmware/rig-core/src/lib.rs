@@ -15,6 +15,11 @@
 //! * [`pulse`]: pulse-train timer settings, f = teeth omega / 2 pi.
 //! * [`timing`]: step accounting from the DWT cycle counter (max, mean, overruns, missed ticks).
 //! * [`bus`]: CAN bus state supervision (error passive, bus-off, recovery).
+//! * [`can_timing`]: nominal CAN bit timing from the kernel clock and its oscillator tolerance.
+//! * [`can_tx`]: transmit freshness (stale frames dropped and counted, not sent late).
+//! * [`log_gate`]: counting the telemetry the RTT channel could not take.
+//! * [`handoff`]: the slot protocol that hands a value built in thread mode to the step.
+//! * [`bringup`]: pass/fail rules of the board's bring-up self-test.
 //! * [`telemetry`]: the decimated telemetry record, its defmt line and its parser.
 //! * [`rig`]: the real-time step and the run state machine (commands, faults, safe state).
 //! * [`hw`]: the hardware-interface traits the board implements.
@@ -25,9 +30,14 @@
 #[cfg(test)]
 extern crate std;
 
+pub mod bringup;
 pub mod bus;
 pub mod can;
+pub mod can_timing;
+pub mod can_tx;
+pub mod handoff;
 pub mod hw;
+pub mod log_gate;
 pub mod pulse;
 pub mod rig;
 pub mod script;
@@ -37,11 +47,38 @@ pub mod timing;
 
 pub use hils_plant::WHEELSETS;
 
+/// The codes of the enums sent in frames and telemetry (`RigState`, `RigMode`,
+/// `CommandResult`, `SensorFault`, `InjectedFault`): their `u8` conversions are derived
+/// (`num_enum`); this adds the two forms the wire uses, for every such enum at once.
+pub trait Code: Sized + Into<u8> + TryFrom<u8> {
+    /// The value of a raw code; `None` for an undefined one.
+    fn from_raw(raw: u8) -> Option<Self> {
+        Self::try_from(raw).ok()
+    }
+
+    /// The code of an optional value, 0 = none.
+    fn code(value: Option<Self>) -> u8 {
+        value.map_or(0, Into::into)
+    }
+
+    /// Inverse of [`Code::code`]: `Some(None)` for 0, `Some(Some(v))` for a defined code,
+    /// `None` for an undefined one.
+    fn from_code(code: u8) -> Option<Option<Self>> {
+        if code == 0 {
+            Some(None)
+        } else {
+            Self::from_raw(code).map(Some)
+        }
+    }
+}
+
+impl<T: Into<u8> + TryFrom<u8>> Code for T {}
+
 /// Number of analog brake-input channels (one per wheelset).
 pub const CHANNELS: usize = 4;
 
 /// Plant step rate of the real-time loop, Hz (0.1 ms step, paper text).
 pub const STEP_RATE_HZ: u32 = 10_000;
 
-/// km/h per m/s.
-pub const KMH_PER_MPS: f32 = 3.6;
+/// km/h per m/s as f32 (the one factor, [`hils_sil::KMH_PER_MPS`]).
+pub const KMH_PER_MPS: f32 = hils_sil::KMH_PER_MPS as f32;

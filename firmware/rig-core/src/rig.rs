@@ -7,9 +7,10 @@
 //! 2. while running, step the plant: in [`RigMode::Rig`] with the measured brake inputs
 //!    (load cell -> `BrakeInput::ClampForce`, pressure -> `BrakeInput::CylinderPressure`),
 //!    in [`RigMode::SelfTest`] closed with the simulated brake unit
-//!    (`hils_brake_unit::ClosedLoop<f32>`);
+//!    (`hils_sil::ClosedLoop<f32>`);
 //! 3. write the outputs: four pulse trains, and on schedule the CAN frames (wheel speeds
-//!    every 10 ticks = 1 ms, status every 100 = 10 ms, diagnostics every 1000 = 100 ms);
+//!    every 10 ticks = 1 ms, status every 100 = 10 ms, diagnostics every 1000 = 100 ms:
+//!    [`WHEEL_SPEED_SCHEDULE`], [`STATUS_SCHEDULE`], [`DIAG_SCHEDULE`]);
 //! 4. every `divider` plant steps, a telemetry record.
 //!
 //! The board times each call with the DWT cycle counter and reports it with
@@ -29,7 +30,7 @@
 //! when during a run:
 //! * in rig mode, a sensor channel latches a fault (open, short, out of range, stuck, ADC
 //!   invalid: see [`crate::sensor`]);
-//! * in rig mode, no fresh ADC sequence arrives for 10 ticks (1 ms);
+//! * in rig mode, no fresh ADC sequence arrives for [`ADC_STALE_TICKS`] ticks (1 ms);
 //! * the plant reports a numeric fault (non-finite state; it has put itself at rest).
 //!
 //! In self-test mode the sensors close no loop: their faults are reported, nothing stops.
@@ -38,12 +39,16 @@
 //! `ClearFaults` clears latched faults whose cause is gone and takes `Fault` to `Stopped`.
 
 use embedded_can::Frame;
-use hils_brake_unit::{BrakeDemand, ClosedLoop};
+use hils_brake_unit::BrakeDemand;
 use hils_plant::{BrakeInput, Flags, FrictionModel, Outputs, Params, Plant, Rail};
+use hils_sil::scenario::at_standstill;
+use hils_sil::{ClosedLoop, LoopError};
 
+use crate::Code;
 use crate::can::{
     BrakeCommand, Calibration, Command, CommandFrame, CommandResult, ConfigItem, DecodeError,
-    DiagFrame, RigMode, RigState, StatusFrame, WHEEL_SPEED_MAX_KMH, WheelSpeedFrame,
+    DiagFrame, RigMode, RigState, StatusFrame, WHEEL_SPEED_MAX_KMH, WheelSpeedFrame, friction_code,
+    rail_code,
 };
 use crate::hw::{RigIo, TelemetryEvent};
 use crate::pulse::{PulseRegisters, PulseTimer, wheel_frequency_hz};
@@ -51,6 +56,48 @@ use crate::sensor::{CalibrationError, SensorChannel, SensorFault, SensorKind, sp
 use crate::telemetry::{RunHeader, TelemetryRecord, WSP_KNOWN};
 use crate::timing::{StepTiming, cycles_to_us};
 use crate::{CHANNELS, KMH_PER_MPS, STEP_RATE_HZ, WHEELSETS};
+
+/// A frame schedule in ticks: sent when `tick % period == phase`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Schedule {
+    /// Period, ticks.
+    pub period: u32,
+    /// Phase within the period, ticks (spreads the frames over the ticks).
+    pub phase: u32,
+}
+
+impl Schedule {
+    /// Whether a frame is due at `tick`.
+    pub fn due(self, tick: u32) -> bool {
+        tick % self.period == self.phase
+    }
+}
+
+/// `RIG_WHEEL_SPEED` every 10 ticks (1 ms).
+pub const WHEEL_SPEED_SCHEDULE: Schedule = Schedule {
+    period: 10,
+    phase: 0,
+};
+/// `RIG_STATUS` every 100 ticks (10 ms), 5 ticks after a wheel-speed frame.
+pub const STATUS_SCHEDULE: Schedule = Schedule {
+    period: 100,
+    phase: 5,
+};
+/// `RIG_DIAG` every 1000 ticks (100 ms).
+pub const DIAG_SCHEDULE: Schedule = Schedule {
+    period: 1000,
+    phase: 50,
+};
+/// Ticks without a fresh ADC sequence after which a rig-mode run faults (1 ms).
+pub const ADC_STALE_TICKS: u32 = 10;
+
+/// Step times since the last `RIG_DIAG` frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct DiagWindow {
+    max_cycles: u32,
+    sum_cycles: u64,
+    steps: u32,
+}
 
 /// Fault flags (bit set). The low 16 bits go into `RIG_STATUS`; all 32 into telemetry.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -132,7 +179,7 @@ pub enum CommandError {
     /// A rig-mode start with latched sensor faults (clear them first).
     SensorFaults,
     /// The plant or brake unit refused the parameters.
-    Build,
+    Build(LoopError),
     Calibration(CalibrationError),
 }
 
@@ -169,7 +216,7 @@ pub struct Rig {
     stale_ticks: u32,
     last_adc: [u16; crate::sensor::ADC_SEQUENCE_LEN],
     counters: [u8; 2],
-    diag_window: (u32, u64, u32),
+    diag_window: DiagWindow,
     wheel_speed_kmh: [Option<f32>; WHEELSETS],
     pulses: [PulseRegisters; WHEELSETS],
     /// Sensor channels with a condition present but not latched (this tick).
@@ -206,7 +253,7 @@ impl Rig {
             stale_ticks: 0,
             last_adc: [0; crate::sensor::ADC_SEQUENCE_LEN],
             counters: [0; 2],
-            diag_window: (0, 0, 0),
+            diag_window: DiagWindow::default(),
             wheel_speed_kmh: [None; WHEELSETS],
             pulses: [silent; WHEELSETS],
             pending: [false; CHANNELS],
@@ -274,6 +321,18 @@ impl Rig {
         self.bus_off_count = bus_off_count.min(255) as u8;
     }
 
+    /// Drops the board counted downstream of the step's queues: telemetry the RTT channel
+    /// could not take (`log_gate`), CAN frames dropped stale or cancelled in the controller
+    /// (`can_tx`). Sets the sticky flags, as a full queue does.
+    pub fn note_downstream_drops(&mut self, telemetry: bool, can: bool) {
+        if telemetry {
+            self.sticky |= Faults::TELEMETRY_DROPPED;
+        }
+        if can {
+            self.sticky |= Faults::CAN_TX_DROPPED;
+        }
+    }
+
     /// Records the timing of the last step (DWT cycles at entry and exit of the step
     /// interrupt; whether the next tick was already pending at exit).
     pub fn record_timing(&mut self, entry: u32, exit: u32, tick_pending: bool) {
@@ -285,9 +344,9 @@ impl Rig {
             self.sticky |= Faults::MISSED_TICKS;
         }
         let d = &mut self.diag_window;
-        d.0 = d.0.max(v.duration_cycles);
-        d.1 += v.duration_cycles as u64;
-        d.2 += 1;
+        d.max_cycles = d.max_cycles.max(v.duration_cycles);
+        d.sum_cycles += v.duration_cycles as u64;
+        d.steps += 1;
     }
 
     /// Decodes and carries out a received command frame; the result goes into the status
@@ -321,64 +380,72 @@ impl Rig {
         self.state == RigState::Running
     }
 
+    /// Starts a run (the `Start` command): builds the simulation of the mode and resets
+    /// the run's accounting.
+    fn start(&mut self, command: Command) -> Result<(), CommandError> {
+        let Command::Start {
+            mode,
+            rail,
+            friction,
+            emergency,
+            initial_speed_kmh,
+        } = command
+        else {
+            return Ok(());
+        };
+        if self.running() {
+            return Err(CommandError::NotNow(self.state));
+        }
+        if !(0.0..=WHEEL_SPEED_MAX_KMH).contains(&initial_speed_kmh) {
+            return Err(CommandError::SpeedOutOfRange);
+        }
+        if mode == RigMode::Rig && self.sensors.iter().any(|s| s.fault().is_some()) {
+            return Err(CommandError::SensorFaults);
+        }
+        let mut params = Params::default();
+        params.friction.model = friction;
+        let v0 = initial_speed_kmh / KMH_PER_MPS;
+        // Drop the old run first: one simulation in memory at a time.
+        self.sim = Sim::None;
+        self.sim = match mode {
+            RigMode::Rig => Sim::Rig(
+                Plant::new(&params, rail, v0)
+                    .map_err(|e| CommandError::Build(LoopError::Params(e)))?,
+            ),
+            RigMode::SelfTest => {
+                let mut c = ClosedLoop::new(&params, rail, v0).map_err(CommandError::Build)?;
+                let demand = if emergency {
+                    BrakeDemand::Emergency
+                } else {
+                    BrakeDemand::Release
+                };
+                c.set_demand(demand);
+                Sim::SelfTest(c)
+            }
+        };
+        self.mode = mode;
+        self.rail = rail;
+        self.friction = friction;
+        self.initial_speed_kmh = initial_speed_kmh;
+        self.brake = match (mode, emergency) {
+            (RigMode::SelfTest, true) => Some(BrakeCommand::Emergency),
+            (RigMode::SelfTest, false) => Some(BrakeCommand::Release),
+            (RigMode::Rig, _) => None,
+        };
+        self.state = RigState::Running;
+        self.run_steps = 0;
+        self.timing.reset();
+        self.diag_window = DiagWindow::default();
+        self.stale_ticks = 0;
+        self.start_events = true;
+        self.last_record_step = None;
+        Ok(())
+    }
+
     /// Carries out a command (also from the board's user button).
     pub fn command(&mut self, command: Command) -> Result<(), CommandError> {
         match command {
-            Command::Start {
-                mode,
-                rail,
-                friction,
-                emergency,
-                initial_speed_kmh,
-            } => {
-                if self.running() {
-                    return Err(CommandError::NotNow(self.state));
-                }
-                if !(0.0..=WHEEL_SPEED_MAX_KMH).contains(&initial_speed_kmh) {
-                    return Err(CommandError::SpeedOutOfRange);
-                }
-                if mode == RigMode::Rig && self.sensors.iter().any(|s| s.fault().is_some()) {
-                    return Err(CommandError::SensorFaults);
-                }
-                let mut params = Params::default();
-                params.friction.model = friction;
-                let v0 = initial_speed_kmh / KMH_PER_MPS;
-                // Drop the old run first: one simulation in memory at a time.
-                self.sim = Sim::None;
-                self.sim = match mode {
-                    RigMode::Rig => {
-                        Sim::Rig(Plant::new(&params, rail, v0).map_err(|_| CommandError::Build)?)
-                    }
-                    RigMode::SelfTest => {
-                        let mut c =
-                            ClosedLoop::new(&params, rail, v0).map_err(|_| CommandError::Build)?;
-                        let demand = if emergency {
-                            BrakeDemand::Emergency
-                        } else {
-                            BrakeDemand::Release
-                        };
-                        c.set_demand(demand);
-                        Sim::SelfTest(c)
-                    }
-                };
-                self.mode = mode;
-                self.rail = rail;
-                self.friction = friction;
-                self.initial_speed_kmh = initial_speed_kmh;
-                self.brake = match (mode, emergency) {
-                    (RigMode::SelfTest, true) => Some(BrakeCommand::Emergency),
-                    (RigMode::SelfTest, false) => Some(BrakeCommand::Release),
-                    (RigMode::Rig, _) => None,
-                };
-                self.state = RigState::Running;
-                self.run_steps = 0;
-                self.timing.reset();
-                self.diag_window = (0, 0, 0);
-                self.stale_ticks = 0;
-                self.start_events = true;
-                self.last_record_step = None;
-                Ok(())
-            }
+            Command::Start { .. } => self.start(command),
             Command::Stop => {
                 if !self.running() {
                     return Err(CommandError::NotNow(self.state));
@@ -392,7 +459,7 @@ impl Rig {
                         BrakeCommand::Release => BrakeDemand::Release,
                         BrakeCommand::Emergency => BrakeDemand::Emergency,
                         BrakeCommand::Service { deceleration_mps2 } => {
-                            BrakeDemand::Service(deceleration_mps2)
+                            BrakeDemand::Service { deceleration_mps2 }
                         }
                     });
                 }
@@ -491,7 +558,8 @@ impl Rig {
         // 3. Simulation.
         if self.running() {
             let rig_fault = self.mode == RigMode::Rig
-                && (self.sensors.iter().any(|s| s.fault().is_some()) || self.stale_ticks >= 10);
+                && (self.sensors.iter().any(|s| s.fault().is_some())
+                    || self.stale_ticks >= ADC_STALE_TICKS);
             if rig_fault {
                 self.end_run(RigState::Fault);
             } else {
@@ -503,7 +571,10 @@ impl Rig {
                 if flags.contains(Flags::NUMERIC_FAULT) {
                     self.sticky |= Faults::PLANT_NUMERIC;
                     self.end_run(RigState::Fault);
-                } else if self.outputs().is_some_and(|o| o.vehicle_speed <= 0.01) {
+                } else if self
+                    .outputs()
+                    .is_some_and(|o| at_standstill(o.vehicle_speed))
+                {
                     self.end_run(RigState::Finished);
                 }
                 let divider = self.config.telemetry_divider.max(1) as u32;
@@ -551,14 +622,8 @@ impl Rig {
         }
         RunHeader {
             mode: self.mode as u8,
-            rail: match self.rail {
-                Rail::Wet => 0,
-                Rail::Dry => 1,
-            },
-            friction: match self.friction {
-                FrictionModel::Variable => 0,
-                FrictionModel::Constant => 1,
-            },
+            rail: rail_code(self.rail),
+            friction: friction_code(self.friction),
             initial_speed_kmh: self.initial_speed_kmh,
             step_ns: 1_000_000_000 / STEP_RATE_HZ,
             divider: self.config.telemetry_divider as u32,
@@ -688,7 +753,7 @@ impl Rig {
             self.wheel_speed_kmh[j] = o.map(|_| speeds[j] * KMH_PER_MPS);
         }
 
-        if self.tick % 10 == 0 {
+        if WHEEL_SPEED_SCHEDULE.due(self.tick) {
             let mut saturated = false;
             for s in self.wheel_speed_kmh {
                 saturated |= WheelSpeedFrame::raw_speed(s).1;
@@ -703,7 +768,7 @@ impl Rig {
             self.counters[0] = (self.counters[0] + 1) & 0x0F;
             self.send(io, frame.encode());
         }
-        if self.tick % 100 == 5 {
+        if STATUS_SCHEDULE.due(self.tick) {
             let frame = StatusFrame {
                 vehicle_speed_kmh: if live { v * KMH_PER_MPS } else { 0.0 },
                 deceleration_mps2: if live { -a } else { 0.0 },
@@ -716,9 +781,14 @@ impl Rig {
             self.counters[1] = (self.counters[1] + 1) & 0x0F;
             self.send(io, frame.encode());
         }
-        if self.tick % 1000 == 50 {
-            let (max, sum, n) = core::mem::take(&mut self.diag_window);
-            let mean = if n > 0 { (sum / n as u64) as u32 } else { 0 };
+        if DIAG_SCHEDULE.due(self.tick) {
+            let w = core::mem::take(&mut self.diag_window);
+            let (max, n) = (w.max_cycles, w.steps);
+            let mean = if n > 0 {
+                (w.sum_cycles / n as u64) as u32
+            } else {
+                0
+            };
             let frame = DiagFrame {
                 step_max_us: cycles_to_us(max, self.config.cpu_hz),
                 step_mean_us: cycles_to_us(mean, self.config.cpu_hz),

@@ -29,7 +29,7 @@
 //! cleared by command while its cause is gone. What a latched fault does to the run (the
 //! safe state) is decided in [`crate::rig`].
 
-use crate::can::InjectedFault;
+use num_enum::{IntoPrimitive, TryFromPrimitive};
 
 /// Largest 12-bit ADC reading.
 pub const ADC_MAX_COUNTS: u16 = 4095;
@@ -105,12 +105,14 @@ pub struct SensorLimits {
     pub debounce_steps: u16,
 }
 
-/// A sensor fault (3-bit code in `RIG_DIAG`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// A sensor fault (3-bit code in `RIG_DIAG`: 1-5 in declaration order, 0 = no fault:
+/// [`crate::Code::code`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, IntoPrimitive, TryFromPrimitive)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
 pub enum SensorFault {
     /// Below 2 % of the ADC range: open wire or short to ground.
-    Open,
+    Open = 1,
     /// Above 98 % of the ADC range: short to the supply.
     Short,
     /// Outside the plausible physical range.
@@ -121,31 +123,21 @@ pub enum SensorFault {
     AdcInvalid,
 }
 
-impl SensorFault {
-    /// 0 = no fault, 1 open, 2 short, 3 out of range, 4 stuck, 5 ADC invalid.
-    pub fn code(f: Option<SensorFault>) -> u8 {
-        match f {
-            None => 0,
-            Some(SensorFault::Open) => 1,
-            Some(SensorFault::Short) => 2,
-            Some(SensorFault::OutOfRange) => 3,
-            Some(SensorFault::Stuck) => 4,
-            Some(SensorFault::AdcInvalid) => 5,
-        }
-    }
-
-    /// Inverse of [`SensorFault::code`]; `None` for an undefined code.
-    pub fn from_code(c: u8) -> Option<Option<SensorFault>> {
-        Some(match c {
-            0 => None,
-            1 => Some(SensorFault::Open),
-            2 => Some(SensorFault::Short),
-            3 => Some(SensorFault::OutOfRange),
-            4 => Some(SensorFault::Stuck),
-            5 => Some(SensorFault::AdcInvalid),
-            _ => return None,
-        })
-    }
+/// A sensor fault to inject (tests the plausibility chain and the safe state on the rig;
+/// the `InjectedFault` code of `RIG_COMMAND`: 1-4 in declaration order, 0 = remove the
+/// injection).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, IntoPrimitive, TryFromPrimitive)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
+pub enum InjectedFault {
+    /// The channel reads 0 counts (open wire with the input pull-down).
+    Open = 1,
+    /// The channel reads full scale (short to the supply).
+    Short,
+    /// The channel's oversampled reading freezes at its present value.
+    Stuck,
+    /// The channel reads 10 % of the span above its plausible range.
+    OutOfRange,
 }
 
 /// Why a calibration command was refused.

@@ -11,6 +11,7 @@
 //! back to the same f32), so a decoded record equals the board's bit for bit. NaN in
 //! `p_cyl`/`f_clamp` means "not measured" (an empty cell in the CSV).
 
+use crate::Code;
 use crate::can::{RigMode, RigState};
 
 /// Names of the fields of a `tlm1` line, in order (41).

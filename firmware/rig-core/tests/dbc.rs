@@ -15,6 +15,7 @@ use can_dbc::{
 };
 use embedded_can::{Frame, StandardId};
 use hils_plant::{FrictionModel, Rail};
+use hils_rig_core::Code;
 use hils_rig_core::can::{
     self, BrakeCommand, Calibration, Command, CommandFrame, CommandResult, ConfigItem, DiagFrame,
     InjectedFault, RigMode, RigState, StatusFrame, WheelSpeedFrame,
@@ -382,4 +383,49 @@ fn dbc_describes_exactly_the_codec_messages_and_no_signals_overlap() {
         other => panic!("{other:?}"),
     };
     assert_eq!((cycle(0x100), cycle(0x110), cycle(0x120)), (1, 10, 100));
+}
+
+/// The signal tables that the codec encodes and decodes with (`can::FRAMES`) are the DBC's
+/// signals: the same names, start bits, lengths, byte order, scales, offsets and signs,
+/// and no signal or message missing on either side.
+#[test]
+fn signal_tables_are_the_dbc() {
+    let dbc = dbc();
+    assert_eq!(dbc.messages.len(), can::FRAMES.len(), "messages");
+    for (id, table) in can::FRAMES {
+        let msg = dbc
+            .messages
+            .iter()
+            .find(|m| m.id == MessageId::Standard(id))
+            .unwrap_or_else(|| panic!("{id:#x} is not in hils.dbc"));
+        let mut theirs: Vec<&str> = msg.signals.iter().map(|s| s.name.as_str()).collect();
+        let mut ours: Vec<&str> = table.iter().map(|s| s.name).collect();
+        theirs.sort();
+        ours.sort();
+        assert_eq!(ours, theirs, "signals of {id:#x}");
+        for t in table {
+            let s = msg.signals.iter().find(|s| s.name == t.name).unwrap();
+            assert_eq!(s.byte_order, ByteOrder::LittleEndian, "{}", t.name);
+            assert_eq!(
+                (t.start as u64, t.len as u64),
+                (s.start_bit, s.size),
+                "{}: start, length",
+                t.name
+            );
+            assert!(
+                (t.scale as f64 - s.factor).abs() <= 1e-6 * s.factor.abs(),
+                "{}: scale {} vs {}",
+                t.name,
+                t.scale,
+                s.factor
+            );
+            assert_eq!(t.offset as f64, s.offset, "{}: offset", t.name);
+            assert_eq!(
+                t.signed,
+                s.value_type == ValueType::Signed,
+                "{}: sign",
+                t.name
+            );
+        }
+    }
 }

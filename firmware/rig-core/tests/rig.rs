@@ -2,8 +2,9 @@
 //! runs, outputs, schedules, the safe state and command handling.
 
 use embedded_can::{Frame, Id, StandardId};
-use hils_brake_unit::{BrakeDemand, ClosedLoop};
+use hils_brake_unit::BrakeDemand;
 use hils_plant::{BrakeInput, FrictionModel, Params, Plant, Rail};
+use hils_rig_core::Code;
 use hils_rig_core::can::{
     BrakeCommand, Calibration, ClassicFrame, Command, CommandFrame, CommandResult, ConfigItem,
     DiagFrame, ID_DIAG, ID_STATUS, ID_WHEEL_SPEED, InjectedFault, RigMode, RigState, StatusFrame,
@@ -14,6 +15,7 @@ use hils_rig_core::pulse::PulseRegisters;
 use hils_rig_core::rig::{CommandError, Faults, Rig, RigConfig};
 use hils_rig_core::sensor::{ADC_SEQUENCE_LEN, SensorFault, SensorKind};
 use hils_rig_core::telemetry::{TelemetryRecord, WSP_KNOWN};
+use hils_sil::ClosedLoop;
 
 type TestFrame = ClassicFrame;
 
@@ -51,13 +53,7 @@ impl MockBoard {
     fn records(&self) -> Vec<TelemetryRecord> {
         self.telemetry
             .iter()
-            .filter_map(|e| {
-                if let TelemetryEvent::Record(r) = e {
-                    Some(*r)
-                } else {
-                    None
-                }
-            })
+            .filter_map(TelemetryEvent::record)
             .collect()
     }
     fn frames_with(&self, id: u16) -> Vec<&(u64, TestFrame)> {
@@ -109,6 +105,17 @@ fn command(rig: &mut Rig, counter: u8, c: Command) -> Result<Command, CommandErr
 
 fn paper_start(friction: FrictionModel) -> Command {
     Command::paper_self_test(friction)
+}
+
+/// A rig-mode start (measured brake inputs) on the wet rail with Eq (2), no EB.
+fn rig_start(initial_speed_kmh: f32) -> Command {
+    Command::Start {
+        mode: RigMode::Rig,
+        rail: Rail::Wet,
+        friction: FrictionModel::Variable,
+        emergency: false,
+        initial_speed_kmh,
+    }
 }
 
 /// Counts a load cell shows for a clamp force with the default calibration (f64).
@@ -285,18 +292,7 @@ fn rig_mode_steps_the_plant_with_the_measured_clamp_forces() {
         load_cell_counts(force),
     ];
     io.adc_counts = Some(counts);
-    command(
-        &mut rig,
-        2,
-        Command::Start {
-            mode: RigMode::Rig,
-            rail: Rail::Wet,
-            friction: FrictionModel::Variable,
-            emergency: false,
-            initial_speed_kmh: 100.0,
-        },
-    )
-    .unwrap();
+    command(&mut rig, 2, rig_start(100.0)).unwrap();
     let mut plant = Plant::<f32>::new(&Params::default(), Rail::Wet, 100.0 / 3.6).unwrap();
     for _ in 0..20_000 {
         rig.step(&mut io);
@@ -335,13 +331,7 @@ fn latched_sensor_fault_puts_a_rig_run_in_the_safe_state() {
     let mut rig = Rig::new(RigConfig::nucleo_g474re());
     let mut io = MockBoard::new();
     io.adc_counts = Some([load_cell_counts(8000.0); 4]);
-    let start = Command::Start {
-        mode: RigMode::Rig,
-        rail: Rail::Wet,
-        friction: FrictionModel::Variable,
-        emergency: false,
-        initial_speed_kmh: 120.0,
-    };
+    let start = rig_start(120.0);
     command(&mut rig, 1, start).unwrap();
     for _ in 0..1000 {
         rig.step(&mut io);
@@ -475,18 +465,7 @@ fn stale_adc_stops_a_rig_run_after_ten_ticks() {
     let mut rig = Rig::new(RigConfig::nucleo_g474re());
     let mut io = MockBoard::new();
     io.adc_counts = Some([load_cell_counts(3000.0); 4]);
-    command(
-        &mut rig,
-        1,
-        Command::Start {
-            mode: RigMode::Rig,
-            rail: Rail::Wet,
-            friction: FrictionModel::Variable,
-            emergency: false,
-            initial_speed_kmh: 60.0,
-        },
-    )
-    .unwrap();
+    command(&mut rig, 1, rig_start(60.0)).unwrap();
     for _ in 0..100 {
         rig.step(&mut io);
     }

@@ -304,9 +304,9 @@ impl Prepared {
             None => {
                 notes.push(format!(
                     "no `rail` metadata: the baseline scenario's rail ({:?}) is used",
-                    baseline.scenario.paper_eb.rail
+                    Rail::default()
                 ));
-                (baseline.scenario.paper_eb.rail, false)
+                (Rail::default(), false)
             }
         };
         let r_w = baseline.vehicle.wheel_radius;

@@ -1,6 +1,7 @@
 //! Physics of the plant's parts against hand values and independent derivations:
 //! static loads, Polach identities (Eqs 9-12), Eq (2) against Table 1, Eq (1), the
-//! quasi-static axle-load transfer under braking, and the reference parameter file.
+//! quasi-static axle-load transfer under braking. (The reference parameter file is checked
+//! with the tools' loader in `host-tests/tests/param_file.rs`.)
 
 use hils_plant::contact::Polach;
 use hils_plant::friction::DiscPadFriction;
@@ -235,42 +236,4 @@ fn axle_load_transfer_matches_a_quasi_static_derivation() {
         reaction_share > 3_000.0,
         "brake reaction moves {reaction_share} N"
     );
-}
-
-#[test]
-fn reference_file_loads_and_equals_the_defaults() {
-    let path = host_tests::reference_parameters_path();
-    let loaded = hils::params_file::load_params(&path)
-        .unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
-    assert_eq!(loaded, Params::default());
-}
-
-#[test]
-fn parameter_files_with_bad_keys_or_values_are_refused_with_the_key_named() {
-    let path = host_tests::reference_parameters_path();
-    let text = std::fs::read_to_string(&path).unwrap();
-    // Misspelt key.
-    let bad = text.replace("bogie_mass = 2500.0", "bogie_mas = 2500.0");
-    let e = hils::params_file::parse_params(&bad, "variant")
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("bogie_mas"), "{e}");
-    // Value out of range.
-    let bad = text.replace("wheelset_mass = 850.0", "wheelset_mass = -850.0");
-    let e = hils::params_file::parse_params(&bad, "variant")
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("vehicle.wheelset_mass"), "{e}");
-    // Wrong type.
-    let bad = text.replace("model = \"variable\"", "model = \"sometimes\"");
-    let e = hils::params_file::parse_params(&bad, "variant")
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("sometimes") || e.contains("model"), "{e}");
-    // A variant with changed values loads and differs only there.
-    let variant = text.replace("mu_d0 = 0.38", "mu_d0 = 0.35");
-    let p = hils::params_file::parse_params(&variant, "variant").unwrap();
-    let mut expected = Params::default();
-    expected.friction.mu_d0 = 0.35;
-    assert_eq!(p, expected);
 }

@@ -1,113 +1,15 @@
-//! # hils-qemu: the plant on an emulated Cortex-M4F
-//!
-//! The emulator binary (`src/main.rs`, `cargo qemu`) runs the plant with the simulated brake
-//! unit ([`hils_brake_unit::ClosedLoop`] in f32) through the paper's emergency brake on QEMU's
-//! `mps2-an386` (Cortex-M4 with FPU), streams a decimated trajectory over semihosting with
-//! every f32 as its bit pattern, and measures instructions per plant step with SysTick under
-//! `-icount shift=0`. The host (`hils target-cost`, the `target_qemu` test) runs the same
-//! scenario in f32 and compares the trajectories bit for bit.
-//!
-//! This library is what both sides share, `no_std` and target independent, so that there is
-//! one copy of it:
-//! * [`EbScenario`]: the run (EB at t = 0, wet rail, 150 km/h, until 1 s after the stop),
-//!   with the same stop rule and recording as `hils simulate` (`tools/src/scenario.rs`);
-//! * [`TraceRow`]: what is recorded every [`RECORD_EVERY`] steps, and its text line
-//!   ([`TraceRow::encode`], [`TraceRow::decode`]);
-//! * the names of the cost lines the binary prints ([`PARTS`]).
-#![no_std]
-#![forbid(unsafe_code)]
+//! The emulated target's trace: what the emulator binary (`firmware/qemu`) streams every
+//! [`RECORD_EVERY`] steps of the paper scenario and the host compares bit for bit
+//! ([`TraceRow`], its text line [`TraceRow::encode`] / [`TraceRow::decode`]), and the names
+//! of the cost lines the binary prints ([`PARTS`]).
 
-use hils_brake_unit::{BrakeDemand, ClosedLoop, LoopError, UnitOutputs, Valve};
-use hils_plant::{FrictionModel, Outputs, Params, Real, WHEELSETS, WheelsetOutput};
+use hils_brake_unit::UnitOutputs;
+use hils_plant::{Outputs, WHEELSETS, WheelsetOutput};
+
+use crate::closed_loop::ClosedLoop;
 
 /// Record every this many plant steps: 10 ms at the 0.1 ms step.
 pub const RECORD_EVERY: u32 = 100;
-/// The run goes on this long after the stop, s (as `hils simulate`).
-pub const AFTER_STOP_S: f64 = 1.0;
-/// The run gives up this long after the EB command, s (as `hils simulate`).
-pub const MAX_TIME_S: f64 = 120.0;
-/// The vehicle has stopped when the carbody speed falls to this, m/s (as `hils simulate`).
-pub const STOP_SPEED_MPS: f64 = 0.01;
-
-/// The paper's emergency brake in closed loop: EB command at t = 0 from the scenario's
-/// initial speed on its rail (150 km/h, wet, in the reference parameters), stepped until
-/// [`AFTER_STOP_S`] after the carbody stops. The caller does the steps (so the target can
-/// time them) through [`EbScenario::advance`].
-#[derive(Clone, Debug)]
-pub struct EbScenario<F: Real> {
-    /// The loop being run (plant + simulated brake unit).
-    pub sim: ClosedLoop<F>,
-    stop_step: Option<u32>,
-    after_steps: u32,
-    max_steps: u32,
-}
-
-/// What [`EbScenario::advance`] says about the step just taken.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Advance {
-    /// Record this step (every [`RECORD_EVERY`] steps).
-    pub record: bool,
-    /// The run is over (this step was the last).
-    pub done: bool,
-}
-
-impl<F: Real> EbScenario<F> {
-    /// The scenario with the reference parameters and one friction model.
-    pub fn paper(friction: FrictionModel) -> Result<Self, LoopError> {
-        let mut params = Params::default();
-        params.friction.model = friction;
-        Self::new(&params)
-    }
-
-    /// The scenario with `params` (rail, initial speed and step from
-    /// `scenario.paper_eb`). The EB demand is set before the first step.
-    pub fn new(params: &Params) -> Result<Self, LoopError> {
-        let sc = &params.scenario.paper_eb;
-        let mut sim = ClosedLoop::new(params, sc.rail, F::of(sc.initial_speed_kmh / 3.6))?;
-        sim.set_demand(BrakeDemand::Emergency);
-        let dt = sc.step;
-        Ok(Self {
-            sim,
-            stop_step: None,
-            after_steps: libm::ceil(AFTER_STOP_S / dt) as u32,
-            max_steps: libm::ceil(MAX_TIME_S / dt) as u32,
-        })
-    }
-
-    /// Plant steps taken so far.
-    pub fn steps(&self) -> u32 {
-        self.sim.outputs().steps
-    }
-
-    /// The step at which the carbody speed first fell to [`STOP_SPEED_MPS`].
-    pub fn stop_step(&self) -> Option<u32> {
-        self.stop_step
-    }
-
-    /// Takes one step: `step` must advance `sim` by exactly one step (`sim.step()`, timed
-    /// or not). Returns whether to record it and whether the run is over. A `step` that
-    /// does not advance the plant ends the run (the plant's step counter is the clock).
-    pub fn advance(&mut self, step: impl FnOnce(&mut ClosedLoop<F>)) -> Advance {
-        let before = self.steps();
-        step(&mut self.sim);
-        let steps = self.steps();
-        if steps != before.wrapping_add(1) {
-            return Advance {
-                record: false,
-                done: true,
-            };
-        }
-        if self.stop_step.is_none() && self.sim.outputs().vehicle_speed.to_f64() <= STOP_SPEED_MPS {
-            self.stop_step = Some(steps);
-        }
-        let after_stop =
-            matches!(self.stop_step, Some(s) if steps >= s.saturating_add(self.after_steps));
-        Advance {
-            record: steps.is_multiple_of(RECORD_EVERY),
-            done: after_stop || steps >= self.max_steps,
-        }
-    }
-}
 
 /// Names of the scalar values of a [`TraceRow`], in order (units in the names).
 pub const SCALAR_COLUMNS: [&str; 7] = [
@@ -189,12 +91,7 @@ impl TraceRow {
                 values[k] = x.to_bits();
                 k += 1;
             }
-            let bits = match u.valves[j] {
-                Valve::Apply => 0,
-                Valve::Hold => 1,
-                Valve::Vent => 2,
-            };
-            valves |= bits << (2 * j);
+            valves |= (u8::from(u.valves[j]) as u32) << (2 * j);
         }
         Self {
             step: o.steps,

@@ -1,12 +1,15 @@
 //! Property tests: no input, in or out of range, makes a step panic or produce NaN/inf;
 //! out-of-range inputs are clamped and flagged; invalid parameters are refused.
 
-use hils_brake_unit::{BrakeDemand, BrakeUnit, ClosedLoop, UnitConfig};
+use hils_brake_unit::{BrakeDemand, BrakeUnit, UnitConfig};
 use hils_plant::{BrakeInput, Flags, Outputs, Params, Plant, Rail};
+use hils_sil::{ClosedLoop, ParamFile};
 use proptest::prelude::*;
 
 /// Every f64 parameter of the file, mutable (for random variants).
-fn fields(p: &mut Params) -> Vec<&mut f64> {
+fn fields(file: &mut ParamFile) -> Vec<&mut f64> {
+    let u = &mut file.brake_unit;
+    let p = &mut file.plant;
     let v = &mut p.vehicle;
     let s = &mut p.suspension;
     let c = &mut p.contact;
@@ -14,7 +17,6 @@ fn fields(p: &mut Params) -> Vec<&mut f64> {
     let f = &mut p.friction;
     let t = &mut p.thermal;
     let r = &mut p.resistance;
-    let u = &mut p.brake_unit;
     vec![
         &mut v.g,
         &mut v.carbody_mass,
@@ -73,10 +75,10 @@ fn fields(p: &mut Params) -> Vec<&mut f64> {
         &mut r.davis_a_n,
         &mut r.davis_b_n_per_mps,
         &mut r.davis_c_n_per_mps2,
-        &mut u.eb_deceleration,
-        &mut u.fill_time_constant,
-        &mut u.vent_time_constant,
-        &mut u.dead_time,
+        &mut u.eb_deceleration_mps2,
+        &mut u.fill_time_constant_s,
+        &mut u.vent_time_constant_s,
+        &mut u.dead_time_s,
     ]
 }
 
@@ -163,9 +165,9 @@ proptest! {
         clamp in 0.0f32..40_000.0,
         dry in any::<bool>(),
     ) {
-        let mut p = Params::default();
+        let mut file = ParamFile::default();
         {
-            let mut f = fields(&mut p);
+            let mut f = fields(&mut file);
             let n = f.len();
             for (i, raw, log_scale, use_raw) in &changes {
                 let x = &mut f[i % n];
@@ -173,11 +175,12 @@ proptest! {
             }
         }
         let rail = if dry { Rail::Dry } else { Rail::Wet };
-        match ClosedLoop::<f32>::new(&p, rail, v0) {
+        let p = file.plant;
+        match ClosedLoop::<f32>::from_file(&file, rail, v0) {
             Err(_) => {
                 // Refused: the validation must name a reason the values fail.
-                prop_assert!(p.validate().is_err() || Plant::<f32>::new(&p, rail, v0).is_err()
-                    || BrakeUnit::<f32>::new(&p, &UnitConfig::new(p.scenario.paper_eb.step)).is_err());
+                prop_assert!(file.validate().is_err() || Plant::<f32>::new(&p, rail, v0).is_err()
+                    || BrakeUnit::<f32>::new(&p, &file.unit_config()).is_err());
             }
             Ok(mut sim) => {
                 sim.set_demand(BrakeDemand::Emergency);
@@ -203,7 +206,7 @@ proptest! {
     ) {
         let p = Params::default();
         let mut unit = BrakeUnit::<f32>::new(&p, &UnitConfig::new(1e-4)).unwrap();
-        unit.set_demand(if eb { BrakeDemand::Emergency } else { BrakeDemand::Service(service) });
+        unit.set_demand(if eb { BrakeDemand::Emergency } else { BrakeDemand::Service { deceleration_mps2: service } });
         for s in &speeds {
             for _ in 0..100 {
                 let out = unit.step(s);

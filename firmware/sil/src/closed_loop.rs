@@ -1,15 +1,19 @@
 //! The plant in a closed loop with the simulated brake unit: what `hils simulate`, the
 //! emulated target and the board's self-test mode run (one copy of the wiring).
 
-use hils_plant::params::{ParamError, Params, Rail};
+use hils_brake_unit::{BrakeDemand, BrakeUnit, UnitConfig, UnitError, UnitOutputs, Valve};
+use hils_plant::params::{ParamError, Params, Rail, STEP_S};
 use hils_plant::{BrakeInput, Outputs, Plant, Real, WHEELSETS};
 
-use crate::unit::{BrakeDemand, BrakeUnit, UnitConfig, UnitError, UnitOutputs};
+use crate::params::ParamFile;
 
-/// Why a closed loop cannot be built.
+/// Why a closed loop cannot be built; keeps the cause.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum LoopError {
+    /// The plant refused its parameters.
     Params(ParamError),
+    /// The brake unit refused its configuration.
     Unit(UnitError),
 }
 
@@ -26,30 +30,39 @@ impl core::fmt::Display for LoopError {
 /// sensors would) and its cylinder pressures drive the plant's brakes through Eq (1).
 #[derive(Clone, Debug)]
 pub struct ClosedLoop<F: Real> {
+    /// The plant.
     pub plant: Plant<F>,
+    /// The simulated brake unit.
     pub unit: BrakeUnit<F>,
     unit_out: UnitOutputs<F>,
 }
 
 impl<F: Real> ClosedLoop<F> {
-    /// A loop at the initial speed (m/s) with the step of the parameters.
+    /// A loop of the reference brake unit at the real-time step ([`STEP_S`]), at the
+    /// initial speed (m/s).
     pub fn new(params: &Params, rail: Rail, initial_speed: F) -> Result<Self, LoopError> {
-        let dt = params.scenario.paper_eb.step;
-        Self::with_config(params, rail, initial_speed, &UnitConfig::new(dt))
+        Self::with_config(params, rail, initial_speed, &UnitConfig::new(STEP_S))
     }
 
+    /// A loop of a whole parameter file: its plant, its `[brake_unit]` and its scenario's
+    /// step.
+    pub fn from_file(file: &ParamFile, rail: Rail, initial_speed: F) -> Result<Self, LoopError> {
+        Self::with_config(&file.plant, rail, initial_speed, &file.unit_config())
+    }
+
+    /// A loop of a plant and a brake unit configuration (its step is the plant's).
     pub fn with_config(
         params: &Params,
         rail: Rail,
         initial_speed: F,
         config: &UnitConfig,
     ) -> Result<Self, LoopError> {
-        let plant =
-            Plant::with_step(params, rail, initial_speed, config.dt).map_err(LoopError::Params)?;
+        let plant = Plant::with_step(params, rail, initial_speed, config.step_s)
+            .map_err(LoopError::Params)?;
         let unit = BrakeUnit::new(params, config).map_err(LoopError::Unit)?;
         let unit_out = UnitOutputs {
             cylinder_pressure: [F::ZERO; WHEELSETS],
-            valves: [crate::Valve::Apply; WHEELSETS],
+            valves: [Valve::Apply; WHEELSETS],
             venting: [false; WHEELSETS],
             reference_speed: plant.outputs().vehicle_speed,
             demand_pressure: F::ZERO,
@@ -61,6 +74,7 @@ impl<F: Real> ClosedLoop<F> {
         })
     }
 
+    /// Sets the brake unit's demand.
     pub fn set_demand(&mut self, demand: BrakeDemand) {
         self.unit.set_demand(demand);
     }
@@ -76,10 +90,12 @@ impl<F: Real> ClosedLoop<F> {
         self.plant.step(&inputs)
     }
 
+    /// The plant's outputs after the last step.
     pub fn outputs(&self) -> &Outputs<F> {
         self.plant.outputs()
     }
 
+    /// The brake unit's outputs of the last step.
     pub fn unit_outputs(&self) -> &UnitOutputs<F> {
         &self.unit_out
     }

@@ -1,0 +1,180 @@
+//! The rig application: peripherals configured in thread mode, the rig handed to the step,
+//! the tasks spawned, then the step clock started.
+
+use defmt::{info, unwrap};
+use embassy_executor::Spawner;
+use embassy_stm32::Peripherals;
+use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, Exten, SampleTime};
+use embassy_stm32::can::CanConfigurator;
+use embassy_stm32::gpio::{Input, Level, Output, OutputType, Pull, Speed};
+use embassy_stm32::interrupt::{self, InterruptExt};
+use embassy_stm32::timer::low_level::Timer;
+use embassy_stm32::timer::simple_pwm::PwmPin;
+use embassy_stm32::triggers;
+use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_time::Timer as Delay;
+use hils_plant::FrictionModel;
+use hils_rig_core::Code;
+use hils_rig_core::can::{Command, RigState};
+use hils_rig_core::rig::{Rig, RigConfig};
+use hils_rig_core::sensor::ADC_SEQUENCE_LEN;
+
+use crate::Irqs;
+use crate::pulse::PulseOut;
+use crate::step::{
+    BoardIo, LOCAL_CMD, REAL_TIME, RIG_STATE, RealTime, WATCHDOG_TIMEOUT_US, Watchdog,
+    configure_step_timer,
+};
+
+/// ADC ring buffer: four sequences.
+const ADC_RING: usize = 4 * ADC_SEQUENCE_LEN;
+
+pub async fn run(spawner: Spawner, p: Peripherals) {
+    let rig_config = RigConfig::nucleo_g474re();
+    let silent = rig_config.pulse_timer.silent();
+
+    let ws1 = PulseOut::new(
+        Timer::new(p.TIM1),
+        PwmPin::new(p.PA8, OutputType::PushPull),
+        &silent,
+    );
+    let ws2 = PulseOut::new(
+        Timer::new(p.TIM4),
+        PwmPin::new(p.PB6, OutputType::PushPull),
+        &silent,
+    );
+    let ws3 = PulseOut::new(
+        Timer::new(p.TIM8),
+        PwmPin::new(p.PC6, OutputType::PushPull),
+        &silent,
+    );
+    let ws4 = PulseOut::new(
+        Timer::new(p.TIM20),
+        PwmPin::new(p.PB2, OutputType::PushPull),
+        &silent,
+    );
+
+    // ADC1: 16 ranks triggered by TIM3_CC4, circular DMA.
+    let adc = Adc::new(p.ADC1, AdcConfig::default());
+    let t = SampleTime::CYCLES24_5;
+    // Each input appears in four ranks. SAFETY: the copies of a pin only put it in analog
+    // mode and name its channel; nothing else uses these pins.
+    let (ch1, ch2, ch3, ch4) = (p.PA0, p.PA1, p.PC1, p.PC0);
+    let sequence: [_; ADC_SEQUENCE_LEN] = core::array::from_fn(|rank| unsafe {
+        let ch = match rank % 4 {
+            0 => ch1.clone_unchecked().degrade_adc(),
+            1 => ch2.clone_unchecked().degrade_adc(),
+            2 => ch3.clone_unchecked().degrade_adc(),
+            _ => ch4.clone_unchecked().degrade_adc(),
+        };
+        (ch, t)
+    });
+    let dma_buf = unwrap!(cortex_m::singleton!(: [u16; ADC_RING] = [0; ADC_RING]));
+    let mut adc = adc.into_ring_buffered(
+        p.DMA1_CH1,
+        dma_buf,
+        Irqs,
+        sequence.into_iter(),
+        triggers::TIM3_CC4,
+        Exten::RISING_EDGE,
+    );
+    adc.start();
+
+    let (tx, rx, props) =
+        crate::can_io::start(CanConfigurator::new(p.FDCAN1, p.PA11, p.PA12, Irqs));
+
+    // The rig is built here, in thread mode, and handed to the step.
+    let watchdog = Watchdog::new(IndependentWatchdog::new(p.IWDG, WATCHDOG_TIMEOUT_US));
+    unwrap!(
+        REAL_TIME
+            .publish_with(|| RealTime {
+                rig: Rig::new(rig_config),
+                io: BoardIo {
+                    adc,
+                    adc_buf: [0; ADC_SEQUENCE_LEN],
+                    ws1,
+                    ws2,
+                    ws3,
+                    ws4,
+                    tick: 0,
+                },
+                watchdog,
+                seen_drops: (0, 0),
+            })
+            .ok()
+    );
+
+    spawner.spawn(unwrap!(crate::can_io::can_tx_task(tx)));
+    spawner.spawn(unwrap!(crate::can_io::can_rx_task(rx)));
+    spawner.spawn(unwrap!(crate::can_io::bus_task(props)));
+    spawner.spawn(unwrap!(crate::telemetry::telemetry_task()));
+    spawner.spawn(unwrap!(crate::telemetry::step_events_task()));
+    spawner.spawn(unwrap!(button_task(Input::new(p.PC13, Pull::Down))));
+    spawner.spawn(unwrap!(led_task(Output::new(
+        p.PA5,
+        Level::Low,
+        Speed::Low
+    ))));
+
+    // TIM3: 10 kHz update interrupt (the step), CH4 at mid-period (the ADC trigger).
+    let step_timer = Timer::new(p.TIM3);
+    configure_step_timer(&step_timer);
+    step_timer.enable_update_interrupt(true);
+    // SAFETY: the handler touches only REAL_TIME (published above), the queues and atomics.
+    unsafe { interrupt::TIM3.enable() };
+    step_timer.start();
+    // The step timer runs for good: keep its clock on (Timer's drop would disable it).
+    core::mem::forget(step_timer);
+    info!(
+        "10 kHz step running, watchdog {=u32} us; press B1 for the self-test paper scenario",
+        WATCHDOG_TIMEOUT_US
+    );
+
+    if cfg!(feature = "selftest-autostart") {
+        LOCAL_CMD
+            .send(Command::paper_self_test(FrictionModel::Variable))
+            .await;
+    }
+}
+
+/// B1 starts the self-test paper scenario; each press alternates the friction law.
+#[embassy_executor::task]
+async fn button_task(button: Input<'static>) {
+    let mut variable = true;
+    let mut was_pressed = false;
+    loop {
+        Delay::after_millis(20).await;
+        let pressed = button.is_high();
+        if pressed && !was_pressed {
+            let friction = if variable {
+                FrictionModel::Variable
+            } else {
+                FrictionModel::Constant
+            };
+            info!(
+                "B1: self-test paper scenario, {} friction",
+                if variable { "variable" } else { "constant" }
+            );
+            LOCAL_CMD.send(Command::paper_self_test(friction)).await;
+            variable = !variable;
+        }
+        was_pressed = pressed;
+    }
+}
+
+/// LD2: on while running, blinking in fault, off otherwise.
+#[embassy_executor::task]
+async fn led_task(mut led: Output<'static>) {
+    let mut on = false;
+    loop {
+        Delay::after_millis(250).await;
+        match RigState::from_raw(RIG_STATE.load(core::sync::atomic::Ordering::Relaxed)) {
+            Some(RigState::Running) => led.set_high(),
+            Some(RigState::Fault) => {
+                on = !on;
+                led.set_level(if on { Level::High } else { Level::Low });
+            }
+            _ => led.set_low(),
+        }
+    }
+}

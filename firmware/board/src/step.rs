@@ -1,0 +1,215 @@
+//! The 10 kHz step: TIM3's update interrupt at [`crate::ceiling::STEP_PRIORITY`], running
+//! from CCM SRAM, owning the rig and its peripherals (handed over once from `main`), talking
+//! to the tasks only through ceiling-locked queues and atomics, feeding the watchdog.
+
+use core::sync::atomic::{AtomicU8, AtomicU32, Ordering};
+
+use cortex_m::peripheral::DWT;
+use cortex_m_rt::interrupt;
+use embassy_stm32::adc::RingBufferedAdc;
+use embassy_stm32::can::Frame;
+use embassy_stm32::interrupt::{self};
+use embassy_stm32::pac;
+use embassy_stm32::peripherals::{ADC1, IWDG, TIM1, TIM4, TIM8, TIM20};
+use embassy_stm32::wdg::IndependentWatchdog;
+use hils_rig_core::can::Command;
+use hils_rig_core::can_tx::QueuedFrame;
+use hils_rig_core::hw::{RigIo, TelemetryEvent};
+use hils_rig_core::pulse::PulseRegisters;
+use hils_rig_core::rig::{CommandError, Rig};
+use hils_rig_core::sensor::ADC_SEQUENCE_LEN;
+
+use crate::ceiling::StepChannel;
+use crate::handoff::Handoff;
+use crate::pulse::PulseOut;
+
+/// CPU and timer clock, Hz.
+pub const CPU_HZ: u32 = crate::clock::SYSCLK_HZ;
+/// Step period in timer counts (10 kHz at 170 MHz).
+pub const STEP_COUNTS: u16 = (CPU_HZ / hils_rig_core::STEP_RATE_HZ) as u16;
+/// Watchdog timeout, us: 100 steps. LSI 32 kHz nominal, /4, reload 79 (embassy wdg).
+pub const WATCHDOG_TIMEOUT_US: u32 = 10_000;
+
+/// Frames from the step to the CAN transmit task, with the tick they were made at.
+pub static CAN_TX: StepChannel<QueuedFrame<Frame>, 32> = StepChannel::new();
+/// `RIG_COMMAND` frames received, for the step.
+pub static CAN_RX: StepChannel<Frame, 8> = StepChannel::new();
+/// Local commands (user button, autostart), for the step.
+pub static LOCAL_CMD: StepChannel<Command, 2> = StepChannel::new();
+/// Telemetry events from the step to the logging task.
+pub static TELEMETRY: StepChannel<TelemetryEvent, 16> = StepChannel::new();
+/// What the step has to say, for a task to log (the step never logs).
+pub static STEP_EVENTS: StepChannel<StepEvent, 8> = StepChannel::new();
+
+/// Step ticks since the step started (0.1 ms, wrapping); written by the step only.
+pub static STEP_TICKS: AtomicU32 = AtomicU32::new(0);
+/// Bus state for the step: bit 0 error passive, bit 1 bus-off (now or seen); bits 8.. count.
+pub static BUS_STATE: AtomicU32 = AtomicU32::new(0);
+/// Rig state for the LED task.
+pub static RIG_STATE: AtomicU8 = AtomicU8::new(0);
+/// Frames dropped after they left the step's queue (stale, or cancelled in the controller).
+pub static CAN_TX_DROPS: AtomicU32 = AtomicU32::new(0);
+/// Telemetry events the RTT channel could not take.
+pub static TELEMETRY_DROPS: AtomicU32 = AtomicU32::new(0);
+
+/// Something the step reports to the log.
+#[derive(Clone, Copy, Debug, defmt::Format)]
+pub enum StepEvent {
+    CommandRejected(CommandError),
+    LocalCommandRejected(CommandError),
+}
+
+/// The peripherals the step uses.
+pub struct BoardIo {
+    pub adc: RingBufferedAdc<'static, ADC1>,
+    pub adc_buf: [u16; ADC_SEQUENCE_LEN],
+    pub ws1: PulseOut<TIM1>,
+    pub ws2: PulseOut<TIM4>,
+    pub ws3: PulseOut<TIM8>,
+    pub ws4: PulseOut<TIM20>,
+    /// The tick of the step in progress (stamps the queued frames).
+    pub tick: u32,
+}
+
+impl RigIo for BoardIo {
+    type Frame = Frame;
+
+    #[unsafe(link_section = ".ccm_text.board_io")]
+    fn adc_sequence(&mut self) -> Option<[u16; ADC_SEQUENCE_LEN]> {
+        let n = self.adc.read_latest(&mut self.adc_buf);
+        (n == ADC_SEQUENCE_LEN).then_some(self.adc_buf)
+    }
+
+    #[unsafe(link_section = ".ccm_text.board_io")]
+    fn set_pulse(&mut self, wheelset: usize, r: &PulseRegisters) {
+        match wheelset {
+            0 => self.ws1.write(r),
+            1 => self.ws2.write(r),
+            2 => self.ws3.write(r),
+            _ => self.ws4.write(r),
+        }
+    }
+
+    #[unsafe(link_section = ".ccm_text.board_io")]
+    fn queue_frame(&mut self, frame: Frame) -> bool {
+        CAN_TX
+            .try_send(QueuedFrame {
+                frame,
+                tick: self.tick,
+            })
+            .is_ok()
+    }
+
+    #[unsafe(link_section = ".ccm_text.board_io")]
+    fn queue_telemetry(&mut self, event: &TelemetryEvent) -> bool {
+        TELEMETRY.try_send(*event).is_ok()
+    }
+}
+
+/// The independent watchdog, started by the first step and fed by every step.
+pub struct Watchdog {
+    iwdg: IndependentWatchdog<'static, IWDG>,
+    started: bool,
+}
+
+impl Watchdog {
+    pub fn new(iwdg: IndependentWatchdog<'static, IWDG>) -> Self {
+        Self {
+            iwdg,
+            started: false,
+        }
+    }
+
+    #[inline(always)]
+    fn feed(&mut self) {
+        if !self.started {
+            self.iwdg.unleash();
+            self.started = true;
+        }
+        self.iwdg.pet();
+    }
+}
+
+/// Everything the step owns.
+pub struct RealTime {
+    pub rig: Rig,
+    pub io: BoardIo,
+    pub watchdog: Watchdog,
+    /// Drop counters as last passed to the rig.
+    pub seen_drops: (u32, u32),
+}
+
+/// The step's state, built in `main` and handed over once.
+pub static REAL_TIME: Handoff<RealTime, 1> = Handoff::new();
+
+/// The rig's step, one function for the interrupt and the bring-up timing (so both run
+/// the same code from the same memory).
+#[unsafe(link_section = ".ccm_text.rig_step")]
+#[inline(never)]
+pub fn rig_step<IO: RigIo>(rig: &mut Rig, io: &mut IO) {
+    rig.step(io);
+}
+
+#[interrupt]
+fn TIM3() {
+    step_tick();
+}
+
+/// One tick: commands, bus state, drops, the step, timing, watchdog.
+#[unsafe(link_section = ".ccm_text.step_tick")]
+#[inline(never)]
+fn step_tick() {
+    let entry = DWT::cycle_count();
+    pac::TIM3.sr().modify(|w| w.set_uif(false));
+    let tick = STEP_TICKS.load(Ordering::Relaxed).wrapping_add(1);
+    STEP_TICKS.store(tick, Ordering::Relaxed);
+    // SAFETY: this is the step interrupt, the only caller; the reference ends with the call.
+    let Some(rt) = (unsafe { REAL_TIME.step_value() }) else {
+        return;
+    };
+    take_commands(&mut rt.rig);
+    let bus = BUS_STATE.load(Ordering::Relaxed);
+    rt.rig.set_bus(bus & 1 != 0, bus & 2 != 0, bus >> 8);
+    let drops = (
+        TELEMETRY_DROPS.load(Ordering::Relaxed),
+        CAN_TX_DROPS.load(Ordering::Relaxed),
+    );
+    rt.rig
+        .note_downstream_drops(drops.0 != rt.seen_drops.0, drops.1 != rt.seen_drops.1);
+    rt.seen_drops = drops;
+    rt.io.tick = tick;
+    rig_step(&mut rt.rig, &mut rt.io);
+    RIG_STATE.store(rt.rig.state() as u8, Ordering::Relaxed);
+    let exit = DWT::cycle_count();
+    let tick_pending = pac::TIM3.sr().read().uif();
+    rt.rig.record_timing(entry, exit, tick_pending);
+    rt.watchdog.feed();
+}
+
+#[inline(always)]
+fn take_commands(rig: &mut Rig) {
+    while let Ok(frame) = CAN_RX.try_receive() {
+        if let Err(e) = rig.command_frame(&frame) {
+            let _ = STEP_EVENTS.try_send(StepEvent::CommandRejected(e));
+        }
+    }
+    while let Ok(c) = LOCAL_CMD.try_receive() {
+        if let Err(e) = rig.command(c) {
+            let _ = STEP_EVENTS.try_send(StepEvent::LocalCommandRejected(e));
+        }
+    }
+}
+
+/// TIM3 as the step clock: 170 MHz / 17 000 = 10 kHz; channel 4 in PWM mode 2 with
+/// CCR4 = half the period gives the ADC trigger (TIM3_CC4) at mid-period.
+pub fn configure_step_timer(
+    t: &embassy_stm32::timer::low_level::Timer<'_, embassy_stm32::peripherals::TIM3>,
+) {
+    use embassy_stm32::timer::Channel as TimChannel;
+    use embassy_stm32::timer::low_level::OutputCompareMode;
+    t.regs_core().psc().write_value(0);
+    t.set_max_compare_value(STEP_COUNTS - 1);
+    t.set_output_compare_mode(TimChannel::Ch4, OutputCompareMode::PwmMode2);
+    t.set_compare_value(TimChannel::Ch4, STEP_COUNTS / 2);
+    t.enable_channel(TimChannel::Ch4, true);
+}

@@ -1,0 +1,171 @@
+//! Stage 2 of reading, section 2 of the spec: a brake-dynamometer friction test.
+
+use std::path::PathBuf;
+
+use hils_sil::record::friction_test::{F_CLAMP, F_FRICTION, MU, T, T_DISC, V_FRICTION};
+
+use super::table::{MeasuredError, Metadata, Table, check_non_negative, check_time, require_all};
+
+/// A brake-dynamometer friction test (spec section 2): points of (friction speed, disc
+/// temperature rise, friction coefficient).
+#[derive(Clone, Debug, Default)]
+pub struct FrictionTest {
+    pub path: PathBuf,
+    pub metadata: Metadata,
+    /// Time, s, when the file is a time series.
+    pub t_s: Option<Vec<f64>>,
+    pub v_friction_mps: Vec<f64>,
+    pub t_disc_c: Vec<f64>,
+    /// mu (given, or f_friction / f_clamp).
+    pub mu: Vec<f64>,
+    /// 1-based data row of each kept point (for messages).
+    pub rows: Vec<usize>,
+    pub unknown_columns: Vec<String>,
+    /// What the reader skipped, and why.
+    pub notes: Vec<String>,
+    /// Rows skipped (not measured, or brake released).
+    pub skipped: usize,
+}
+
+/// Rows of a time series with a clamp force below this share of the file's largest clamp
+/// force are brake-released samples: mu is undefined there, they are skipped (counted).
+pub const RELEASED_SHARE: f64 = 0.05;
+
+pub(crate) fn from_table(table: Table) -> Result<FrictionTest, MeasuredError> {
+    let required = |c: hils_sil::record::Channel| table.required(c.name(0), "friction test");
+    table.require_rows()?;
+    let mut used = vec![false; table.header.len()];
+    let i_v = required(V_FRICTION)?;
+    let i_t = required(T_DISC)?;
+    used[i_v] = true;
+    used[i_t] = true;
+    let v = table.numeric(i_v)?;
+    check_non_negative(&table, i_v, &v, 0.3, "friction speed")?;
+    let temp = table.numeric(i_t)?;
+    let time = match table.index(T.name(0)) {
+        Some(i) => {
+            used[i] = true;
+            let t = table.numeric(i)?;
+            require_all(&table, i, &t)?;
+            check_time(&table, i, &t)?;
+            Some(t)
+        }
+        None => None,
+    };
+    enum MuSource {
+        Direct(Vec<f64>),
+        Forces(Vec<f64>, Vec<f64>),
+    }
+    let source = if let Some(i) = table.index(MU.name(0)) {
+        used[i] = true;
+        let mu = table.numeric(i)?;
+        if let Some(r) = mu.iter().position(|&m| m < 0.0 || m > 2.0) {
+            return Err(table.err(
+                table.rows[r].0,
+                r + 1,
+                "mu",
+                format!("friction coefficient {} outside [0, 2]", mu[r]),
+            ));
+        }
+        MuSource::Direct(mu)
+    } else {
+        let i_c = table.index(F_CLAMP.name(0));
+        let i_f = table.index(F_FRICTION.name(0));
+        match (i_c, i_f) {
+            (Some(i_c), Some(i_f)) => {
+                used[i_c] = true;
+                used[i_f] = true;
+                let c = table.numeric(i_c)?;
+                check_non_negative(&table, i_c, &c, 50.0, "clamp force")?;
+                let f = table.numeric(i_f)?;
+                MuSource::Forces(c, f)
+            }
+            _ => {
+                return Err(table.err(
+                    table.header_line,
+                    0,
+                    "mu",
+                    "required column is missing: `mu`, or both `f_clamp_n` and `f_friction_n`",
+                ));
+            }
+        }
+    };
+    let mut out = FrictionTest {
+        path: table.path.clone(),
+        metadata: table.metadata.clone(),
+        t_s: None,
+        unknown_columns: table
+            .header
+            .iter()
+            .zip(&used)
+            .filter(|(_, u)| !**u)
+            .map(|(h, _)| h.clone())
+            .collect(),
+        ..Default::default()
+    };
+    let mut kept_t = Vec::new();
+    let (mut empty, mut released) = (0usize, 0usize);
+    let clamp_max = match &source {
+        MuSource::Forces(c, _) => c
+            .iter()
+            .filter(|x| x.is_finite())
+            .fold(0.0f64, |m, &x| m.max(x)),
+        MuSource::Direct(_) => 0.0,
+    };
+    for r in 0..table.rows.len() {
+        let mu = match &source {
+            MuSource::Direct(mu) => mu[r],
+            MuSource::Forces(c, f) => {
+                if c[r].is_nan() || f[r].is_nan() {
+                    f64::NAN
+                } else if c[r] < RELEASED_SHARE * clamp_max || c[r] <= 0.0 {
+                    released += 1;
+                    continue;
+                } else {
+                    let mu = f[r] / c[r];
+                    if !(0.0..=2.0).contains(&mu) {
+                        return Err(table.err(
+                            table.rows[r].0,
+                            r + 1,
+                            "f_friction_n",
+                            format!(
+                                "friction coefficient f_friction / f_clamp = {mu:.4} outside [0, 2]"
+                            ),
+                        ));
+                    }
+                    mu
+                }
+            }
+        };
+        if mu.is_nan() || v[r].is_nan() || temp[r].is_nan() {
+            empty += 1;
+            continue;
+        }
+        out.v_friction_mps.push(v[r]);
+        out.t_disc_c.push(temp[r]);
+        out.mu.push(mu);
+        out.rows.push(r + 1);
+        if let Some(t) = &time {
+            kept_t.push(t[r]);
+        }
+    }
+    if empty > 0 {
+        out.notes.push(format!(
+            "{empty} row(s) skipped: a needed cell is empty (not measured)"
+        ));
+    }
+    if released > 0 {
+        out.notes.push(format!(
+            "{released} row(s) skipped: brake released (clamp force below {:.0} % of the largest, mu undefined)",
+            RELEASED_SHARE * 100.0
+        ));
+    }
+    out.skipped = empty + released;
+    if time.is_some() {
+        out.t_s = Some(kept_t);
+    }
+    if out.mu.is_empty() {
+        return Err(table.err(0, 0, "", "no usable friction points (every row skipped)"));
+    }
+    Ok(out)
+}

@@ -1,0 +1,294 @@
+//! Stage 2 of reading, section 1 of the spec: a braking run's log.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use hils_plant::{Rail, WHEELSETS};
+use hils_sil::record::Channel;
+use hils_sil::record::run_log::{
+    A_X, CMD, F_BRAKE, F_CLAMP, OMEGA, P_CYL, Q, T, T_DISC, V_REF, WSP,
+};
+
+use super::table::{MeasuredError, Metadata, Table, check_non_negative, check_time, require_all};
+
+/// One of the four wheelsets' values of a per-wheelset quantity; `None` when the column is
+/// absent. Values are `NaN` where a cell was empty (not measured at that sample).
+pub type PerWheelset = [Option<Vec<f64>>; 4];
+
+/// A braking run (spec section 1).
+#[derive(Clone, Debug, Default)]
+pub struct RunLog {
+    pub path: PathBuf,
+    pub metadata: Metadata,
+    /// Rail condition from the `rail` metadata (None when absent).
+    pub rail: Option<Rail>,
+    /// Time since the start of the log, s (strictly increasing).
+    pub t_s: Vec<f64>,
+    pub v_ref_mps: Vec<f64>,
+    pub omega_radps: [Vec<f64>; 4],
+    pub p_cyl_pa: PerWheelset,
+    pub f_clamp_n: PerWheelset,
+    pub f_brake_n: PerWheelset,
+    pub t_disc_c: PerWheelset,
+    pub q_n: PerWheelset,
+    pub wsp: PerWheelset,
+    pub a_x_mps2: Option<Vec<f64>>,
+    pub cmd: Option<Vec<String>>,
+    /// Columns the project does not use (kept by name, ignored).
+    pub unknown_columns: Vec<String>,
+    /// Empty cells per column (not measured at that sample).
+    pub missing: BTreeMap<String, usize>,
+    /// What the reader skipped or repaired, and why (empty: nothing).
+    pub notes: Vec<String>,
+}
+
+impl RunLog {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.t_s.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.t_s.is_empty()
+    }
+
+    /// File name for messages.
+    pub fn name(&self) -> String {
+        self.path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    }
+
+    /// Median sample interval, s.
+    pub fn median_interval_s(&self) -> f64 {
+        let mut d: Vec<f64> = self.t_s.windows(2).map(|w| w[1] - w[0]).collect();
+        if d.is_empty() {
+            return 0.0;
+        }
+        d.sort_by(f64::total_cmp);
+        d[d.len() / 2]
+    }
+}
+
+/// The spec section the run-log errors name.
+const KIND: &str = "run log";
+
+/// A per-wheelset channel's reading rule: the smallest noise band of its negative-value
+/// check (`floor`, with what the quantity is called), or none when it may be negative.
+struct Reading {
+    channel: Channel,
+    non_negative: Option<(f64, &'static str)>,
+}
+
+/// The optional per-wheelset channels, in the order of the schema.
+const OPTIONAL: [Reading; 6] = [
+    Reading {
+        channel: P_CYL,
+        non_negative: Some((5.0e3, "pressure")),
+    },
+    Reading {
+        channel: F_CLAMP,
+        non_negative: Some((200.0, "clamp force")),
+    },
+    Reading {
+        channel: F_BRAKE,
+        non_negative: None,
+    },
+    Reading {
+        channel: T_DISC,
+        non_negative: None,
+    },
+    Reading {
+        channel: Q,
+        non_negative: Some((1000.0, "axle load")),
+    },
+    Reading {
+        channel: WSP,
+        non_negative: None,
+    },
+];
+
+/// The columns taken so far and their empty-cell counts.
+struct Taken<'a> {
+    table: &'a Table,
+    used: Vec<bool>,
+    missing: BTreeMap<String, usize>,
+}
+
+impl<'a> Taken<'a> {
+    fn new(table: &'a Table) -> Self {
+        Self {
+            table,
+            used: vec![false; table.header.len()],
+            missing: BTreeMap::new(),
+        }
+    }
+
+    /// A numeric column, marked used, its empty cells counted.
+    fn take(&mut self, idx: usize) -> Result<Vec<f64>, MeasuredError> {
+        self.used[idx] = true;
+        let v = self.table.numeric(idx)?;
+        let n = v.iter().filter(|x| x.is_nan()).count();
+        if n > 0 {
+            self.missing.insert(self.table.header[idx].clone(), n);
+        }
+        Ok(v)
+    }
+
+    /// A required column of the run log.
+    fn required(&mut self, c: Channel, j: usize) -> Result<(usize, Vec<f64>), MeasuredError> {
+        let i = self.table.required(c.name(j), KIND)?;
+        Ok((i, self.take(i)?))
+    }
+
+    /// The four columns of an optional per-wheelset channel (those present).
+    fn per_wheelset(&mut self, r: &Reading) -> Result<PerWheelset, MeasuredError> {
+        let mut out: PerWheelset = Default::default();
+        for (j, slot) in out.iter_mut().enumerate() {
+            if let Some(i) = self.table.index(r.channel.name(j)) {
+                let v = self.take(i)?;
+                if let Some((floor, what)) = r.non_negative {
+                    check_non_negative(self.table, i, &v, floor, what)?;
+                }
+                *slot = Some(v);
+            }
+        }
+        Ok(out)
+    }
+
+    /// The columns nobody took, by name.
+    fn unknown(&self) -> Vec<String> {
+        self.table
+            .header
+            .iter()
+            .zip(&self.used)
+            .filter(|(_, u)| !**u)
+            .map(|(h, _)| h.clone())
+            .collect()
+    }
+}
+
+/// Every wheelset needs a brake input (its clamp force or its cylinder pressure); WSP
+/// flags are 0/1.
+fn check_inputs(
+    table: &Table,
+    p_cyl: &PerWheelset,
+    f_clamp: &PerWheelset,
+    wsp: &PerWheelset,
+) -> Result<(), MeasuredError> {
+    for j in 0..WHEELSETS {
+        if p_cyl[j].is_none() && f_clamp[j].is_none() {
+            return Err(table.err(
+                table.header_line,
+                0,
+                &format!("{} or {}", P_CYL.name(j), F_CLAMP.name(j)),
+                "required column is missing: wheelset's brake input (cylinder pressure or clamp force)",
+            ));
+        }
+    }
+    for j in 0..WHEELSETS {
+        if let Some(w) = &wsp[j] {
+            if let Some(r) = w
+                .iter()
+                .position(|&x| !(x.is_nan() || x == 0.0 || x == 1.0))
+            {
+                let idx = table.index(WSP.name(j)).unwrap_or(0);
+                return Err(table.err(
+                    table.rows[r].0,
+                    r + 1,
+                    &table.header[idx],
+                    format!("`{}` is not 0 or 1", w[r]),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The `rail` metadata (None when absent; an error when neither wet nor dry).
+fn rail_of(table: &Table) -> Result<Option<Rail>, MeasuredError> {
+    match table.metadata.get("rail") {
+        None => Ok(None),
+        Some(r) => match r.trim().to_ascii_lowercase().as_str() {
+            "wet" => Ok(Some(Rail::Wet)),
+            "dry" => Ok(Some(Rail::Dry)),
+            other => Err(table.err(
+                0,
+                0,
+                "",
+                format!("metadata `rail: {other}`: must be `wet` or `dry`"),
+            )),
+        },
+    }
+}
+
+/// A run log from its table.
+pub(crate) fn from_table(table: Table) -> Result<RunLog, MeasuredError> {
+    table.require_rows()?;
+    let mut taken = Taken::new(&table);
+    let (i_t, t_s) = taken.required(T, 0)?;
+    require_all(&table, i_t, &t_s)?;
+    check_time(&table, i_t, &t_s)?;
+    let (i_v, v_ref_mps) = taken.required(V_REF, 0)?;
+    check_non_negative(&table, i_v, &v_ref_mps, 0.3, "speed")?;
+    let mut omega: [Vec<f64>; WHEELSETS] = Default::default();
+    for (j, slot) in omega.iter_mut().enumerate() {
+        let (i, v) = taken.required(OMEGA, j)?;
+        check_non_negative(&table, i, &v, 0.7, "wheel speed")?;
+        *slot = v;
+    }
+    let [p_cyl, f_clamp, f_brake, t_disc, q, wsp_reading] = &OPTIONAL;
+    let p_cyl_pa = taken.per_wheelset(p_cyl)?;
+    let f_clamp_n = taken.per_wheelset(f_clamp)?;
+    let f_brake_n = taken.per_wheelset(f_brake)?;
+    let t_disc_c = taken.per_wheelset(t_disc)?;
+    let q_n = taken.per_wheelset(q)?;
+    let wsp = taken.per_wheelset(wsp_reading)?;
+    check_inputs(&table, &p_cyl_pa, &f_clamp_n, &wsp)?;
+    let a_x_mps2 = match table.index(A_X.name(0)) {
+        Some(i) => Some(taken.take(i)?),
+        None => None,
+    };
+    let cmd = table.index(CMD.name(0)).map(|i| {
+        taken.used[i] = true;
+        table
+            .rows
+            .iter()
+            .map(|(_, c)| c[i].trim().to_string())
+            .collect()
+    });
+    let unknown_columns = taken.unknown();
+    let missing = taken.missing;
+    let rail = rail_of(&table)?;
+    let path = table.path.clone();
+    table.metadata.number("initial_speed_kmh", &path)?;
+    table.metadata.number("eb_command_s", &path)?;
+    let notes = missing
+        .iter()
+        .map(|(col, n)| {
+            format!(
+                "{col}: {n} empty cell(s) (not measured at those samples; left out, not invented)"
+            )
+        })
+        .collect();
+    Ok(RunLog {
+        path,
+        metadata: table.metadata,
+        rail,
+        t_s,
+        v_ref_mps,
+        omega_radps: omega,
+        p_cyl_pa,
+        f_clamp_n,
+        f_brake_n,
+        t_disc_c,
+        q_n,
+        wsp,
+        a_x_mps2,
+        cmd,
+        unknown_columns,
+        missing,
+        notes,
+    })
+}

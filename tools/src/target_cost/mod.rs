@@ -1,0 +1,207 @@
+//! `hils target-cost`: the plant on the emulated Cortex-M4F, as a chain of stages that
+//! each return a value:
+//!
+//! 1. [`build`]: build the emulator binary (or take `--elf`) -> its path;
+//! 2. [`emulator`]: run it in QEMU -> what it printed;
+//! 3. [`parse`]: parse that -> [`EmulatorOutput`];
+//! 4. [`compare`]: the host's f32 run against the target's, bit for bit -> [`Comparison`];
+//! 5. [`fidelity`]: the f32 run against the f64 reference -> [`Fidelity`];
+//! 6. [`evaluate`]: the figures -> [`TargetCost`];
+//! 7. [`report`]: the text report (or JSON).
+//!
+//! Builds the emulator binary (`firmware/qemu`, `cargo qemu`) unless `--elf` names one,
+//! runs it in QEMU (`-machine mps2-an386 -cpu cortex-m4 -icount shift=0`, semihosting),
+//! and reads what it prints (see `firmware/qemu/src/main.rs`): the SysTick calibration,
+//! instructions per plant step (mean, maximum, percentiles; per part) and the trajectory of
+//! the paper's EB for both disc-pad friction models, every f32 as its bit pattern. The same
+//! scenario then runs on the host in f32 ([`host_trace`]) and every recorded value is
+//! compared bit for bit ([`compare`]); the host run is also checked against what
+//! `hils simulate` records ([`check_against_simulate`]). Finally the f32 run is compared
+//! with the f64 reference ([`fidelity`]): the math comparison of docs/target.md.
+//!
+//! The math implementation is the one `hils_plant::math` was compiled with; the emulator is
+//! built with the same one, so `cargo run -p hils --features hils-plant/math-libm --
+//! target-cost` measures the libm variant, and so on.
+
+pub mod build;
+pub mod compare;
+pub mod emulator;
+pub mod fidelity;
+pub mod parse;
+pub mod report;
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, anyhow, bail};
+use clap::Args;
+use hils_plant::FrictionModel;
+use serde::Serialize;
+
+pub use build::{build_elf, emulator_features, workspace_root};
+pub use compare::{
+    Comparison, Mismatch, check_against_simulate, column_names, compare, host_trace,
+};
+pub use emulator::run_emulator;
+use fidelity::friction_name;
+pub use fidelity::{Fidelity, RunFigures, fidelity};
+pub use parse::{
+    CalibrationPoint, EmulatorOutput, FunctionCost, PartCost, TargetRun, parse_output,
+};
+pub use report::report;
+
+/// Targets of the issue: instructions per full plant step.
+pub const TARGET_MEAN: f64 = 2500.0;
+pub const TARGET_MAX: u32 = 3000;
+
+/// Arguments of `hils target-cost`.
+#[derive(Args, Debug, Clone)]
+pub struct TargetCostArgs {
+    /// Print one JSON object instead of the report.
+    #[arg(long)]
+    pub json: bool,
+    /// Emulator binary to run (default: build it with cargo, `cargo qemu`).
+    #[arg(long)]
+    pub elf: Option<PathBuf>,
+    /// QEMU system emulator for Arm.
+    #[arg(long, default_value = "qemu-system-arm")]
+    pub qemu: String,
+    /// Give up on the emulator after this many seconds.
+    #[arg(long, default_value_t = 900)]
+    pub timeout_s: u64,
+    /// Also save the emulator's raw output (trajectory lines included) to this file.
+    #[arg(long)]
+    pub save_output: Option<PathBuf>,
+}
+
+/// The figures of `hils target-cost --json`.
+#[derive(Clone, Debug, Serialize)]
+pub struct TargetCost {
+    /// Mean instructions per full plant step (`Plant::step`): the larger of the two
+    /// friction models' means over the scenario.
+    pub instructions_mean: f64,
+    /// Largest instructions of one plant step over both runs.
+    pub instructions_max: u32,
+    /// Host f32 and emulated target trajectories equal bit for bit, both frictions.
+    pub bit_identical: bool,
+    pub target_mean: f64,
+    pub target_max: u32,
+    pub within_targets: bool,
+    pub math: String,
+    pub machine: &'static str,
+    pub instructions_per_systick_tick: u32,
+    /// Largest |measured - known| over the calibration loops, instructions.
+    pub calibration_max_error: u32,
+    pub frictions: Vec<FrictionCost>,
+    pub functions: Vec<FunctionCost>,
+    pub fidelity: Vec<Fidelity>,
+    pub emulator_wall_s: f64,
+}
+
+/// One friction model's figures.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FrictionCost {
+    pub friction: String,
+    pub steps: u32,
+    pub stop_step: Option<u32>,
+    /// Per part (`hils_sil::trace::PARTS`).
+    pub parts: std::collections::BTreeMap<String, PartCost>,
+    pub comparison: Comparison,
+    /// Values checked against `hils simulate`'s samples of the same run.
+    pub simulate_values_checked: usize,
+}
+
+/// Runs the stages: build (or take) the ELF, emulate, then [`evaluate`].
+pub fn measure(args: &TargetCostArgs) -> Result<TargetCost> {
+    let elf = match &args.elf {
+        Some(p) => p.clone(),
+        None => build_elf()?,
+    };
+    let started = Instant::now();
+    let text = run_emulator(&args.qemu, &elf, Duration::from_secs(args.timeout_s))?;
+    let wall = started.elapsed().as_secs_f64();
+    if let Some(path) = &args.save_output {
+        std::fs::write(path, &text).with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    evaluate(&text, wall)
+}
+
+/// The figures from the emulator's output: parse, compare each friction model's run with
+/// the host, fidelity, totals.
+pub fn evaluate(text: &str, emulator_wall_s: f64) -> Result<TargetCost> {
+    let out = parse_output(text)?;
+    if out.math != hils_plant::math::IMPLEMENTATION {
+        bail!(
+            "the emulator computes with `{}` but this program with `{}`: build both alike",
+            out.math,
+            hils_plant::math::IMPLEMENTATION
+        );
+    }
+    let mut frictions = Vec::new();
+    let mut fid = Vec::new();
+    for friction in [FrictionModel::Variable, FrictionModel::Constant] {
+        frictions.push(friction_cost(&out, friction)?);
+        fid.push(fidelity(friction)?);
+    }
+    let step_costs: Vec<PartCost> = out
+        .runs
+        .iter()
+        .map(|r| {
+            r.part("step")
+                .copied()
+                .ok_or_else(|| anyhow!("no `step` cost line"))
+        })
+        .collect::<Result<_>>()?;
+    let instructions_mean = step_costs.iter().map(|c| c.mean).fold(0.0, f64::max);
+    let instructions_max = step_costs.iter().map(|c| c.max).max().unwrap_or(0);
+    let calibration_max_error = out
+        .calibration
+        .iter()
+        .map(|c| c.measured.abs_diff(c.expected))
+        .max()
+        .unwrap_or(0);
+    Ok(TargetCost {
+        instructions_mean,
+        instructions_max,
+        bit_identical: frictions.iter().all(|f| f.comparison.identical),
+        target_mean: TARGET_MEAN,
+        target_max: TARGET_MAX,
+        within_targets: instructions_mean <= TARGET_MEAN && instructions_max <= TARGET_MAX,
+        math: out.math.clone(),
+        machine: "QEMU mps2-an386 (Cortex-M4F), -icount shift=0",
+        instructions_per_systick_tick: out.instructions_per_tick,
+        calibration_max_error,
+        frictions,
+        functions: out.functions.clone(),
+        fidelity: fid,
+        emulator_wall_s,
+    })
+}
+
+/// One friction model's costs and comparisons.
+fn friction_cost(out: &EmulatorOutput, friction: FrictionModel) -> Result<FrictionCost> {
+    let name = friction_name(friction);
+    let run = out
+        .run(name)
+        .ok_or_else(|| anyhow!("the emulator output has no {name} friction run"))?;
+    let (host_rows, _, _) = host_trace(friction)?;
+    Ok(FrictionCost {
+        friction: name.to_string(),
+        steps: run.steps,
+        stop_step: run.stop_step,
+        parts: run.parts.iter().cloned().collect(),
+        comparison: compare(name, &run.rows, &host_rows),
+        simulate_values_checked: check_against_simulate(friction, &host_rows)?,
+    })
+}
+
+/// `hils target-cost`.
+pub fn main(args: TargetCostArgs) -> Result<()> {
+    let c = measure(&args)?;
+    if args.json {
+        println!("{}", serde_json::to_string(&c)?);
+    } else {
+        print!("{}", report(&c));
+    }
+    Ok(())
+}
