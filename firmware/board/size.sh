@@ -13,7 +13,7 @@ fi
 # Flash: everything loaded from flash (vector table, code, read-only data, the load images
 # of .data and of the step code that runs from CCM SRAM).
 # Static RAM: .data + .bss + .uninit (the stack is the rest of the 96 KiB SRAM1+2).
-# CCM SRAM: the step code copied there at reset (memory.x; 32 KiB).
+# CCM SRAM: the step code copied there at reset (ccm.x; 32 KiB).
 "$size_tool" -A "$elf" | awk -v elf="$elf" '
     $1 == ".vector_table" || $1 == ".text" || $1 == ".rodata" || $1 == ".gnu.sgstubs" { flash += $2 }
     $1 == ".ccmram_text" { flash += $2; ccm += $2 }
@@ -28,7 +28,7 @@ fi
         print "  within budget"
     }'
 
-# Step placement (memory.x): the step interrupt runs from CCM SRAM, masks no interrupt
+# Step placement (ccm.x): the step interrupt runs from CCM SRAM, masks no interrupt
 # globally (no CPSID in CCM code: its critical sections are BASEPRI ceilings), and leaves
 # CCM only for cold paths (panics, defmt, the construction of a run).
 objdump_tool="$(command -v llvm-objdump || command -v arm-none-eabi-objdump || true)"
@@ -42,7 +42,7 @@ if [ -n "$objdump_tool" ] && [ -n "$nm_tool" ]; then
         "$tim3" "$cpsid" "$(printf '%s' "$hot_exits" | grep -c . || true)"
     if [ "${tim3:0:2}" != "10" ] || [ "$cpsid" != "0" ] || [ -n "$hot_exits" ]; then
         printf '%s\n' "$hot_exits"
-        echo "  STEP PLACEMENT BROKEN (see memory.x)"
+        echo "  STEP PLACEMENT BROKEN (see firmware/board/ccm.x)"
         exit 1
     fi
 fi

@@ -3,3 +3,7 @@
 //! netduinoplus2 machine (STM32F405: 1 MiB flash at 0x0800_0000, 128 KiB SRAM).
 
 include!("../link-stm32.rs");
+
+fn main() {
+    link_stm32();
+}

@@ -1,4 +1,4 @@
-//! The step's code in CCM SRAM (see `memory.x`): copied from its flash load image before
+//! The step's code in CCM SRAM (see `firmware/board/ccm.x`): copied from its flash load image before
 //! anything runs, then write-protected.
 //!
 //! Why CCM rather than flash with prefetch and the ART caches alone: at 170 MHz flash needs
@@ -22,7 +22,7 @@ unsafe extern "C" {
 // cortex-m-rt's Reset calls `__pre_init` before it initialises RAM (cortex-m-rt 0.7.7
 // lib.rs: `bl __pre_init`), and asks for it in assembly: no Rust code, no memcpy (which
 // may itself live in CCM), runs before the copy. Word copy; the section is 8-byte aligned
-// and padded (memory.x), so every word of it is written before it is fetched (CCM SRAM
+// and padded (ccm.x), so every word of it is written before it is fetched (CCM SRAM
 // parity, when enabled by the SRAM_PE option bit, is computed on write).
 core::arch::global_asm!(
     ".section .text.__pre_init, \"ax\"",
