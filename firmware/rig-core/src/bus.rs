@@ -1,18 +1,25 @@
 //! CAN bus supervision: error-passive and bus-off are detected, recovered from and reported.
 //!
-//! The board polls the controller's protocol status (FDCAN `PSR`: bus-off and
-//! error-passive bits; `ECR`: error counters) every 10 ms and feeds it to
-//! [`BusMonitor::poll`]. Recovery from bus-off is the CAN standard's: the controller leaves
-//! bus-off after 128 x 11 recessive bits (2.8 ms at 500 kbit/s once the bus is idle); the
-//! board starts it at once (FDCAN automatic bus-off recovery: `CCCR.INIT` cleared in the
-//! interrupt). If the controller is still bus-off after [`BusMonitor::RESTART_AFTER_MS`]
-//! (nobody acknowledges, e.g. the cable is off), the monitor asks the board to restart the
-//! controller ([`BusAction::Restart`]) and keeps asking at that interval. Error passive
-//! needs no action: the controller goes on sending and returns to error active by itself.
+//! **Counting.** The FDCAN interrupt (`IR.BO`, bus-off status changed) counts every entry
+//! into bus-off as it happens; the board passes that total to [`BusMonitor::note_irq_bus_offs`],
+//! so an episode shorter than the 10 ms poll is counted too. The board also polls the
+//! protocol status (FDCAN `PSR`: bus-off and error-passive bits; `ECR`: error counters)
+//! every 10 ms and feeds it to [`BusMonitor::poll`] for the mode, the log and the recovery.
+//!
+//! **Recovery with backoff.** Automatic recovery is off: the controller stays bus-off
+//! (`CCCR.INIT` set by the hardware) until the monitor asks for a restart
+//! ([`BusAction::Restart`]: the board clears `CCCR.INIT`, after which the controller waits
+//! 128 x 11 recessive bits, 2.8 ms at 500 kbit/s, before it joins the bus again). The first
+//! restart comes [`BusMonitor::BACKOFF_FIRST_MS`] after the bus-off, each further one of the
+//! same episode after twice the delay before, up to [`BusMonitor::RESTART_AFTER_MS`]: a
+//! controller that keeps going bus-off (wrong bit rate, short) disturbs the bus less and
+//! less often. Error passive needs no action: the controller goes on sending and returns to
+//! error active by itself.
 //!
 //! Reported: the mode now (fault flags [`crate::rig::Faults::CAN_ERROR_PASSIVE`],
 //! [`crate::rig::Faults::CAN_BUS_OFF`]), a sticky "bus-off seen" flag until faults are
-//! cleared, and the count of bus-off events (in `RIG_DIAG`).
+//! cleared ([`BusMonitor::clear`], refused while bus-off), and the count of bus-off events
+//! (in `RIG_DIAG`).
 
 /// Error state of the controller.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -69,11 +76,21 @@ pub struct BusMonitor {
     pub restarts: u32,
     /// A bus-off happened since faults were last cleared.
     pub bus_off_seen: bool,
+    /// Restarts asked for in the present bus-off episode (sets the backoff).
+    attempts: u32,
+    /// Bus-off entries the interrupt counted since power-up.
+    irq_total_count: u32,
+    /// Bus-off entries the polls saw since power-up.
+    poll_count: u32,
+    /// The interrupt's bus-off count at the last [`BusMonitor::note_irq_bus_offs`].
+    irq_seen: u32,
 }
 
 impl BusMonitor {
-    /// Bus-off this long (ms) -> restart the controller.
+    /// Longest delay between restarts of one bus-off episode, ms.
     pub const RESTART_AFTER_MS: u32 = 1000;
+    /// Delay of the first restart after a bus-off, ms (one poll).
+    pub const BACKOFF_FIRST_MS: u32 = 10;
 
     pub fn new() -> Self {
         Self::default()
@@ -81,6 +98,27 @@ impl BusMonitor {
 
     pub fn mode(&self) -> BusMode {
         self.mode
+    }
+
+    /// Takes the interrupt's running count of bus-off entries (wrapping): episodes the
+    /// polls missed are counted and set "bus-off seen".
+    pub fn note_irq_bus_offs(&mut self, irq_total: u32) {
+        let new = irq_total.wrapping_sub(self.irq_seen);
+        self.irq_seen = irq_total;
+        if new > 0 {
+            self.bus_off_seen = true;
+            // The polls count the entries they see; the interrupt sees all of them.
+            self.irq_total_count = self.irq_total_count.saturating_add(new);
+            self.bus_off_count = self.poll_count.max(self.irq_total_count);
+        }
+    }
+
+    /// Delay before the next restart of this episode, ms.
+    pub fn backoff_ms(&self) -> u32 {
+        Self::BACKOFF_FIRST_MS
+            .checked_shl(self.attempts)
+            .unwrap_or(u32::MAX)
+            .min(Self::RESTART_AFTER_MS)
     }
 
     /// Takes a poll at `now_ms` (a wrapping millisecond clock).
@@ -91,10 +129,12 @@ impl BusMonitor {
         match (before, status.mode) {
             (BusMode::BusOff, BusMode::BusOff) => {}
             (_, BusMode::BusOff) => {
-                self.bus_off_count = self.bus_off_count.saturating_add(1);
+                self.poll_count = self.poll_count.saturating_add(1);
+                self.bus_off_count = self.poll_count.max(self.irq_total_count);
                 self.bus_off_seen = true;
                 self.bus_off_since_ms = Some(now_ms);
                 self.last_restart_ms = now_ms;
+                self.attempts = 0;
                 event = Some(BusEvent::WentBusOff);
             }
             (BusMode::ErrorActive, BusMode::ErrorPassive) => {
@@ -117,9 +157,10 @@ impl BusMonitor {
         }
         let mut action = BusAction::None;
         if status.mode == BusMode::BusOff
-            && now_ms.wrapping_sub(self.last_restart_ms) >= Self::RESTART_AFTER_MS
+            && now_ms.wrapping_sub(self.last_restart_ms) >= self.backoff_ms()
         {
             self.last_restart_ms = now_ms;
+            self.attempts = self.attempts.saturating_add(1);
             self.restarts = self.restarts.saturating_add(1);
             action = BusAction::Restart;
         }
@@ -186,22 +227,49 @@ mod tests {
     }
 
     #[test]
-    fn restart_when_bus_off_persists_and_again_each_second() {
+    fn restarts_back_off_from_10_ms_to_each_second() {
         let mut m = BusMonitor::new();
         m.poll(st(BusMode::BusOff), 5000);
-        let mut restarts = 0;
-        for t in (5010..8100).step_by(10) {
+        let mut at = std::vec::Vec::new();
+        for t in (5010..8300).step_by(10) {
             if m.poll(st(BusMode::BusOff), t).1 == BusAction::Restart {
-                restarts += 1;
+                at.push(t);
             }
         }
-        // At 6000, 7000 and 8000 ms.
-        assert_eq!(restarts, 3);
+        // Delays 10, 20, 40, ... 640 ms, then 1000 ms (independent list).
+        assert_eq!(at, [5010, 5030, 5070, 5150, 5310, 5630, 6270, 7270, 8270]);
         assert_eq!(m.bus_off_count, 1);
+        // A new episode starts the backoff again.
+        m.poll(st(BusMode::ErrorActive), 8280);
+        m.poll(st(BusMode::BusOff), 8290);
+        assert_eq!(m.poll(st(BusMode::BusOff), 8300).1, BusAction::Restart);
+        assert_eq!(m.bus_off_count, 2);
         // The millisecond clock may wrap.
         let mut m = BusMonitor::new();
-        m.poll(st(BusMode::BusOff), u32::MAX - 100);
-        assert_eq!(m.poll(st(BusMode::BusOff), 898).1, BusAction::None);
-        assert_eq!(m.poll(st(BusMode::BusOff), 899).1, BusAction::Restart);
+        m.poll(st(BusMode::BusOff), u32::MAX - 5);
+        assert_eq!(m.poll(st(BusMode::BusOff), 3).1, BusAction::None);
+        assert_eq!(m.poll(st(BusMode::BusOff), 4).1, BusAction::Restart);
+    }
+
+    #[test]
+    fn a_bus_off_shorter_than_the_poll_is_counted_from_the_interrupt() {
+        let mut m = BusMonitor::new();
+        m.poll(st(BusMode::ErrorActive), 0);
+        // Two episodes of 3 ms between polls: the polls never see bus-off.
+        m.note_irq_bus_offs(2);
+        m.poll(st(BusMode::ErrorActive), 10);
+        assert_eq!((m.bus_off_count, m.bus_off_seen), (2, true));
+        // One seen by both the interrupt and the poll is counted once.
+        m.note_irq_bus_offs(3);
+        m.poll(st(BusMode::BusOff), 20);
+        assert_eq!(m.bus_off_count, 3);
+        m.poll(st(BusMode::ErrorActive), 30);
+        m.clear();
+        assert!(!m.bus_off_seen);
+        // The interrupt's counter wraps.
+        let mut m = BusMonitor::new();
+        m.note_irq_bus_offs(u32::MAX);
+        m.note_irq_bus_offs(1);
+        assert_eq!(m.bus_off_count, u32::MAX);
     }
 }

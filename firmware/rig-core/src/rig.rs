@@ -214,7 +214,8 @@ pub struct Rig {
     last_command_counter: Option<u8>,
     last_result: CommandResult,
     stale_ticks: u32,
-    last_adc: [u16; crate::sensor::ADC_SEQUENCE_LEN],
+    /// `ClearFaults` asked the bus supervision to clear its sticky bus-off (board).
+    bus_clear_requested: bool,
     counters: [u8; 2],
     diag_window: DiagWindow,
     wheel_speed_kmh: [Option<f32>; WHEELSETS],
@@ -251,7 +252,7 @@ impl Rig {
             last_command_counter: None,
             last_result: CommandResult::None,
             stale_ticks: 0,
-            last_adc: [0; crate::sensor::ADC_SEQUENCE_LEN],
+            bus_clear_requested: false,
             counters: [0; 2],
             diag_window: DiagWindow::default(),
             wheel_speed_kmh: [None; WHEELSETS],
@@ -319,6 +320,13 @@ impl Rig {
             0
         }) | (if bus_off { Faults::CAN_BUS_OFF } else { 0 });
         self.bus_off_count = bus_off_count.min(255) as u8;
+    }
+
+    /// Whether `ClearFaults` asked since the last call that the bus supervision clear its
+    /// sticky bus-off (the board then calls `BusMonitor::clear`, which refuses while the
+    /// controller is bus-off, and passes the result back through [`Rig::set_bus`]).
+    pub fn take_bus_clear(&mut self) -> bool {
+        core::mem::take(&mut self.bus_clear_requested)
     }
 
     /// Drops the board counted downstream of the step's queues: telemetry the RTT channel
@@ -500,9 +508,12 @@ impl Rig {
                 for s in &mut self.sensors {
                     all_clear &= s.clear_fault();
                 }
-                self.sticky = 0;
-                self.stale_ticks = 0;
-                if self.state == RigState::Fault && all_clear {
+                // A flag whose cause is present stays: ADC still stale, bus still off (the
+                // board's monitor clears "bus-off seen" only if it is back on the bus).
+                let stale = self.stale_ticks > 0;
+                self.sticky = if stale { Faults::ADC_STALE } else { 0 };
+                self.bus_clear_requested = true;
+                if self.state == RigState::Fault && all_clear && !stale {
                     self.state = RigState::Stopped;
                 }
                 Ok(())
@@ -530,23 +541,22 @@ impl Rig {
         self.tick = self.tick.wrapping_add(1);
 
         // 1. Sensors.
+        // Without a fresh sequence the channels are not updated (a stalled DMA is one
+        // ADC_STALE fault, not four "stuck" sensors) and hold their last plausible values.
         match io.adc_sequence() {
             Some(seq) => {
-                self.last_adc = seq;
                 self.stale_ticks = 0;
+                let split = split_sequence(&seq);
+                for (j, s) in self.sensors.iter_mut().enumerate() {
+                    self.pending[j] = s.update(split[j]).pending;
+                }
             }
             None => {
                 self.stale_ticks = self.stale_ticks.saturating_add(1);
                 self.sticky |= Faults::ADC_STALE;
             }
         }
-        let split = split_sequence(&self.last_adc);
-        let mut readings = [0.0f32; CHANNELS];
-        for (j, s) in self.sensors.iter_mut().enumerate() {
-            let r = s.update(split[j]);
-            readings[j] = r.value;
-            self.pending[j] = r.pending;
-        }
+        let readings: [f32; CHANNELS] = core::array::from_fn(|j| self.sensors[j].value());
 
         // 2. Start-of-run telemetry (header and the t = 0 record).
         if core::mem::take(&mut self.start_events) {

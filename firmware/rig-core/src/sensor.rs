@@ -24,10 +24,18 @@
 //!   [`SensorFault::Stuck`]. A live sensor always shows some counts of noise in a 4-sample
 //!   sum; a noise-free source (a lab calibrator) may need `stuck_steps = 0` (check off).
 //!
-//! A condition must persist `debounce_steps` consecutive steps (default 10 = 1 ms) to latch;
-//! meanwhile the channel holds its last plausible value. A latched fault stays until it is
-//! cleared by command while its cause is gone. What a latched fault does to the run (the
-//! safe state) is decided in [`crate::rig`].
+//! **Debounce** (up/down counter): a step with a condition adds [`DEBOUNCE_UP`] to the
+//! channel's score, a clean step takes 1 off; the condition latches when the score reaches
+//! `debounce_steps` x [`DEBOUNCE_UP`]. A steady condition so latches after `debounce_steps`
+//! steps (default 10 = 1 ms), as before, and an intermittent one present on a fraction
+//! d > 1/10 of the steps latches within `debounce_steps` x 9 / (10 d - 1) steps (9 of 10:
+//! 12 steps; 1 of 2: 23; 1 of 5: 90), where a counter that restarts on any clean step never
+//! latched it. Single spikes (one step in more than ten) never latch. On a step with a
+//! condition the channel holds its last plausible value. A latched fault stays until it is
+//! cleared by command while its cause is gone: no condition this step and the score back
+//! to 0 (at most `debounce_steps` x 9 clean steps after the last condition, 9 ms by
+//! default), so an intermittent cause is never cleared. What a latched fault does to the run
+//! (the safe state) is decided in [`crate::rig`].
 
 use num_enum::{IntoPrimitive, TryFromPrimitive};
 
@@ -37,6 +45,10 @@ pub const ADC_MAX_COUNTS: u16 = 4095;
 pub const OVERSAMPLING: usize = 4;
 /// Length of the ADC regular sequence: ch1..ch4 repeated `OVERSAMPLING` times.
 pub const ADC_SEQUENCE_LEN: usize = crate::CHANNELS * OVERSAMPLING;
+
+/// Debounce score a step with a condition adds (a clean step takes 1 off): a condition
+/// present on more than one step in [`DEBOUNCE_UP`] + 1 latches.
+pub const DEBOUNCE_UP: u32 = 9;
 
 /// What a channel measures.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -101,7 +113,7 @@ pub struct SensorLimits {
     pub max_value: f32,
     /// Steps with an identical oversampled sum that mean "stuck" (0 = check off).
     pub stuck_steps: u32,
-    /// Consecutive steps a condition must persist to latch.
+    /// Steps a steady condition needs to latch (intermittent ones: see the module's debounce).
     pub debounce_steps: u16,
 }
 
@@ -174,8 +186,10 @@ pub struct SensorChannel {
     frozen_sum: u32,
     last_sum: Option<u32>,
     same_sum_steps: u32,
+    /// The condition of the last step.
     pending: Option<SensorFault>,
-    pending_steps: u16,
+    /// Up/down debounce score (module doc).
+    score: u32,
     latched: Option<SensorFault>,
     value: f32,
     mean_counts: f32,
@@ -192,7 +206,7 @@ impl SensorChannel {
             last_sum: None,
             same_sum_steps: 0,
             pending: None,
-            pending_steps: 0,
+            score: 0,
             latched: None,
             value: 0.0,
             mean_counts: 0.0,
@@ -238,22 +252,17 @@ impl SensorChannel {
             None
         };
 
+        self.pending = condition;
+        let threshold = self.latch_score();
         match condition {
             Some(c) => {
-                if self.pending == Some(c) {
-                    self.pending_steps = self.pending_steps.saturating_add(1);
-                } else {
-                    self.pending = Some(c);
-                    self.pending_steps = 1;
-                }
-                if self.latched.is_none() && self.pending_steps >= self.limits.debounce_steps.max(1)
-                {
+                self.score = (self.score + DEBOUNCE_UP).min(threshold);
+                if self.latched.is_none() && self.score >= threshold {
                     self.latched = Some(c);
                 }
             }
             None => {
-                self.pending = None;
-                self.pending_steps = 0;
+                self.score = self.score.saturating_sub(1);
                 self.value = value;
             }
         }
@@ -261,8 +270,18 @@ impl SensorChannel {
             value: self.value,
             mean_counts: mean,
             fault: self.latched,
-            pending: self.pending.is_some(),
+            pending: self.cause_present(),
         }
+    }
+
+    /// Debounce score at which a condition latches.
+    fn latch_score(&self) -> u32 {
+        self.limits.debounce_steps.max(1) as u32 * DEBOUNCE_UP
+    }
+
+    /// A condition this step, or one recent enough that the debounce score is not back to 0.
+    pub fn cause_present(&self) -> bool {
+        self.pending.is_some() || self.score > 0
     }
 
     /// Latched fault, if any.
@@ -275,10 +294,10 @@ impl SensorChannel {
         self.value
     }
 
-    /// Clears the latched fault if its cause is gone (nothing pending); returns whether
-    /// the channel is now free of faults.
+    /// Clears the latched fault if its cause is gone ([`Self::cause_present`] false);
+    /// returns whether the channel is now free of faults.
     pub fn clear_fault(&mut self) -> bool {
-        if self.pending.is_none() {
+        if !self.cause_present() {
             self.latched = None;
         }
         self.latched.is_none()
@@ -300,7 +319,7 @@ impl SensorChannel {
     pub fn tare(&mut self) -> Result<(), CalibrationError> {
         let nominal = self.kind.default_calibration().offset_counts;
         let tolerance = 0.1 * ADC_MAX_COUNTS as f32;
-        if self.pending.is_some()
+        if self.cause_present()
             || self.latched.is_some()
             || self.last_sum.is_none()
             || !((self.mean_counts - nominal).abs() <= tolerance)
@@ -328,10 +347,21 @@ impl SensorChannel {
     }
 
     /// Changes the measured quantity; calibration and limits go back to the kind's defaults.
+    /// The fault state (latched fault, debounce, stuck tracking, injection) is the wiring's
+    /// and stays: a new kind clears no fault (only [`Self::clear_fault`] does, with the cause
+    /// gone).
     pub fn set_kind(&mut self, kind: SensorKind) {
-        let inject = self.inject;
-        *self = Self::new(kind);
-        self.inject = inject;
+        let old = *self;
+        *self = Self {
+            inject: old.inject,
+            frozen_sum: old.frozen_sum,
+            last_sum: old.last_sum,
+            same_sum_steps: old.same_sum_steps,
+            pending: old.pending,
+            score: old.score,
+            latched: old.latched,
+            ..Self::new(kind)
+        };
     }
 }
 
@@ -464,6 +494,12 @@ mod tests {
             assert_eq!(r.value, before);
             // Latched until cleared, and clearing fails while the cause persists.
             assert!(!ch.clear_fault());
+            // The cause goes: the debounce score needs 10 x 9 clean steps to reach 0; until
+            // then the cause counts as present and no clear succeeds.
+            for k in 0..89 {
+                ch.update(noisy(counts_for(SensorKind::LoadCell, 5_000.0), k));
+                assert!(!ch.clear_fault(), "clean step {k}");
+            }
             ch.update(noisy(counts_for(SensorKind::LoadCell, 5_000.0), 1));
             assert_eq!(ch.fault(), Some(want));
             assert!(ch.clear_fault());
@@ -480,6 +516,59 @@ mod tests {
             run_until_latched(&mut ch, [3000; 4], 100),
             Some((10, SensorFault::OutOfRange))
         );
+    }
+
+    /// Steps until an open wire present on `on` steps of every `period` latches (None
+    /// within 20 000 steps).
+    fn intermittent_open_latches_after(on: u32, period: u32) -> Option<u32> {
+        let mut ch = SensorChannel::new(SensorKind::LoadCell);
+        for k in 0..20_000u32 {
+            let s = if k % period < on {
+                [0; 4]
+            } else {
+                noisy(2000.0, k)
+            };
+            if ch.update(s).fault.is_some() {
+                return Some(k + 1);
+            }
+        }
+        None
+    }
+
+    #[test]
+    fn intermittent_open_latches_within_the_bound() {
+        // Independent bound: score +9 per faulty step, -1 per clean one, latch at 90; a
+        // duty d gains (10 d - 1) per step on average, so it latches within
+        // 90 / (10 d - 1) steps plus one period of phase.
+        for (on, period) in [(9u32, 10u32), (1, 2), (1, 5), (3, 10), (2, 9)] {
+            let d = on as f64 / period as f64;
+            let bound = (90.0 / (10.0 * d - 1.0)).ceil() as u32 + period;
+            let got = intermittent_open_latches_after(on, period);
+            assert!(
+                got.is_some_and(|n| n <= bound),
+                "{on} of {period}: latched after {got:?}, bound {bound}"
+            );
+        }
+        // A restart-on-clean debounce never latches 9 of 10; this one does, after 12 steps.
+        assert_eq!(intermittent_open_latches_after(9, 10), Some(12));
+        // One step in ten or fewer: spikes, never latched.
+        assert_eq!(intermittent_open_latches_after(1, 10), None);
+        assert_eq!(intermittent_open_latches_after(1, 50), None);
+    }
+
+    #[test]
+    fn an_intermittent_cause_is_never_cleared() {
+        let mut ch = SensorChannel::new(SensorKind::LoadCell);
+        let mut clears = 0;
+        for k in 0..5_000u32 {
+            let s = if k % 10 < 5 { [0; 4] } else { noisy(2000.0, k) };
+            ch.update(s);
+            if ch.fault().is_some() && ch.clear_fault() {
+                clears += 1;
+            }
+        }
+        assert_eq!(clears, 0);
+        assert_eq!(ch.fault(), Some(SensorFault::Open));
     }
 
     #[test]
@@ -524,7 +613,10 @@ mod tests {
             let got = (0..10).map(|k| ch.update(noisy(2000.0, k))).last().unwrap();
             assert_eq!(got.fault, Some(want));
             ch.inject(None);
-            ch.update(noisy(2000.0, 3));
+            // Ten steps at +9 saturate the score at 90: 90 clean steps to decay.
+            for k in 0..90 {
+                ch.update(noisy(2000.0, k));
+            }
             assert!(ch.clear_fault());
         }
         let mut ch = SensorChannel::new(SensorKind::LoadCell);
@@ -549,6 +641,21 @@ mod tests {
             run_until_latched(&mut ch, [1000, 1000, 5000, 1000], 20),
             Some((10, SensorFault::AdcInvalid))
         );
+    }
+
+    #[test]
+    fn set_kind_keeps_a_latched_fault_and_its_cause() {
+        let mut ch = SensorChannel::new(SensorKind::LoadCell);
+        assert_eq!(
+            run_until_latched(&mut ch, [0; 4], 20),
+            Some((10, SensorFault::Open))
+        );
+        ch.set_kind(SensorKind::PressureTransducer);
+        assert_eq!(ch.fault(), Some(SensorFault::Open));
+        assert!(!ch.clear_fault(), "the wire is still open");
+        ch.update([0; 4]);
+        assert!(!ch.clear_fault());
+        assert_eq!(ch.fault(), Some(SensorFault::Open));
     }
 
     #[test]

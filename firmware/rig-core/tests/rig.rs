@@ -118,6 +118,15 @@ fn rig_start(initial_speed_kmh: f32) -> Command {
     }
 }
 
+/// Makes `channel` a pressure transducer (command with alive counter `counter`).
+fn make_pressure_channel(rig: &mut Rig, counter: u8, channel: u8) {
+    let c = Command::Calibrate {
+        channel,
+        action: Calibration::SetKind(SensorKind::PressureTransducer),
+    };
+    command(rig, counter, c).unwrap();
+}
+
 /// Counts a load cell shows for a clamp force with the default calibration (f64).
 fn load_cell_counts(force_n: f64) -> f64 {
     4095.0 * (0.1 + 0.8 * force_n / 40_000.0)
@@ -274,15 +283,7 @@ fn rig_mode_steps_the_plant_with_the_measured_clamp_forces() {
     let mut rig = Rig::new(RigConfig::nucleo_g474re());
     let mut io = MockBoard::new();
     // Channel 3 is a pressure transducer; the others load cells.
-    command(
-        &mut rig,
-        1,
-        Command::Calibrate {
-            channel: 2,
-            action: Calibration::SetKind(SensorKind::PressureTransducer),
-        },
-    )
-    .unwrap();
+    make_pressure_channel(&mut rig, 1, 2);
     let force = 12_000.0;
     let pressure = 350_000.0;
     let counts = [
@@ -404,11 +405,17 @@ fn latched_sensor_fault_puts_a_rig_run_in_the_safe_state() {
         },
     )
     .unwrap();
-    rig.step(&mut io);
+    // The debounce score decays one per clean step: 90 steps after the cause went.
+    for _ in 0..89 {
+        rig.step(&mut io);
+    }
     command(&mut rig, 6, Command::ClearFaults).unwrap();
+    assert_eq!(rig.state(), RigState::Fault, "cause gone only 89 steps ago");
+    rig.step(&mut io);
+    command(&mut rig, 8, Command::ClearFaults).unwrap();
     assert_eq!(rig.state(), RigState::Stopped);
     assert_eq!(rig.faults().0 & 0xFFFF, 0);
-    command(&mut rig, 7, start).unwrap();
+    command(&mut rig, 9, start).unwrap();
     assert_eq!(rig.state(), RigState::Running);
 }
 
@@ -477,6 +484,146 @@ fn stale_adc_stops_a_rig_run_after_ten_ticks() {
     }
     rig.step(&mut io);
     assert_eq!(rig.state(), RigState::Fault);
+}
+
+// ---- Fault injection: the cases of issue 11, item 7 ----
+
+#[test]
+fn an_open_wire_on_nine_ticks_of_ten_faults_a_rig_run_in_bounded_time() {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut io = MockBoard::new();
+    let good = load_cell_counts(6000.0);
+    io.adc_counts = Some([good; 4]);
+    command(&mut rig, 1, rig_start(100.0)).unwrap();
+    for _ in 0..200 {
+        rig.step(&mut io);
+    }
+    let mut fault_tick = None;
+    for k in 0..200u32 {
+        // Channel 1 open (0 V) on 9 ticks of 10.
+        let ch1 = if k % 10 == 9 { good } else { 0.0 };
+        io.adc_counts = Some([ch1, good, good, good]);
+        rig.step(&mut io);
+        if rig.state() == RigState::Fault {
+            fault_tick = Some(k + 1);
+            break;
+        }
+    }
+    // Score +9 per open tick, -1 per clean one, latch at 90: tick 12 (independent count).
+    assert_eq!(fault_tick, Some(12));
+    assert!(rig.faults().contains(1));
+    assert!(io.pulses.iter().all(|p| p.unwrap().is_silent()));
+}
+
+#[test]
+fn set_kind_clears_no_fault_and_a_rig_start_stays_refused() {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut io = MockBoard::new();
+    let good = load_cell_counts(0.0);
+    // Channel 3 open while idle: latches before any run.
+    io.adc_counts = Some([good, good, 0.0, good]);
+    for _ in 0..20 {
+        rig.step(&mut io);
+    }
+    assert!(rig.faults().contains(1 << 2));
+    make_pressure_channel(&mut rig, 1, 2);
+    assert!(rig.faults().contains(1 << 2), "SetKind cleared the fault");
+    command(&mut rig, 2, Command::ClearFaults).unwrap();
+    assert!(rig.faults().contains(1 << 2), "cleared with the wire open");
+    assert_eq!(
+        command(&mut rig, 3, rig_start(80.0)),
+        Err(CommandError::SensorFaults)
+    );
+    // Wire repaired, debounce decayed (90 clean ticks): clear and start succeed.
+    io.adc_counts = Some([good; 4]);
+    for _ in 0..90 {
+        rig.step(&mut io);
+    }
+    command(&mut rig, 4, Command::ClearFaults).unwrap();
+    assert!(!rig.faults().contains(Faults::SENSOR));
+    command(&mut rig, 5, rig_start(80.0)).unwrap();
+}
+
+#[test]
+fn a_stalled_dma_in_self_test_is_adc_stale_not_four_stuck_sensors() {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut io = MockBoard::new();
+    command(&mut rig, 1, paper_start(FrictionModel::Variable)).unwrap();
+    for _ in 0..100 {
+        rig.step(&mut io);
+    }
+    io.adc_counts = None;
+    // Longer than the 5000-step stuck window.
+    for _ in 0..6000 {
+        rig.step(&mut io);
+    }
+    let f = rig.faults();
+    assert!(f.contains(Faults::ADC_STALE));
+    assert!(!f.contains(Faults::SENSOR), "{:#x}", f.0);
+    assert_eq!(
+        rig.state(),
+        RigState::Running,
+        "self-test closes no loop on the ADC"
+    );
+    // The cause is present: ClearFaults keeps ADC_STALE.
+    command(&mut rig, 2, Command::ClearFaults).unwrap();
+    assert!(rig.faults().contains(Faults::ADC_STALE));
+    io.adc_counts = Some([409.5; 4]);
+    rig.step(&mut io);
+    command(&mut rig, 3, Command::ClearFaults).unwrap();
+    assert!(!rig.faults().contains(Faults::ADC_STALE));
+}
+
+#[test]
+fn stale_adc_fault_is_not_cleared_while_the_adc_is_stale() {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut io = MockBoard::new();
+    io.adc_counts = Some([load_cell_counts(3000.0); 4]);
+    command(&mut rig, 1, rig_start(60.0)).unwrap();
+    rig.step(&mut io);
+    io.adc_counts = None;
+    for _ in 0..20 {
+        rig.step(&mut io);
+    }
+    assert_eq!(rig.state(), RigState::Fault);
+    command(&mut rig, 2, Command::ClearFaults).unwrap();
+    assert_eq!(rig.state(), RigState::Fault);
+    assert!(rig.faults().contains(Faults::ADC_STALE));
+    io.adc_counts = Some([load_cell_counts(3000.0); 4]);
+    rig.step(&mut io);
+    command(&mut rig, 3, Command::ClearFaults).unwrap();
+    assert_eq!(rig.state(), RigState::Stopped);
+}
+
+#[test]
+fn bus_state_reaches_flags_and_diag_and_clear_is_passed_to_the_board() {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut io = MockBoard::new();
+    command(&mut rig, 1, paper_start(FrictionModel::Variable)).unwrap();
+    rig.set_bus(true, false, 0);
+    rig.step(&mut io);
+    assert!(rig.faults().contains(Faults::CAN_ERROR_PASSIVE));
+    assert!(!rig.faults().contains(Faults::CAN_BUS_OFF));
+    rig.set_bus(false, true, 3);
+    for _ in 0..1000 {
+        rig.step(&mut io);
+    }
+    let f = rig.faults();
+    assert!(f.contains(Faults::CAN_BUS_OFF) && !f.contains(Faults::CAN_ERROR_PASSIVE));
+    let (_, d) = io.frames_with(ID_DIAG).last().copied().unwrap().clone();
+    assert_eq!(DiagFrame::decode(&d).unwrap().bus_off_count, 3);
+    // Bus faults are flagged, the run goes on.
+    assert_eq!(rig.state(), RigState::Running);
+    let (_, st) = io.frames_with(ID_STATUS).last().copied().unwrap().clone();
+    assert!(StatusFrame::decode(&st).unwrap().faults as u32 & Faults::CAN_BUS_OFF != 0);
+    // ClearFaults asks the board's monitor once; the flag goes only when the board says so.
+    assert!(!rig.take_bus_clear());
+    command(&mut rig, 2, Command::ClearFaults).unwrap();
+    assert!(rig.take_bus_clear());
+    assert!(!rig.take_bus_clear());
+    assert!(rig.faults().contains(Faults::CAN_BUS_OFF));
+    rig.set_bus(false, false, 3);
+    assert!(!rig.faults().contains(Faults::CAN_BUS_OFF));
 }
 
 #[test]
