@@ -1,15 +1,16 @@
 //! FDCAN1 (PA11 RX, PA12 TX, AF9): classic CAN at 500 kbit/s with the bit timing computed
 //! in `hils_rig_core::can_timing` from the 24 MHz HSE kernel clock, transmit FIFO mode,
 //! one acceptance filter (the command id into RX FIFO 0, everything else rejected), stale
-//! frames dropped and counted, bus supervision.
+//! frames dropped and counted, bus-off counted in the FDCAN interrupt, recovery with backoff.
 
 use core::num::{NonZeroU8, NonZeroU16};
-use core::sync::atomic::Ordering;
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
 use defmt::{info, unwrap, warn};
 use embassy_stm32::can::config::{GlobalFilter, NominalBitTiming as EmbassyTiming, TxBufferMode};
 use embassy_stm32::can::filter::{Action, FilterType, StandardFilter, StandardFilterSlot};
 use embassy_stm32::can::{self, CanConfigurator, CanRx, CanTx, Frame, OperatingMode, Properties};
+use embassy_stm32::interrupt::typelevel::{FDCAN1_IT0, Handler};
 use embassy_stm32::pac;
 use embassy_time::{Duration, Ticker, Timer, with_timeout};
 use embedded_can::{Id, StandardId};
@@ -20,6 +21,25 @@ use hils_rig_core::can_tx::{QueuedFrame, TxSlots, is_stale};
 
 use crate::clock::HSE_HZ;
 use crate::step::{BUS_STATE, CAN_RX, CAN_TX, CAN_TX_DROPS, STEP_TICKS};
+
+/// Entries into bus-off seen by the FDCAN interrupt since power-up (wrapping).
+pub static BUS_OFF_IRQS: AtomicU32 = AtomicU32::new(0);
+/// The step's `ClearFaults` asks the bus supervision to clear its sticky bus-off.
+pub static BUS_CLEAR: AtomicBool = AtomicBool::new(false);
+
+/// Counts bus-off entries as they happen (RM0440 FDCAN `IR.BO`: bus-off status changed,
+/// routed to IT0 by embassy with `IE.BOE`): an episode shorter than the bus task's 10 ms
+/// poll is counted too. Bound before embassy's IT0 handler, which acknowledges `IR.BO`.
+pub struct BusOffCounter;
+
+impl Handler<FDCAN1_IT0> for BusOffCounter {
+    unsafe fn on_interrupt() {
+        let regs = pac::FDCAN1;
+        if regs.ir().read().bo() && regs.psr().read().bo() {
+            BUS_OFF_IRQS.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
 
 /// The rig's bus rate, bit/s.
 pub const BITRATE: u32 = 500_000;
@@ -35,7 +55,8 @@ pub fn bit_timing() -> NominalBitTiming {
 /// Configures FDCAN1: our timing (embassy's `FdCanConfig::set_nominal_bit_timing`, the
 /// supported way besides `set_bitrate`, which picks at most 17 quanta and SJW 1), FIFO
 /// transmit (embassy `TxBufferMode::Fifo`: no pending frame is aborted for a
-/// higher-priority one), automatic bus-off recovery, and the acceptance filter. Returns
+/// higher-priority one), no automatic bus-off recovery (the bus task restarts with backoff,
+/// `hils_rig_core::bus`), and the acceptance filter. Returns
 /// the configurator, to start in the mode the caller wants.
 pub fn configure(mut cfg: CanConfigurator<'static>) -> CanConfigurator<'static> {
     let t = bit_timing();
@@ -49,7 +70,7 @@ pub fn configure(mut cfg: CanConfigurator<'static>) -> CanConfigurator<'static> 
         cfg.config()
             .set_nominal_bit_timing(nbtr)
             .set_tx_buffer_mode(TxBufferMode::Fifo)
-            .set_automatic_bus_off_recovery(true)
+            .set_automatic_bus_off_recovery(false)
             .set_global_filter(GlobalFilter::reject_all()),
     );
     cfg.properties().set_standard_filter(
@@ -175,7 +196,8 @@ pub async fn can_rx_task(mut rx: CanRx<'static>) {
     }
 }
 
-/// Polls the bus state every 10 ms: error passive, bus-off, recovery, restart.
+/// Polls the bus state every 10 ms: error passive, bus-off (and the interrupt's count),
+/// restart with backoff, and the clear asked by `ClearFaults`.
 #[embassy_executor::task]
 pub async fn bus_task(props: Properties) {
     let mut monitor = BusMonitor::new();
@@ -194,7 +216,12 @@ pub async fn bus_task(props: Properties) {
             rx_errors: props.rx_error_count(),
         };
         let now_ms = embassy_time::Instant::now().as_millis() as u32;
+        monitor.note_irq_bus_offs(BUS_OFF_IRQS.load(Ordering::Relaxed));
         let (event, action) = monitor.poll(status, now_ms);
+        if BUS_CLEAR.swap(false, Ordering::Relaxed) {
+            // Refused while bus-off: the flag stays until the controller is back.
+            monitor.clear();
+        }
         if let Some(e) = event {
             warn!(
                 "CAN bus: {} (TEC {}, REC {})",
@@ -203,8 +230,8 @@ pub async fn bus_task(props: Properties) {
         }
         if action == BusAction::Restart {
             warn!(
-                "CAN bus-off for over {} ms: restarting the controller",
-                BusMonitor::RESTART_AFTER_MS
+                "CAN bus-off: restarting the controller (next try in {=u32} ms)",
+                monitor.backoff_ms()
             );
             // Leaving INIT starts the bus-off recovery sequence again.
             pac::FDCAN1.cccr().modify(|w| w.set_init(false));

@@ -41,7 +41,8 @@ use embassy_executor::Spawner;
 use embassy_stm32::{bind_interrupts, can, dma, peripherals};
 
 bind_interrupts!(pub struct Irqs {
-    FDCAN1_IT0 => can::IT0InterruptHandler<peripherals::FDCAN1>;
+    // Ours first: it must see IR.BO before embassy's handler acknowledges it.
+    FDCAN1_IT0 => can_io::BusOffCounter, can::IT0InterruptHandler<peripherals::FDCAN1>;
     FDCAN1_IT1 => can::IT1InterruptHandler<peripherals::FDCAN1>;
     DMA1_CHANNEL1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
 });

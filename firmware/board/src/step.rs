@@ -168,6 +168,9 @@ fn step_tick() {
         return;
     };
     take_commands(&mut rt.rig);
+    if rt.rig.take_bus_clear() {
+        crate::can_io::BUS_CLEAR.store(true, Ordering::Relaxed);
+    }
     let bus = BUS_STATE.load(Ordering::Relaxed);
     rt.rig.set_bus(bus & 1 != 0, bus & 2 != 0, bus >> 8);
     let drops = (
