@@ -166,6 +166,7 @@ fn state_text(code: u8) -> &'static str {
         Some(RigState::Finished) => "finished",
         Some(RigState::Stopped) => "stopped",
         Some(RigState::Fault) => "fault",
+        Some(RigState::Starting) => "starting",
         None => "unknown",
     }
 }

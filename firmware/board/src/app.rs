@@ -1,5 +1,6 @@
 //! The rig application: peripherals configured in thread mode, the rig handed to the step,
-//! the tasks spawned, then the step clock started.
+//! the tasks spawned (among them the builder of each run's simulation), then the step clock
+//! started.
 
 use defmt::{info, unwrap};
 use embassy_executor::Spawner;
@@ -22,8 +23,8 @@ use hils_rig_core::sensor::ADC_SEQUENCE_LEN;
 use crate::Irqs;
 use crate::pulse::PulseOut;
 use crate::step::{
-    BoardIo, LOCAL_CMD, REAL_TIME, RIG_STATE, RealTime, WATCHDOG_TIMEOUT_US, Watchdog,
-    configure_step_timer,
+    BUILT, BoardIo, LOCAL_CMD, REAL_TIME, RIG_STATE, RealTime, START_REQUESTS, WATCHDOG_TIMEOUT_US,
+    Watchdog, configure_step_timer,
 };
 
 /// ADC ring buffer: four sequences.
@@ -109,6 +110,7 @@ pub async fn run(spawner: Spawner, p: Peripherals) {
     spawner.spawn(unwrap!(crate::can_io::bus_task(props)));
     spawner.spawn(unwrap!(crate::telemetry::telemetry_task()));
     spawner.spawn(unwrap!(crate::telemetry::step_events_task()));
+    spawner.spawn(unwrap!(sim_builder_task()));
     spawner.spawn(unwrap!(button_task(Input::new(p.PC13, Pull::Down))));
     spawner.spawn(unwrap!(led_task(Output::new(
         p.PA5,
@@ -134,6 +136,20 @@ pub async fn run(spawner: Spawner, p: Peripherals) {
         LOCAL_CMD
             .send(Command::paper_self_test(FrictionModel::Variable))
             .await;
+    }
+}
+
+/// Builds the simulation of each run the step requests, in thread mode (~35 000
+/// instructions and a large stack frame that must not run in the step), and publishes it
+/// for the step to move in at its next tick.
+#[embassy_executor::task]
+async fn sim_builder_task() {
+    loop {
+        let request = START_REQUESTS.receive().await;
+        // The slot is busy only while the step has not yet taken the last build (< 0.1 ms).
+        while BUILT.publish_with(|| request.build()).is_err() {
+            Delay::after_micros(100).await;
+        }
     }
 }
 

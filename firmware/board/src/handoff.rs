@@ -1,10 +1,10 @@
 //! Storage for values handed from thread mode to the step (`hils_rig_core::handoff`: the
 //! slot protocol; here: the slots and the memory access it permits).
 //!
-//! Used now for the rig and its peripherals (built in `main`, taken by the step at its
-//! first tick); made for the simulation of a run too: a builder task constructs it in a
-//! free slot while the step keeps running the current one, publishes it, and the step
-//! switches slots at its next tick in constant time (docs: /work/notes/fw-phase2.md).
+//! Used for the rig and its peripherals (built in `main`, used in place by the step from
+//! its first tick: [`Handoff::step_value`]) and for the simulation of each run (built by
+//! the builder task in thread mode when the step requests a start, moved into the rig by
+//! the step at its next tick: [`Handoff::step_take`]).
 
 use core::cell::UnsafeCell;
 use core::mem::MaybeUninit;
@@ -49,6 +49,22 @@ impl<T, const N: usize> Handoff<T, N> {
         }
         self.states.publish(claim.slot);
         Ok(())
+    }
+
+    /// The step: moves a newly published value out, if any, and frees its slot at once
+    /// (for values the step keeps in its own memory: the simulation of a run).
+    ///
+    /// # Safety
+    /// Only the step interrupt calls this (one context, not re-entrant).
+    #[inline(always)]
+    pub unsafe fn step_take(&self) -> Option<T> {
+        let i = self.states.take()?;
+        // SAFETY: `take` gave this context the slot, fully written before the builder's
+        // publish (release); after the read the slot is marked free, so nobody drops the
+        // moved-out value again.
+        let value = unsafe { (*self.slots[i].get()).assume_init_read() };
+        self.states.release(i);
+        Some(value)
     }
 
     /// The step: the value it uses, switching to a newly published one first (the slot it

@@ -16,7 +16,7 @@ use hils_rig_core::can::Command;
 use hils_rig_core::can_tx::QueuedFrame;
 use hils_rig_core::hw::{RigIo, TelemetryEvent};
 use hils_rig_core::pulse::PulseRegisters;
-use hils_rig_core::rig::{CommandError, Rig};
+use hils_rig_core::rig::{CommandError, Rig, Simulation, StartRequest};
 use hils_rig_core::sensor::ADC_SEQUENCE_LEN;
 
 use crate::ceiling::StepChannel;
@@ -36,6 +36,10 @@ pub static CAN_TX: StepChannel<QueuedFrame<Frame>, 32> = StepChannel::new();
 pub static CAN_RX: StepChannel<Frame, 8> = StepChannel::new();
 /// Local commands (user button, autostart), for the step.
 pub static LOCAL_CMD: StepChannel<Command, 2> = StepChannel::new();
+/// Runs the step requested, for the builder task (thread mode).
+pub static START_REQUESTS: StepChannel<StartRequest, 1> = StepChannel::new();
+/// Simulations the builder built (or why not), for the step to move into the rig.
+pub static BUILT: Handoff<Result<Simulation, CommandError>, 1> = Handoff::new();
 /// Telemetry events from the step to the logging task.
 pub static TELEMETRY: StepChannel<TelemetryEvent, 16> = StepChannel::new();
 /// What the step has to say, for a task to log (the step never logs).
@@ -57,6 +61,8 @@ pub static TELEMETRY_DROPS: AtomicU32 = AtomicU32::new(0);
 pub enum StepEvent {
     CommandRejected(CommandError),
     LocalCommandRejected(CommandError),
+    /// A requested run could not start (build failed, or the builder was busy).
+    StartFailed(CommandError),
 }
 
 /// The peripherals the step uses.
@@ -168,6 +174,7 @@ fn step_tick() {
         return;
     };
     take_commands(&mut rt.rig);
+    hand_over_runs(&mut rt.rig);
     if rt.rig.take_bus_clear() {
         crate::can_io::BUS_CLEAR.store(true, Ordering::Relaxed);
     }
@@ -187,6 +194,29 @@ fn step_tick() {
     let tick_pending = pac::TIM3.sr().read().uif();
     rt.rig.record_timing(entry, exit, tick_pending);
     rt.watchdog.feed();
+}
+
+/// Passes a start request to the builder and installs a built simulation (a move).
+#[inline(always)]
+fn hand_over_runs(rig: &mut Rig) {
+    if let Some(req) = rig.take_start_request()
+        && START_REQUESTS.try_send(req).is_err()
+    {
+        // The builder still holds an earlier (cancelled) request: refuse this one.
+        let busy = Err(CommandError::NotNow(rig.state()));
+        if let Err(e) = rig.install(busy) {
+            let _ = STEP_EVENTS.try_send(StepEvent::StartFailed(e));
+        }
+    }
+    // SAFETY: this is the step interrupt, the only caller.
+    if let Some(built) = unsafe { BUILT.step_take() } {
+        let failed = built.is_err();
+        if let Err(e) = rig.install(built)
+            && failed
+        {
+            let _ = STEP_EVENTS.try_send(StepEvent::StartFailed(e));
+        }
+    }
 }
 
 #[inline(always)]

@@ -587,7 +587,7 @@ impl WheelSpeedFrame {
 // ---------------------------------------------------------------------------------------
 // RIG_STATUS
 
-/// Run state of the board (4 bits in `RIG_STATUS`; codes 0-4 in declaration order).
+/// Run state of the board (4 bits in `RIG_STATUS`; codes 0-5 in declaration order).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, IntoPrimitive, TryFromPrimitive)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[repr(u8)]
@@ -603,6 +603,9 @@ pub enum RigState {
     Stopped,
     /// A fault latched during a run: safe state (see [`crate::rig`]).
     Fault,
+    /// A run was requested: its simulation is being built outside the step; outputs in
+    /// the safe state until it runs.
+    Starting,
 }
 
 /// What closes the loop (2 bits in `RIG_STATUS`; 0 rig, 1 self-test).

@@ -10,6 +10,7 @@
 //!   Free/Retired --claim (builder)--> Building --publish--> Ready --take (step)--> Active
 //!        ^                               |                                            |
 //!        +-----------abandon-------------+              <----retire (step)------------+
+//!   Free <--release (step: the value was moved out)-------------------------------- Active
 //! ```
 //!
 //! Whoever moved a slot into a state owns its memory in that state: the builder in
@@ -132,6 +133,11 @@ impl<const N: usize> SlotStates<N> {
         (0..N).find(|&i| self.state(i) == SlotState::Active)
     }
 
+    /// Step: moved the value out of `slot` (`Active` -> `Free`): nothing left to drop.
+    pub fn release(&self, slot: usize) -> bool {
+        self.swap(slot, SlotState::Active, SlotState::Free)
+    }
+
     /// Step: done with `slot` (`Active` -> `Retired`); the builder may reuse it.
     pub fn retire(&self, slot: usize) -> bool {
         self.swap(slot, SlotState::Active, SlotState::Retired)
@@ -170,6 +176,24 @@ mod tests {
         );
         assert!(s.abandon(0));
         assert_eq!(s.state(0), SlotState::Free);
+    }
+
+    #[test]
+    fn a_value_moved_out_frees_its_slot_with_nothing_to_drop() {
+        let s = SlotStates::<1>::new();
+        let a = s.claim().unwrap().slot;
+        s.publish(a);
+        assert_eq!(s.take(), Some(a));
+        assert!(s.release(a));
+        assert!(!s.release(a), "only an active slot is released");
+        assert_eq!(s.state(a), SlotState::Free);
+        assert_eq!(
+            s.claim(),
+            Some(Claim {
+                slot: a,
+                holds_old_value: false
+            })
+        );
     }
 
     #[test]

@@ -192,6 +192,49 @@ enum Sim {
     SelfTest(ClosedLoop<f32>),
 }
 
+/// The parameters of a requested run: checked by the step (the `Start` command), built
+/// outside it ([`StartRequest::build`], thread mode on the board).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StartRequest {
+    pub mode: RigMode,
+    pub rail: Rail,
+    pub friction: FrictionModel,
+    pub emergency: bool,
+    pub initial_speed_kmh: f32,
+}
+
+/// The simulation of a run, built by [`StartRequest::build`] and handed to the step by
+/// [`Rig::install`] (a move: no construction in the step).
+#[derive(Clone, Debug)]
+pub struct Simulation(Sim);
+
+impl StartRequest {
+    /// Builds the run's simulation (plant, and in self-test mode the simulated brake unit):
+    /// ~35 000 instructions of mostly soft-float f64 and a large stack frame, so never in
+    /// the step (issue 11).
+    pub fn build(&self) -> Result<Simulation, CommandError> {
+        let mut params = Params::default();
+        params.friction.model = self.friction;
+        let v0 = self.initial_speed_kmh / KMH_PER_MPS;
+        let sim = match self.mode {
+            RigMode::Rig => Sim::Rig(
+                Plant::new(&params, self.rail, v0)
+                    .map_err(|e| CommandError::Build(LoopError::Params(e)))?,
+            ),
+            RigMode::SelfTest => {
+                let mut c = ClosedLoop::new(&params, self.rail, v0).map_err(CommandError::Build)?;
+                c.set_demand(if self.emergency {
+                    BrakeDemand::Emergency
+                } else {
+                    BrakeDemand::Release
+                });
+                Sim::SelfTest(c)
+            }
+        };
+        Ok(Simulation(sim))
+    }
+}
+
 /// The rig: sensors, simulation, outputs, telemetry and state.
 pub struct Rig {
     config: RigConfig,
@@ -228,6 +271,12 @@ pub struct Rig {
     end_event: bool,
     /// Plant step of the last telemetry record of the run (no record twice for a step).
     last_record_step: Option<u32>,
+    /// The run requested, while `Starting`.
+    start_request: Option<StartRequest>,
+    /// The request has not been handed to the builder yet.
+    start_request_new: bool,
+    /// The state before `Starting` (back to it if the build fails).
+    state_before_start: RigState,
 }
 
 impl Rig {
@@ -261,6 +310,9 @@ impl Rig {
             start_events: false,
             end_event: false,
             last_record_step: None,
+            start_request: None,
+            start_request_new: false,
+            state_before_start: RigState::Idle,
         }
     }
 
@@ -388,8 +440,14 @@ impl Rig {
         self.state == RigState::Running
     }
 
-    /// Starts a run (the `Start` command): builds the simulation of the mode and resets
-    /// the run's accounting.
+    /// A run is requested or running: no new start, calibration or configuration.
+    fn busy(&self) -> bool {
+        matches!(self.state, RigState::Running | RigState::Starting)
+    }
+
+    /// The `Start` command: checks it and requests the run (`Starting`); the simulation is
+    /// built outside the step ([`Rig::take_start_request`], [`StartRequest::build`]) and
+    /// the run begins when it is installed ([`Rig::install`]).
     fn start(&mut self, command: Command) -> Result<(), CommandError> {
         let Command::Start {
             mode,
@@ -401,7 +459,7 @@ impl Rig {
         else {
             return Ok(());
         };
-        if self.running() {
+        if self.busy() {
             return Err(CommandError::NotNow(self.state));
         }
         if !(0.0..=WHEEL_SPEED_MAX_KMH).contains(&initial_speed_kmh) {
@@ -410,32 +468,56 @@ impl Rig {
         if mode == RigMode::Rig && self.sensors.iter().any(|s| s.fault().is_some()) {
             return Err(CommandError::SensorFaults);
         }
-        let mut params = Params::default();
-        params.friction.model = friction;
-        let v0 = initial_speed_kmh / KMH_PER_MPS;
-        // Drop the old run first: one simulation in memory at a time.
+        // The old run's simulation is no longer shown (plain data: nothing to drop).
         self.sim = Sim::None;
-        self.sim = match mode {
-            RigMode::Rig => Sim::Rig(
-                Plant::new(&params, rail, v0)
-                    .map_err(|e| CommandError::Build(LoopError::Params(e)))?,
-            ),
-            RigMode::SelfTest => {
-                let mut c = ClosedLoop::new(&params, rail, v0).map_err(CommandError::Build)?;
-                let demand = if emergency {
-                    BrakeDemand::Emergency
-                } else {
-                    BrakeDemand::Release
-                };
-                c.set_demand(demand);
-                Sim::SelfTest(c)
+        self.start_request = Some(StartRequest {
+            mode,
+            rail,
+            friction,
+            emergency,
+            initial_speed_kmh,
+        });
+        self.start_request_new = true;
+        self.state_before_start = self.state;
+        self.state = RigState::Starting;
+        Ok(())
+    }
+
+    /// The run requested since the last call, for the builder (once per request).
+    pub fn take_start_request(&mut self) -> Option<StartRequest> {
+        if core::mem::take(&mut self.start_request_new) {
+            self.start_request
+        } else {
+            None
+        }
+    }
+
+    /// Installs a built simulation (a move, in the step) and starts the run; a failed
+    /// build goes back to the state before the request, with the command rejected. A
+    /// simulation that arrives when no start is pending (stopped meanwhile) is discarded.
+    pub fn install(&mut self, built: Result<Simulation, CommandError>) -> Result<(), CommandError> {
+        let Some(req) = self
+            .start_request
+            .filter(|_| self.state == RigState::Starting)
+        else {
+            return Err(CommandError::NotNow(self.state));
+        };
+        self.start_request = None;
+        self.start_request_new = false;
+        let sim = match built {
+            Ok(Simulation(sim)) => sim,
+            Err(e) => {
+                self.state = self.state_before_start;
+                self.note_result(false);
+                return Err(e);
             }
         };
-        self.mode = mode;
-        self.rail = rail;
-        self.friction = friction;
-        self.initial_speed_kmh = initial_speed_kmh;
-        self.brake = match (mode, emergency) {
+        self.sim = sim;
+        self.mode = req.mode;
+        self.rail = req.rail;
+        self.friction = req.friction;
+        self.initial_speed_kmh = req.initial_speed_kmh;
+        self.brake = match (req.mode, req.emergency) {
             (RigMode::SelfTest, true) => Some(BrakeCommand::Emergency),
             (RigMode::SelfTest, false) => Some(BrakeCommand::Release),
             (RigMode::Rig, _) => None,
@@ -450,17 +532,34 @@ impl Rig {
         Ok(())
     }
 
+    /// Builds a requested run here and installs it: for hosts (tests, the scripted run,
+    /// the QEMU cost measurement), where the build does not count against a step. The
+    /// board builds in thread mode instead. `Ok` when nothing was requested.
+    pub fn build_pending(&mut self) -> Result<(), CommandError> {
+        match self.take_start_request() {
+            Some(req) => self.install(req.build()),
+            None => Ok(()),
+        }
+    }
+
     /// Carries out a command (also from the board's user button).
     pub fn command(&mut self, command: Command) -> Result<(), CommandError> {
         match command {
             Command::Start { .. } => self.start(command),
-            Command::Stop => {
-                if !self.running() {
-                    return Err(CommandError::NotNow(self.state));
+            Command::Stop => match self.state {
+                RigState::Running => {
+                    self.end_run(RigState::Stopped);
+                    Ok(())
                 }
-                self.end_run(RigState::Stopped);
-                Ok(())
-            }
+                // Cancelled before it ran: no run events; a late simulation is discarded.
+                RigState::Starting => {
+                    self.start_request = None;
+                    self.start_request_new = false;
+                    self.state = RigState::Stopped;
+                    Ok(())
+                }
+                s => Err(CommandError::NotNow(s)),
+            },
             Command::Brake(b) => {
                 if let Sim::SelfTest(c) = &mut self.sim {
                     c.set_demand(match b {
@@ -485,7 +584,7 @@ impl Rig {
                 Ok(())
             }
             Command::Calibrate { channel, action } => {
-                if self.running() {
+                if self.busy() {
                     return Err(CommandError::NotNow(self.state));
                 }
                 let ch = self
@@ -519,7 +618,7 @@ impl Rig {
                 Ok(())
             }
             Command::Configure(item) => {
-                if self.running() {
+                if self.busy() {
                     return Err(CommandError::NotNow(self.state));
                 }
                 match item {

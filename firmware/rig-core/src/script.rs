@@ -59,7 +59,7 @@ pub fn run(sink: impl FnMut(&TelemetryEvent)) -> u32 {
     let start = Command::paper_self_test(FrictionModel::Variable);
     // The start cannot fail with the built-in parameters; if it did, the log would show
     // no header and the host check would fail.
-    let _ = rig.command(start);
+    let _ = rig.command(start).and_then(|_| rig.build_pending());
     for k in 0..STEPS {
         rig.step(&mut io);
         let entry = k.wrapping_mul(17_000);

@@ -218,7 +218,7 @@ proptest! {
     }
 
     #[test]
-    fn status_frame(speed in 0u32..=65535, decel in -32768i32..=32767, state in 0u8..5, mode in 0u8..2,
+    fn status_frame(speed in 0u32..=65535, decel in -32768i32..=32767, state in 0u8..6, mode in 0u8..2,
                     result in 0u8..3, faults: u16, counter in 0u8..16) {
         let s = StatusFrame {
             vehicle_speed_kmh: speed as f32 * 0.01,

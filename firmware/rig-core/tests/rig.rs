@@ -100,7 +100,9 @@ fn command(rig: &mut Rig, counter: u8, c: Command) -> Result<Command, CommandErr
     }
     .encode()
     .unwrap();
+    // A start is only requested by the step; build it here, as the board's builder would.
     rig.command_frame(&f)
+        .and_then(|c| rig.build_pending().map(|_| c))
 }
 
 fn paper_start(friction: FrictionModel) -> Command {
@@ -484,6 +486,72 @@ fn stale_adc_stops_a_rig_run_after_ten_ticks() {
     }
     rig.step(&mut io);
     assert_eq!(rig.state(), RigState::Fault);
+}
+
+#[test]
+fn start_is_built_outside_the_step_and_handed_over() {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut io = MockBoard::new();
+    let start = paper_start(FrictionModel::Variable);
+    // The step's command path only requests the run.
+    rig.command(start).unwrap();
+    assert_eq!(rig.state(), RigState::Starting);
+    assert_eq!(
+        rig.command(start),
+        Err(CommandError::NotNow(RigState::Starting))
+    );
+    for _ in 0..50 {
+        rig.step(&mut io);
+    }
+    // Nothing runs, outputs safe, no run events until the simulation arrives.
+    assert_eq!(rig.state(), RigState::Starting);
+    assert_eq!(rig.run_steps(), 0);
+    assert!(rig.outputs().is_none());
+    assert!(io.pulses.iter().all(|p| p.unwrap().is_silent()));
+    assert!(io.telemetry.is_empty());
+    let (_, st) = io.frames_with(ID_STATUS).last().copied().unwrap().clone();
+    assert_eq!(StatusFrame::decode(&st).unwrap().state, RigState::Starting);
+    // The builder gets the request once.
+    let req = rig.take_start_request().unwrap();
+    assert_eq!(rig.take_start_request(), None);
+    assert_eq!(req.mode, RigMode::SelfTest);
+    rig.install(req.build()).unwrap();
+    assert_eq!(rig.state(), RigState::Running);
+    rig.step(&mut io);
+    assert_eq!(rig.run_steps(), 1);
+    assert!(matches!(
+        io.telemetry.first(),
+        Some(TelemetryEvent::Header(_))
+    ));
+    // The same run as one built directly (independent construction).
+    let mut c = ClosedLoop::<f32>::new(&Params::default(), Rail::Wet, 150.0 / 3.6).unwrap();
+    c.set_demand(BrakeDemand::Emergency);
+    c.step();
+    assert_eq!(
+        rig.outputs().unwrap().vehicle_speed,
+        c.outputs().vehicle_speed
+    );
+
+    // Stop while starting cancels; a simulation arriving late is discarded.
+    rig.command(Command::Stop).unwrap();
+    rig.step(&mut io);
+    rig.command(start).unwrap();
+    let req = rig.take_start_request().unwrap();
+    rig.command(Command::Stop).unwrap();
+    assert_eq!(rig.state(), RigState::Stopped);
+    assert!(rig.install(req.build()).is_err());
+    assert_eq!(rig.state(), RigState::Stopped);
+    assert!(rig.outputs().is_none());
+
+    // A failed build goes back to the state before, with the command rejected.
+    rig.command(start).unwrap();
+    rig.take_start_request().unwrap();
+    assert_eq!(
+        rig.install(Err(CommandError::SpeedOutOfRange)),
+        Err(CommandError::SpeedOutOfRange)
+    );
+    assert_eq!(rig.state(), RigState::Stopped);
+    assert!(rig.faults().contains(Faults::COMMAND_REJECTED));
 }
 
 // ---- Fault injection: the cases of issue 11, item 7 ----

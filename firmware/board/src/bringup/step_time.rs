@@ -48,6 +48,7 @@ pub fn paper_steps() -> bool {
     let rig = RIG.init(Rig::new(RigConfig::nucleo_g474re()));
     let started = rig
         .command(Command::paper_self_test(FrictionModel::Variable))
+        .and_then(|_| rig.build_pending())
         .is_ok();
     let mut io = BenchIo { tick: 0 };
     let mut timing = StepTiming::new(CPU_HZ, hils_rig_core::STEP_RATE_HZ);
