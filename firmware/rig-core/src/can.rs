@@ -5,7 +5,8 @@
 //!
 //! | id | name | dir | period | content |
 //! |---|---|---|---|---|
-//! | 0x100 | `RIG_WHEEL_SPEED` | out | 1 ms | four wheel speeds (14 bit, 0.01 km/h), alive counter, checksum |
+//! | 0x100 | `RIG_WHEEL_SPEED_12` | out | 1 ms | wheel speeds of wheelsets 1, 2 (16 bit, 0.01 km/h), alive counter, checksum |
+//! | 0x101 | `RIG_WHEEL_SPEED_34` | out | 1 ms | wheel speeds of wheelsets 3, 4 (16 bit, 0.01 km/h), alive counter, checksum |
 //! | 0x110 | `RIG_STATUS` | out | 10 ms | vehicle speed, deceleration, state, mode, command result, fault flags, counter, checksum |
 //! | 0x120 | `RIG_DIAG` | out | 100 ms | step time max/mean, overruns, sensor fault kinds, bus-off count |
 //! | 0x200 | `RIG_COMMAND` | in | on demand | multiplexed by opcode: start, stop, brake, fault injection, calibration, clear faults, configure; counter, checksum |
@@ -17,10 +18,12 @@
 //! as in AUTOSAR E2E's data id. The **alive counter** (low nibble of byte 7) counts 0-15
 //! and wraps, one step per frame sent.
 //!
-//! **Wheel-speed range.** Four speeds, an alive counter and a checksum fill the 64 bits of a
-//! classic frame only with 14 bits per speed: 0.01 km/h resolution over 0-163.82 km/h. The
-//! raw value 0x3FFF means "not available" (safe state, see [`crate::rig`]); speeds above
-//! the range are sent as 163.82 km/h (0x3FFE) and flagged ([`crate::rig::Faults::SPEED_SATURATED`]).
+//! **Wheel-speed range.** Two frames of two wheelsets each (sent in the same tick with the
+//! same alive counter, so a receiver can pair them), 16 bits per speed: 0.01 km/h resolution
+//! over 0-655.34 km/h, beyond any vehicle or WSP test (four 14-bit speeds in one frame
+//! stopped at 163.82 km/h). The raw value 0xFFFF means "not available" (safe state, see
+//! [`crate::rig`]); speeds above the range are sent as 655.34 km/h (0xFFFE) and flagged
+//! ([`crate::rig::Faults::SPEED_SATURATED`]). Bytes 4-6 are reserved (0).
 
 use embedded_can::{Frame, Id, StandardId};
 use hils_plant::{FrictionModel, Rail};
@@ -32,8 +35,12 @@ use crate::Code;
 pub use crate::sensor::InjectedFault;
 use crate::sensor::{SensorFault, SensorKind};
 
-/// Identifier of `RIG_WHEEL_SPEED`.
-pub const ID_WHEEL_SPEED: u16 = 0x100;
+/// Identifier of `RIG_WHEEL_SPEED_12` (wheelsets 1 and 2).
+pub const ID_WHEEL_SPEED_12: u16 = 0x100;
+/// Identifier of `RIG_WHEEL_SPEED_34` (wheelsets 3 and 4).
+pub const ID_WHEEL_SPEED_34: u16 = 0x101;
+/// The wheel-speed identifiers by pair of wheelsets ([`WheelSpeedFrame::pair`]).
+pub const ID_WHEEL_SPEEDS: [u16; 2] = [ID_WHEEL_SPEED_12, ID_WHEEL_SPEED_34];
 /// Identifier of `RIG_STATUS`.
 pub const ID_STATUS: u16 = 0x110;
 /// Identifier of `RIG_DIAG`.
@@ -44,9 +51,9 @@ pub const ID_COMMAND: u16 = 0x200;
 /// Wheel-speed resolution, km/h per bit.
 pub const WHEEL_SPEED_RESOLUTION_KMH: f32 = 0.01;
 /// Raw wheel speed meaning "not available".
-pub const WHEEL_SPEED_NOT_AVAILABLE: u16 = 0x3FFF;
-/// Largest raw wheel speed (163.82 km/h).
-pub const WHEEL_SPEED_RAW_MAX: u16 = 0x3FFE;
+pub const WHEEL_SPEED_NOT_AVAILABLE: u16 = 0xFFFF;
+/// Largest raw wheel speed (655.34 km/h).
+pub const WHEEL_SPEED_RAW_MAX: u16 = 0xFFFE;
 /// Highest wheel speed the frame carries, km/h.
 pub const WHEEL_SPEED_MAX_KMH: f32 = WHEEL_SPEED_RAW_MAX as f32 * WHEEL_SPEED_RESOLUTION_KMH;
 
@@ -369,24 +376,33 @@ pub mod sealed {
     pub const CHECKSUM: Signal = Signal::raw("Checksum", 60, 4);
 }
 
-/// `RIG_WHEEL_SPEED` (0x100).
+/// `RIG_WHEEL_SPEED_12` (0x100) and `RIG_WHEEL_SPEED_34` (0x101).
 pub mod wheel_speed {
     use super::Signal;
-    /// `WheelSpeed1..4`, km/h (14 bits at 0.01; 0x3FFF = not available).
-    pub const SPEEDS: [Signal; 4] = [
-        Signal::scaled("WheelSpeed1", 0, 14, 0.01),
-        Signal::scaled("WheelSpeed2", 14, 14, 0.01),
-        Signal::scaled("WheelSpeed3", 28, 14, 0.01),
-        Signal::scaled("WheelSpeed4", 42, 14, 0.01),
+    /// `WheelSpeed1..4`, km/h (16 bits at 0.01; 0xFFFF = not available), by frame.
+    pub const SPEEDS: [[Signal; 2]; 2] = [
+        [
+            Signal::scaled("WheelSpeed1", 0, 16, 0.01),
+            Signal::scaled("WheelSpeed2", 16, 16, 0.01),
+        ],
+        [
+            Signal::scaled("WheelSpeed3", 0, 16, 0.01),
+            Signal::scaled("WheelSpeed4", 16, 16, 0.01),
+        ],
     ];
-    /// Every signal of the frame.
-    pub const ALL: [Signal; 6] = [
-        SPEEDS[0],
-        SPEEDS[1],
-        SPEEDS[2],
-        SPEEDS[3],
-        Signal::raw("WheelSpeedAlive", 56, 4),
-        Signal::raw("WheelSpeedChecksum", 60, 4),
+    /// Every signal of `RIG_WHEEL_SPEED_12`.
+    pub const ALL_12: [Signal; 4] = [
+        SPEEDS[0][0],
+        SPEEDS[0][1],
+        Signal::raw("WheelSpeed12Alive", 56, 4),
+        Signal::raw("WheelSpeed12Checksum", 60, 4),
+    ];
+    /// Every signal of `RIG_WHEEL_SPEED_34`.
+    pub const ALL_34: [Signal; 4] = [
+        SPEEDS[1][0],
+        SPEEDS[1][1],
+        Signal::raw("WheelSpeed34Alive", 56, 4),
+        Signal::raw("WheelSpeed34Checksum", 60, 4),
     ];
 }
 
@@ -505,8 +521,9 @@ pub mod command {
 }
 
 /// Every frame's identifier and signal table (what `hils.dbc` must describe).
-pub const FRAMES: [(u16, &[Signal]); 4] = [
-    (ID_WHEEL_SPEED, &wheel_speed::ALL),
+pub const FRAMES: [(u16, &[Signal]); 5] = [
+    (ID_WHEEL_SPEED_12, &wheel_speed::ALL_12),
+    (ID_WHEEL_SPEED_34, &wheel_speed::ALL_34),
     (ID_STATUS, &status::ALL),
     (ID_DIAG, &diag::ALL),
     (ID_COMMAND, &command::ALL),
@@ -533,18 +550,20 @@ pub enum Opcode {
 }
 
 // ---------------------------------------------------------------------------------------
-// RIG_WHEEL_SPEED
+// RIG_WHEEL_SPEED_12, RIG_WHEEL_SPEED_34
 
-/// `RIG_WHEEL_SPEED` (0x100, every 1 ms): the four wheelsets' circumferential speeds
-/// r omega, km/h. `None` = not available (raw 0x3FFF).
+/// `RIG_WHEEL_SPEED_12` / `RIG_WHEEL_SPEED_34` (0x100 / 0x101, every 1 ms): two wheelsets'
+/// circumferential speeds r omega, km/h. `None` = not available (raw 0xFFFF).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct WheelSpeedFrame {
-    pub speeds_kmh: [Option<f32>; 4],
+    /// 0: wheelsets 1 and 2 (0x100); 1: wheelsets 3 and 4 (0x101).
+    pub pair: usize,
+    pub speeds_kmh: [Option<f32>; 2],
     pub counter: u8,
 }
 
 impl WheelSpeedFrame {
-    /// Raw value of a speed: rounded to 0.01 km/h, limited to 0..=163.82 km/h; negative
+    /// Raw value of a speed: rounded to 0.01 km/h, limited to 0..=655.34 km/h; negative
     /// speeds are sent as 0 (a speed sensor has no direction); `None`, NaN -> not available.
     /// Returns the raw value and whether the speed was above the range.
     pub fn raw_speed(speed_kmh: Option<f32>) -> (u16, bool) {
@@ -560,17 +579,37 @@ impl WheelSpeedFrame {
         }
     }
 
-    pub fn encode<F: Frame>(&self) -> Option<F> {
-        let mut data = [0u8; 8];
-        for (signal, s) in wheel_speed::SPEEDS.iter().zip(self.speeds_kmh) {
-            signal.put_raw(&mut data, Self::raw_speed(s).0 as u64);
-        }
-        seal(ID_WHEEL_SPEED, data, self.counter)
+    /// The two frames of one cycle: the four wheelsets' speeds, one alive counter.
+    pub fn cycle(speeds_kmh: [Option<f32>; 4], counter: u8) -> [Self; 2] {
+        core::array::from_fn(|pair| Self {
+            pair,
+            speeds_kmh: [speeds_kmh[2 * pair], speeds_kmh[2 * pair + 1]],
+            counter,
+        })
     }
 
+    /// The frame's identifier (`None` for a pair other than 0 or 1).
+    pub fn id(&self) -> Option<u16> {
+        ID_WHEEL_SPEEDS.get(self.pair).copied()
+    }
+
+    pub fn encode<F: Frame>(&self) -> Option<F> {
+        let id = self.id()?;
+        let mut data = [0u8; 8];
+        for (signal, s) in wheel_speed::SPEEDS[self.pair].iter().zip(self.speeds_kmh) {
+            signal.put_raw(&mut data, Self::raw_speed(s).0 as u64);
+        }
+        seal(id, data, self.counter)
+    }
+
+    /// Decodes either frame (the pair from the identifier).
     pub fn decode<F: Frame>(frame: &F) -> Result<Self, DecodeError> {
-        let (data, counter) = open(frame, ID_WHEEL_SPEED)?;
-        let speeds_kmh = wheel_speed::SPEEDS.map(|s| {
+        let pair = match frame.id() {
+            Id::Standard(id) if id.as_raw() == ID_WHEEL_SPEED_34 => 1,
+            _ => 0,
+        };
+        let (data, counter) = open(frame, ID_WHEEL_SPEEDS[pair])?;
+        let speeds_kmh = wheel_speed::SPEEDS[pair].map(|s| {
             if s.get_raw(&data) as u16 == WHEEL_SPEED_NOT_AVAILABLE {
                 None
             } else {
@@ -578,6 +617,7 @@ impl WheelSpeedFrame {
             }
         });
         Ok(Self {
+            pair,
             speeds_kmh,
             counter,
         })
@@ -776,7 +816,7 @@ pub enum ConfigItem {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Command {
     /// Opcode 1: start a run from `initial_speed_kmh` (0.01 km/h per bit; the board
-    /// accepts 0-163.82, the wheel-speed frame's range). `emergency`: the self-test's
+    /// accepts 0-655.34, the wheel-speed frames' range). `emergency`: the self-test's
     /// simulated brake unit gets the EB command at t = 0 (the paper's scenario).
     Start {
         mode: RigMode,
@@ -1047,28 +1087,48 @@ mod tests {
 
     #[test]
     fn wheel_speed_roundtrip_within_half_resolution() {
-        let speeds = [Some(150.0), Some(0.0), None, Some(163.82)];
-        let f: TestFrame = WheelSpeedFrame {
-            speeds_kmh: speeds,
-            counter: 9,
+        let speeds = [Some(350.0), Some(0.0), None, Some(655.34)];
+        let frames = WheelSpeedFrame::cycle(speeds, 9);
+        let mut back = [None; 4];
+        for (pair, w) in frames.iter().enumerate() {
+            let f: TestFrame = w.encode().unwrap();
+            assert_eq!(
+                f.id(),
+                Id::Standard(StandardId::new(0x100 + pair as u16).unwrap())
+            );
+            let d = WheelSpeedFrame::decode(&f).unwrap();
+            assert_eq!((d.pair, d.counter), (pair, 9));
+            back[2 * pair..2 * pair + 2].copy_from_slice(&d.speeds_kmh);
         }
-        .encode()
-        .unwrap();
-        let back = WheelSpeedFrame::decode(&f).unwrap();
-        assert_eq!(back.counter, 9);
-        for (a, b) in speeds.iter().zip(back.speeds_kmh.iter()) {
+        for (a, b) in speeds.iter().zip(back.iter()) {
             match (a, b) {
-                (Some(a), Some(b)) => assert!((a - b).abs() <= 0.005 + 1e-4, "{a} vs {b}"),
+                (Some(a), Some(b)) => {
+                    assert!((a - b).abs() <= 0.005 + 3e-3 * 0.01 * a, "{a} vs {b}")
+                }
                 (None, None) => {}
                 _ => panic!("{a:?} vs {b:?}"),
             }
         }
+        // 350 km/h and above at 0.01 km/h: within half a step (f32 keeps 16 bits exactly).
+        for raw in [35_000u16, 35_001, 65_534] {
+            let v = raw as f32 * 0.01;
+            assert_eq!(WheelSpeedFrame::raw_speed(Some(v)), (raw, false));
+        }
+        assert!(
+            WheelSpeedFrame {
+                pair: 2,
+                speeds_kmh: [None; 2],
+                counter: 0
+            }
+            .encode::<TestFrame>()
+            .is_none()
+        );
     }
 
     #[test]
     fn wheel_speed_saturates_and_flags_above_range() {
         assert_eq!(
-            WheelSpeedFrame::raw_speed(Some(200.0)),
+            WheelSpeedFrame::raw_speed(Some(700.0)),
             (WHEEL_SPEED_RAW_MAX, true)
         );
         assert_eq!(WheelSpeedFrame::raw_speed(Some(-3.0)), (0, false));
@@ -1083,7 +1143,8 @@ mod tests {
     #[test]
     fn corrupted_frames_are_rejected() {
         let f: TestFrame = WheelSpeedFrame {
-            speeds_kmh: [Some(100.0); 4],
+            pair: 0,
+            speeds_kmh: [Some(100.0); 2],
             counter: 3,
         }
         .encode()

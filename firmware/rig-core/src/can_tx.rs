@@ -17,7 +17,7 @@
 //! of the same id, which is the one the receiver wants.
 
 use crate::STEP_RATE_HZ;
-use crate::can::{ID_DIAG, ID_STATUS, ID_WHEEL_SPEED};
+use crate::can::{ID_DIAG, ID_STATUS, ID_WHEEL_SPEED_12, ID_WHEEL_SPEED_34};
 
 /// Step ticks per millisecond.
 pub const TICKS_PER_MS: u32 = STEP_RATE_HZ / 1000;
@@ -33,7 +33,7 @@ pub struct QueuedFrame<F> {
 /// Useful life of a frame by identifier, step ticks: one period of the frame.
 pub fn max_age_ticks(id: u16) -> u32 {
     match id {
-        ID_WHEEL_SPEED => TICKS_PER_MS,
+        ID_WHEEL_SPEED_12 | ID_WHEEL_SPEED_34 => TICKS_PER_MS,
         ID_STATUS => 10 * TICKS_PER_MS,
         ID_DIAG => 100 * TICKS_PER_MS,
         _ => 100 * TICKS_PER_MS,
@@ -142,18 +142,18 @@ mod tests {
 
     #[test]
     fn life_is_one_period_and_wraps() {
-        assert!(!is_stale(ID_WHEEL_SPEED, 100, 110));
-        assert!(is_stale(ID_WHEEL_SPEED, 100, 111));
+        assert!(!is_stale(ID_WHEEL_SPEED_12, 100, 110));
+        assert!(is_stale(ID_WHEEL_SPEED_12, 100, 111));
         assert!(!is_stale(ID_STATUS, 100, 200));
         assert!(is_stale(ID_STATUS, 100, 201));
-        assert!(!is_stale(ID_WHEEL_SPEED, u32::MAX - 4, 5));
+        assert!(!is_stale(ID_WHEEL_SPEED_12, u32::MAX - 4, 5));
         assert!(is_stale(ID_DIAG, u32::MAX - 500, 501));
     }
 
     #[test]
     fn stale_pending_frames_are_cancelled_once_and_counted() {
         let mut s = TxSlots::<3>::new();
-        s.on_write(0, ID_WHEEL_SPEED, 0);
+        s.on_write(0, ID_WHEEL_SPEED_12, 0);
         s.on_write(1, ID_STATUS, 0);
         assert_eq!(s.stale_mask(0b011, 10), 0);
         assert_eq!(s.stale_mask(0b011, 11), 0b001);

@@ -8,8 +8,8 @@
 //!    (load cell -> `BrakeInput::ClampForce`, pressure -> `BrakeInput::CylinderPressure`),
 //!    in [`RigMode::SelfTest`] closed with the simulated brake unit
 //!    (`hils_sil::ClosedLoop<f32>`);
-//! 3. write the outputs: four pulse trains, and on schedule the CAN frames (wheel speeds
-//!    every 10 ticks = 1 ms, status every 100 = 10 ms, diagnostics every 1000 = 100 ms:
+//! 3. write the outputs: four pulse trains, and on schedule the CAN frames (wheel speeds,
+//!    two frames of two wheelsets, every 10 ticks = 1 ms, status every 100 = 10 ms, diagnostics every 1000 = 100 ms:
 //!    [`WHEEL_SPEED_SCHEDULE`], [`STATUS_SCHEDULE`], [`DIAG_SCHEDULE`]);
 //! 4. every `divider` plant steps, a telemetry record.
 //!
@@ -20,7 +20,7 @@
 //!
 //! Outside a run, and in the states `Stopped` and `Fault`, the outputs are in the safe
 //! state: every pulse train silent (pin low) and every wheel speed "not available"
-//! (raw 0x3FFF) in `RIG_WHEEL_SPEED`; the status frame keeps coming with the state and
+//! (raw 0xFFFF) in `RIG_WHEEL_SPEED_12`/`_34`; the status frame keeps coming with the state and
 //! the fault flags. A brake controller sees a lost speed signal, the condition its own
 //! sensor supervision is built for, rather than a plausible but false speed. After a run
 //! ends at standstill (`Finished`), the speeds are sent as 0.00 km/h and the trains are
@@ -73,7 +73,7 @@ impl Schedule {
     }
 }
 
-/// `RIG_WHEEL_SPEED` every 10 ticks (1 ms).
+/// `RIG_WHEEL_SPEED_12` and `RIG_WHEEL_SPEED_34` every 10 ticks (1 ms).
 pub const WHEEL_SPEED_SCHEDULE: Schedule = Schedule {
     period: 10,
     phase: 0,
@@ -116,7 +116,7 @@ impl Faults {
     pub const PLANT_INPUT: u32 = 0x0080;
     /// The plant's state became non-finite; it put itself at rest.
     pub const PLANT_NUMERIC: u32 = 0x0100;
-    /// A wheel speed was above the frame's 163.82 km/h and was sent saturated.
+    /// A wheel speed was above the frame's 655.34 km/h and was sent saturated.
     pub const SPEED_SATURATED: u32 = 0x0200;
     /// A command was rejected (sticky until cleared; the last result is in the status frame).
     pub const COMMAND_REJECTED: u32 = 0x0400;
@@ -174,7 +174,7 @@ pub enum CommandError {
     Repeated,
     /// Not allowed in this state (e.g. calibration during a run).
     NotNow(RigState),
-    /// Initial speed above what the wheel-speed frame carries (163.82 km/h) or negative.
+    /// Initial speed above what the wheel-speed frame carries (655.34 km/h) or negative.
     SpeedOutOfRange,
     /// A rig-mode start with latched sensor faults (clear them first).
     SensorFaults,
@@ -870,12 +870,10 @@ impl Rig {
             if saturated {
                 self.sticky |= Faults::SPEED_SATURATED;
             }
-            let frame = WheelSpeedFrame {
-                speeds_kmh: self.wheel_speed_kmh,
-                counter: self.counters[0],
-            };
+            for frame in WheelSpeedFrame::cycle(self.wheel_speed_kmh, self.counters[0]) {
+                self.send(io, frame.encode());
+            }
             self.counters[0] = (self.counters[0] + 1) & 0x0F;
-            self.send(io, frame.encode());
         }
         if STATUS_SCHEDULE.due(self.tick) {
             let frame = StatusFrame {

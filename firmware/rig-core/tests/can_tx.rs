@@ -7,7 +7,7 @@
 
 use std::collections::VecDeque;
 
-use hils_rig_core::can::{ID_DIAG, ID_STATUS, ID_WHEEL_SPEED};
+use hils_rig_core::can::{ID_DIAG, ID_STATUS, ID_WHEEL_SPEED_12, ID_WHEEL_SPEED_34};
 use hils_rig_core::can_tx::{TxSlots, is_stale, max_age_ticks};
 
 const QUEUE: usize = 32;
@@ -52,11 +52,12 @@ impl Model {
         }
     }
 
-    /// The step's schedule (rig.rs): wheel speeds at tick % 10 == 0, status at % 100 == 5,
+    /// The step's schedule (rig.rs): both wheel-speed frames at tick % 10 == 0, status at % 100 == 5,
     /// diagnostics at % 1000 == 50.
     fn step(&mut self, tick: u32) {
         for (id, due) in [
-            (ID_WHEEL_SPEED, tick % 10 == 0),
+            (ID_WHEEL_SPEED_12, tick % 10 == 0),
+            (ID_WHEEL_SPEED_34, tick % 10 == 0),
             (ID_STATUS, tick % 100 == 5),
             (ID_DIAG, tick % 1000 == 50),
         ] {
@@ -109,7 +110,8 @@ impl Model {
 
     fn bus(&mut self, now: u32, up: bool) {
         if let Some((slot, _, _, end)) = self.on_bus {
-            if now >= end {
+            // Wrapping tick clock: `end` reached when now - end is not negative.
+            if now.wrapping_sub(end) as i32 >= 0 {
                 self.on_bus = None;
                 if up {
                     self.hw.retain(|e| e.0 != slot);
@@ -121,7 +123,7 @@ impl Model {
         if up && self.on_bus.is_none() {
             if let Some(&(slot, id, tick)) = self.hw.front() {
                 self.sent_ages.push((now, id, now.wrapping_sub(tick)));
-                self.on_bus = Some((slot, id, tick, now + FRAME_TICKS));
+                self.on_bus = Some((slot, id, tick, now.wrapping_add(FRAME_TICKS)));
             }
         }
     }
@@ -186,7 +188,7 @@ fn after_a_bus_outage_nothing_stale_goes_out() {
         let first = m
             .sent_ages
             .iter()
-            .find(|&&(at, id, _)| at.wrapping_sub(start) >= down.end && id == ID_WHEEL_SPEED)
+            .find(|&&(at, id, _)| at.wrapping_sub(start) >= down.end && id == ID_WHEEL_SPEED_12)
             .unwrap();
         assert!(first.2 <= 10);
         accounted(&m);

@@ -197,24 +197,42 @@ fn checksum_of(f: &TestFrame) -> f64 {
 
 fn wheel_fields(w: &WheelSpeedFrame, frame: Option<&TestFrame>) -> Fields {
     let mut m = Fields::new();
-    let names = ["WheelSpeed1", "WheelSpeed2", "WheelSpeed3", "WheelSpeed4"];
+    let (names, alive, crc) = match w.pair {
+        0 => (
+            ["WheelSpeed1", "WheelSpeed2"],
+            "WheelSpeed12Alive",
+            "WheelSpeed12Checksum",
+        ),
+        _ => (
+            ["WheelSpeed3", "WheelSpeed4"],
+            "WheelSpeed34Alive",
+            "WheelSpeed34Checksum",
+        ),
+    };
     for (j, n) in names.iter().enumerate() {
-        m.insert(n, w.speeds_kmh[j].map(|v| v as f64).unwrap_or(163.83));
+        // Not available: raw 0xFFFF = 655.35 km/h in the DBC's scaling.
+        m.insert(n, w.speeds_kmh[j].map(|v| v as f64).unwrap_or(655.35));
     }
-    m.insert("WheelSpeedAlive", w.counter as f64);
-    m.insert("WheelSpeedChecksum", frame.map(checksum_of).unwrap_or(0.0));
+    m.insert(alive, w.counter as f64);
+    m.insert(crc, frame.map(checksum_of).unwrap_or(0.0));
     m
 }
 
 proptest! {
     #![proptest_config(ProptestConfig { cases: 200, ..Default::default() })]
 
+    /// Both wheel-speed frames over the whole 16-bit range, half the cases at or above
+    /// 350 km/h (raw 35 000).
     #[test]
-    fn wheel_speed_frame(speeds in proptest::array::uniform4(proptest::option::weighted(0.9, 0u32..=16382)), counter in 0u8..16) {
-        let w = WheelSpeedFrame { speeds_kmh: speeds.map(|s| s.map(|r| r as f32 * 0.01)), counter };
-        let f: TestFrame = w.encode().unwrap();
-        both_ways(can::ID_WHEEL_SPEED, None, &f, &wheel_fields(&w, Some(&f)),
-            |f| WheelSpeedFrame::decode(f).unwrap(), |w| wheel_fields(w, None), Some("WheelSpeedChecksum"));
+    fn wheel_speed_frames(speeds in proptest::array::uniform4(proptest::option::weighted(0.9,
+                              prop_oneof![0u32..=65534, 35_000u32..=65534])), counter in 0u8..16) {
+        let kmh = speeds.map(|s| s.map(|r| r as f32 * 0.01));
+        for w in WheelSpeedFrame::cycle(kmh, counter) {
+            let f: TestFrame = w.encode().unwrap();
+            let checksum = if w.pair == 0 { "WheelSpeed12Checksum" } else { "WheelSpeed34Checksum" };
+            both_ways(w.id().unwrap(), None, &f, &wheel_fields(&w, Some(&f)),
+                |f| WheelSpeedFrame::decode(f).unwrap(), |w| wheel_fields(w, None), Some(checksum));
+        }
     }
 
     #[test]
@@ -352,7 +370,7 @@ proptest! {
 fn dbc_describes_exactly_the_codec_messages_and_no_signals_overlap() {
     let dbc = dbc();
     let ids: Vec<u32> = dbc.messages.iter().map(|m| m.id.raw()).collect();
-    assert_eq!(ids, vec![0x100, 0x110, 0x120, 0x200]);
+    assert_eq!(ids, vec![0x100, 0x101, 0x110, 0x120, 0x200]);
     for m in &dbc.messages {
         let MessageId::Standard(id) = m.id else {
             panic!()

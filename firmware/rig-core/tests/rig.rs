@@ -7,8 +7,8 @@ use hils_plant::{BrakeInput, FrictionModel, Params, Plant, Rail};
 use hils_rig_core::Code;
 use hils_rig_core::can::{
     BrakeCommand, Calibration, ClassicFrame, Command, CommandFrame, CommandResult, ConfigItem,
-    DiagFrame, ID_DIAG, ID_STATUS, ID_WHEEL_SPEED, InjectedFault, RigMode, RigState, StatusFrame,
-    WheelSpeedFrame,
+    DiagFrame, ID_DIAG, ID_STATUS, ID_WHEEL_SPEED_12, ID_WHEEL_SPEED_34, InjectedFault, RigMode,
+    RigState, StatusFrame, WheelSpeedFrame,
 };
 use hils_rig_core::hw::{RigIo, TelemetryEvent};
 use hils_rig_core::pulse::PulseRegisters;
@@ -120,6 +120,22 @@ fn rig_start(initial_speed_kmh: f32) -> Command {
     }
 }
 
+/// The four speeds of the last wheel-speed cycle (both frames, same alive counter).
+fn last_wheel_speeds(io: &MockBoard) -> [Option<f32>; 4] {
+    let decode = |id| {
+        let (_, f) = io.frames_with(id).last().copied().unwrap().clone();
+        WheelSpeedFrame::decode(&f).unwrap()
+    };
+    let (a, b) = (decode(ID_WHEEL_SPEED_12), decode(ID_WHEEL_SPEED_34));
+    assert_eq!(a.counter, b.counter);
+    [
+        a.speeds_kmh[0],
+        a.speeds_kmh[1],
+        b.speeds_kmh[0],
+        b.speeds_kmh[1],
+    ]
+}
+
 /// Makes `channel` a pressure transducer (command with alive counter `counter`).
 fn make_pressure_channel(rig: &mut Rig, counter: u8, channel: u8) {
     let c = Command::Calibrate {
@@ -210,16 +226,21 @@ fn self_test_paper_run_matches_the_closed_loop_and_streams_it() {
     assert_eq!(vented, [false, true, false, true]);
 
     // CAN: a wheel-speed frame every 10 ticks with the circumferential speeds, counter 0..15.
-    let ws = io.frames_with(ID_WHEEL_SPEED);
-    assert_eq!(ws.len() as u32, ticks / 10);
-    for (k, (_, f)) in ws.iter().enumerate() {
-        let d = WheelSpeedFrame::decode(f).unwrap();
-        assert_eq!(d.counter as usize, k % 16);
-        assert!(
-            d.speeds_kmh
-                .iter()
-                .all(|s| s.is_some_and(|v| (0.0..=150.01).contains(&v)))
-        );
+    for (pair, id) in [ID_WHEEL_SPEED_12, ID_WHEEL_SPEED_34]
+        .into_iter()
+        .enumerate()
+    {
+        let ws = io.frames_with(id);
+        assert_eq!(ws.len() as u32, ticks / 10);
+        for (k, (_, f)) in ws.iter().enumerate() {
+            let d = WheelSpeedFrame::decode(f).unwrap();
+            assert_eq!((d.pair, d.counter as usize), (pair, k % 16));
+            assert!(
+                d.speeds_kmh
+                    .iter()
+                    .all(|s| s.is_some_and(|v| (0.0..=150.01).contains(&v)))
+            );
+        }
     }
     let status = io.frames_with(ID_STATUS);
     assert_eq!(status.len() as u32, (ticks + 95) / 100);
@@ -267,16 +288,10 @@ fn wheel_speed_outputs_follow_the_plant() {
         }
     }
     // Decoded frames agree with the speeds within half the resolution.
-    let (_, last) = io
-        .frames_with(ID_WHEEL_SPEED)
-        .last()
-        .copied()
-        .unwrap()
-        .clone();
-    let d = WheelSpeedFrame::decode(&last).unwrap();
+    let sent = last_wheel_speeds(&io);
     for j in 0..4 {
         let v = rig.wheel_speeds_kmh()[j].unwrap();
-        assert!((d.speeds_kmh[j].unwrap() - v).abs() <= 0.0051, "{j}");
+        assert!((sent[j].unwrap() - v).abs() <= 0.0051, "{j}");
     }
 }
 
@@ -370,13 +385,7 @@ fn latched_sensor_fault_puts_a_rig_run_in_the_safe_state() {
     for _ in 0..200 {
         rig.step(&mut io);
     }
-    let (_, ws) = io
-        .frames_with(ID_WHEEL_SPEED)
-        .last()
-        .copied()
-        .unwrap()
-        .clone();
-    assert_eq!(WheelSpeedFrame::decode(&ws).unwrap().speeds_kmh, [None; 4]);
+    assert_eq!(last_wheel_speeds(&io), [None; 4]);
     let (_, st) = io.frames_with(ID_STATUS).last().copied().unwrap().clone();
     let st = StatusFrame::decode(&st).unwrap();
     assert_eq!(st.state, RigState::Fault);
@@ -554,6 +563,33 @@ fn start_is_built_outside_the_step_and_handed_over() {
     assert!(rig.faults().contains(Faults::COMMAND_REJECTED));
 }
 
+#[test]
+fn a_350_kmh_run_is_sent_unsaturated_at_0_01_kmh() {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut io = MockBoard::new();
+    let mut start = paper_start(FrictionModel::Variable);
+    if let Command::Start {
+        initial_speed_kmh,
+        emergency,
+        ..
+    } = &mut start
+    {
+        *initial_speed_kmh = 350.0;
+        *emergency = false;
+    }
+    command(&mut rig, 1, start).unwrap();
+    for _ in 0..100 {
+        rig.step(&mut io);
+    }
+    assert!(!rig.faults().contains(Faults::SPEED_SATURATED));
+    let sent = last_wheel_speeds(&io);
+    for j in 0..4 {
+        let v = rig.wheel_speeds_kmh()[j].unwrap();
+        assert!(v > 349.0, "{v}");
+        assert!((sent[j].unwrap() - v).abs() <= 0.0051 + 1e-5 * v, "{j}");
+    }
+}
+
 // ---- Fault injection: the cases of issue 11, item 7 ----
 
 #[test]
@@ -716,7 +752,7 @@ fn commands_are_checked_and_results_reported() {
         initial_speed_kmh, ..
     } = &mut too_fast
     {
-        *initial_speed_kmh = 200.0;
+        *initial_speed_kmh = 700.0;
     }
     assert_eq!(
         command(&mut rig, 3, too_fast),
@@ -817,7 +853,8 @@ fn idle_outputs_are_safe_and_frames_keep_coming() {
         rig.step(&mut io);
     }
     assert!(io.pulses.iter().all(|p| p.unwrap().is_silent()));
-    assert_eq!(io.frames_with(ID_WHEEL_SPEED).len(), 100);
+    assert_eq!(io.frames_with(ID_WHEEL_SPEED_12).len(), 100);
+    assert_eq!(io.frames_with(ID_WHEEL_SPEED_34).len(), 100);
     assert_eq!(io.frames_with(ID_STATUS).len(), 10);
     let (_, st) = io.frames_with(ID_STATUS)[9].clone();
     let st = StatusFrame::decode(&st).unwrap();

@@ -8,7 +8,7 @@ use embassy_stm32::pac::can::vals::Tfqm;
 use embassy_stm32::peripherals::{FDCAN1, PA11, PA12};
 use embassy_time::{Duration, with_timeout};
 
-use hils_rig_core::can::{ID_COMMAND, ID_WHEEL_SPEED};
+use hils_rig_core::can::{ID_COMMAND, ID_WHEEL_SPEED_12};
 use hils_rig_core::can_timing::NominalBitTiming;
 
 use super::verdict;
@@ -47,7 +47,7 @@ pub async fn loopback(
             }
         }
     }
-    let _ = can.write(&frame(ID_WHEEL_SPEED, 0)).await;
+    let _ = can.write(&frame(ID_WHEEL_SPEED_12, 0)).await;
     let filtered = with_timeout(Duration::from_millis(10), can.read())
         .await
         .is_err();
@@ -57,7 +57,7 @@ pub async fn loopback(
         verdict(pass),
         intact,
         FRAMES,
-        ID_WHEEL_SPEED,
+        ID_WHEEL_SPEED_12,
         filtered,
         nbtp,
         t.nbtp(),
