@@ -135,3 +135,29 @@ fn cost_figures_are_complete_and_consistent() {
     assert!((mean(c, "contact") - mean(v, "contact")).abs() < 0.1 * mean(v, "contact"));
     assert!((mean(c, "thermal") - mean(v, "thermal")).abs() < 0.1 * mean(v, "thermal"));
 }
+
+/// Issue 11: the rig's own step (`Rig::step` with the tick's command, mock board) over the
+/// cost sequence, on the emulated target: every tick measured, no command refused, the
+/// maximum within the 6,000-instruction budget and no smaller than the median plant step
+/// of the same scenario (a running tick contains a full closed-loop step).
+#[test]
+fn rig_step_cost_is_measured_over_the_whole_sequence_and_within_budget() {
+    let out = emulator();
+    let rig = out.rig.expect("the emulator measured the rig step");
+    assert_eq!(rig.ticks, hils_rig_core::script::COST_TICKS);
+    assert_eq!(rig.rejected_commands, 0);
+    let plant_p50 = out
+        .run("variable")
+        .and_then(|r| r.part("step"))
+        .expect("plant step cost")
+        .p50;
+    assert!(
+        rig.max >= plant_p50 && rig.mean > 0.0 && rig.mean <= rig.max as f64,
+        "{rig:?} vs plant median step {plant_p50}"
+    );
+    assert!(
+        rig.max <= hils::target_cost::RIG_STEP_BUDGET_MAX,
+        "rig step max {} > budget",
+        rig.max
+    );
+}

@@ -11,6 +11,9 @@
 //! * `C friction=F part=P n= sum= max= max_step= p50= p99=`: instructions per step of a part
 //!   (see [`hils_sil::trace::PARTS`]);
 //! * `E friction=F steps= stop_step= rows=`: the run ended;
+//! * `G part=rig_step n= sum= max= max_tick= rejected=`: instructions per tick of the rig's
+//!   step (`Rig::step` with the tick's command, mock board) over the cost sequence
+//!   ([`hils_rig_core::script::CostRun`]);
 //! * `X message`: an error (then the program exits with failure).
 //!
 //! # Counting instructions
@@ -507,6 +510,30 @@ mod emulator {
         }
     }
 
+    /// Instructions of each tick of the rig's cost sequence: the command and the step, as
+    /// the board's step interrupt runs them; the build of a requested run happens between
+    /// ticks (thread mode on the board) and is not counted.
+    fn rig_cost(host: &mut Host, timer: &Timer) {
+        let mut run = hils_rig_core::script::CostRun::new();
+        let (mut n, mut sum, mut max, mut max_tick) = (0u32, 0u64, 0u32, 0u32);
+        loop {
+            let (more, cost) = timer.measure(|| run.tick());
+            if !more {
+                break;
+            }
+            run.between_ticks();
+            if cost > max {
+                (max, max_tick) = (cost, n);
+            }
+            sum += cost as u64;
+            n += 1;
+        }
+        host.line(format_args!(
+            "G part=rig_step n={n} sum={sum} max={max} max_tick={max_tick} rejected={}",
+            run.rejected()
+        ));
+    }
+
     #[entry]
     fn main() -> ! {
         let Some(mut p) = cortex_m::Peripherals::take() else {
@@ -539,6 +566,7 @@ mod emulator {
         for friction in [FrictionModel::Variable, FrictionModel::Constant] {
             run(&mut host, &timer, friction);
         }
+        rig_cost(&mut host, &timer);
         debug::exit(debug::EXIT_SUCCESS);
         loop {
             cortex_m::asm::bkpt();

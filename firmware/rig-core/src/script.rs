@@ -1,4 +1,5 @@
-//! A scripted self-test run, the same on the target and on the host.
+//! Scripted runs, the same on the target and on the host: the self-test telemetry run
+//! ([`run`]) and the rig's cost sequence ([`CostRun`], `hils target-cost --rig`).
 //!
 //! The telemetry fixture (`firmware/rig-fixture`, run in QEMU) and the host test of
 //! `hils decode` both call [`run`]: the first logs the events with defmt (real defmt frames
@@ -10,13 +11,13 @@
 //! step. The ADC reads live-zero counts with a deterministic noise pattern; the step
 //! timing is synthetic (QEMU has no cycle counter): 5000 to 5600 cycles.
 
-use hils_plant::FrictionModel;
+use hils_plant::{FrictionModel, Rail};
 
-use crate::can::{ClassicFrame, Command};
+use crate::can::{Calibration, ClassicFrame, Command, RigMode};
 use crate::hw::{RigIo, TelemetryEvent};
 use crate::pulse::PulseRegisters;
 use crate::rig::{Rig, RigConfig};
-use crate::sensor::ADC_SEQUENCE_LEN;
+use crate::sensor::{ADC_SEQUENCE_LEN, InjectedFault, SensorKind};
 
 /// Plant steps of the scripted run (6 s: the EB, the WSP onsets near 4 s).
 pub const STEPS: u32 = 60_000;
@@ -68,4 +69,130 @@ pub fn run(sink: impl FnMut(&TelemetryEvent)) -> u32 {
     let _ = rig.command(Command::Stop);
     rig.step(&mut io);
     io.frames
+}
+
+/// Ticks of the cost sequence ([`cost_command`]).
+pub const COST_TICKS: u32 = 21_400;
+
+/// The command the cost sequence (issue 11, `hils target-cost --rig`) gives at tick `k`,
+/// carried out in that tick's step: the self-test paper scenario started and run 2 s,
+/// stopped, restarted in rig mode (measured brake inputs, 120 km/h), a sensor fault
+/// injected (the run faults), removed, cleared, then a calibration (tare, gain, kind).
+pub fn cost_command(k: u32) -> Option<Command> {
+    let inject = |fault| Command::InjectFault { channel: 1, fault };
+    let calibrate = |action| Command::Calibrate { channel: 0, action };
+    Some(match k {
+        0 => Command::paper_self_test(FrictionModel::Variable),
+        20_000 => Command::Stop,
+        20_010 => Command::Start {
+            mode: RigMode::Rig,
+            rail: Rail::Dry,
+            friction: FrictionModel::Constant,
+            emergency: false,
+            initial_speed_kmh: 120.0,
+        },
+        21_010 => inject(Some(InjectedFault::Open)),
+        21_100 => inject(None),
+        21_200 => Command::ClearFaults,
+        21_300 => calibrate(Calibration::Tare),
+        21_310 => calibrate(Calibration::SetGain(10.5)),
+        21_320 => calibrate(Calibration::SetKind(SensorKind::PressureTransducer)),
+        _ => return None,
+    })
+}
+
+/// The cost sequence on a rig with a mock board (live-zero ADC, queues that never fill).
+pub struct CostRun {
+    rig: Rig,
+    io: ScriptIo<fn(&TelemetryEvent)>,
+    tick: u32,
+    rejected: u32,
+}
+
+impl Default for CostRun {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl CostRun {
+    pub fn new() -> Self {
+        Self {
+            rig: Rig::new(RigConfig::nucleo_g474re()),
+            io: ScriptIo {
+                tick: 0,
+                sink: |_| {},
+                frames: 0,
+            },
+            tick: 0,
+            rejected: 0,
+        }
+    }
+
+    /// One tick as the board's step interrupt does it: the sequence's command, if any, and
+    /// `Rig::step`. `false` once the sequence is over (nothing done).
+    pub fn tick(&mut self) -> bool {
+        if self.tick >= COST_TICKS {
+            return false;
+        }
+        if let Some(c) = cost_command(self.tick)
+            && self.rig.command(c).is_err()
+        {
+            self.rejected += 1;
+        }
+        self.rig.step(&mut self.io);
+        self.tick += 1;
+        true
+    }
+
+    /// Thread-mode work between ticks (building a requested run): not part of the step.
+    pub fn between_ticks(&mut self) {
+        if self.rig.build_pending().is_err() {
+            self.rejected += 1;
+        }
+    }
+
+    pub fn rig(&self) -> &Rig {
+        &self.rig
+    }
+
+    /// Commands the rig refused (0 for the sequence as written).
+    pub fn rejected(&self) -> u32 {
+        self.rejected
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::can::RigState;
+
+    /// The sequence reaches every state it is meant to exercise, with no command refused.
+    #[test]
+    fn the_cost_sequence_goes_through_each_phase() {
+        let mut run = CostRun::new();
+        let mut states = std::vec::Vec::new();
+        while run.tick() {
+            let s = run.rig().state();
+            if states.last() != Some(&s) {
+                states.push(s);
+            }
+            run.between_ticks();
+        }
+        assert_eq!(run.rejected(), 0);
+        assert_eq!(
+            states,
+            [
+                RigState::Starting,
+                RigState::Running,
+                RigState::Stopped,
+                RigState::Starting,
+                RigState::Running,
+                RigState::Fault,
+                RigState::Stopped
+            ]
+        );
+        assert_eq!(run.rig().mode(), RigMode::Rig);
+        assert_eq!(run.rig().sensors[0].kind, SensorKind::PressureTransducer);
+    }
 }

@@ -46,13 +46,15 @@ pub use emulator::run_emulator;
 use fidelity::friction_name;
 pub use fidelity::{Fidelity, RunFigures, fidelity};
 pub use parse::{
-    CalibrationPoint, EmulatorOutput, FunctionCost, PartCost, TargetRun, parse_output,
+    CalibrationPoint, EmulatorOutput, FunctionCost, PartCost, RigStepCost, TargetRun, parse_output,
 };
 pub use report::report;
 
 /// Targets of the issue: instructions per full plant step.
 pub const TARGET_MEAN: f64 = 2500.0;
 pub const TARGET_MAX: u32 = 3000;
+/// Budget of issue 11: instructions of the rig's step (`Rig::step` with its command), max.
+pub const RIG_STEP_BUDGET_MAX: u32 = 6000;
 
 /// Arguments of `hils target-cost`.
 #[derive(Args, Debug, Clone)]
@@ -72,6 +74,49 @@ pub struct TargetCostArgs {
     /// Also save the emulator's raw output (trajectory lines included) to this file.
     #[arg(long)]
     pub save_output: Option<PathBuf>,
+    /// Report the rig's own step instead (`Rig::step` with a mock board through the
+    /// scripted sequence: start, 2 s running, stop, restart in the other mode, fault
+    /// injection, clear, calibrate).
+    #[arg(long)]
+    pub rig: bool,
+}
+
+/// The figures of `hils target-cost --rig --json`.
+#[derive(Clone, Debug, Serialize)]
+pub struct RigCost {
+    pub rig_step_instructions_max: u32,
+    pub rig_step_instructions_mean: f64,
+    pub rig_step_budget_max: u32,
+    pub within_budget: bool,
+    pub ticks: u32,
+    /// Tick (0-based) of the maximum.
+    pub max_tick: u32,
+    pub rejected_commands: u32,
+    pub machine: &'static str,
+}
+
+/// The rig's figures from the emulator's output.
+pub fn rig_cost(text: &str) -> Result<RigCost> {
+    let out = parse_output(text)?;
+    let r = out
+        .rig
+        .ok_or_else(|| anyhow!("the emulator output has no rig step line (`G`)"))?;
+    if r.rejected_commands != 0 {
+        bail!(
+            "the rig refused {} commands of its cost sequence",
+            r.rejected_commands
+        );
+    }
+    Ok(RigCost {
+        rig_step_instructions_max: r.max,
+        rig_step_instructions_mean: r.mean,
+        rig_step_budget_max: RIG_STEP_BUDGET_MAX,
+        within_budget: r.max <= RIG_STEP_BUDGET_MAX,
+        ticks: r.ticks,
+        max_tick: r.max_tick,
+        rejected_commands: r.rejected_commands,
+        machine: "QEMU mps2-an386 (Cortex-M4F), -icount shift=0",
+    })
 }
 
 /// The figures of `hils target-cost --json`.
@@ -113,6 +158,12 @@ pub struct FrictionCost {
 
 /// Runs the stages: build (or take) the ELF, emulate, then [`evaluate`].
 pub fn measure(args: &TargetCostArgs) -> Result<TargetCost> {
+    let (text, wall) = emulate(args)?;
+    evaluate(&text, wall)
+}
+
+/// Builds (or takes) the ELF and runs it: the emulator's output and its wall time, s.
+fn emulate(args: &TargetCostArgs) -> Result<(String, f64)> {
     let elf = match &args.elf {
         Some(p) => p.clone(),
         None => build_elf()?,
@@ -123,7 +174,7 @@ pub fn measure(args: &TargetCostArgs) -> Result<TargetCost> {
     if let Some(path) = &args.save_output {
         std::fs::write(path, &text).with_context(|| format!("cannot write {}", path.display()))?;
     }
-    evaluate(&text, wall)
+    Ok((text, wall))
 }
 
 /// The figures from the emulator's output: parse, compare each friction model's run with
@@ -197,6 +248,25 @@ fn friction_cost(out: &EmulatorOutput, friction: FrictionModel) -> Result<Fricti
 
 /// `hils target-cost`.
 pub fn main(args: TargetCostArgs) -> Result<()> {
+    if args.rig {
+        let c = rig_cost(&emulate(&args)?.0)?;
+        if args.json {
+            println!("{}", serde_json::to_string(&c)?);
+        } else {
+            println!(
+                "rig step (Rig::step + command, mock board, {} ticks of the cost sequence) on {}:\n  \
+                 rig_step_instructions_max  {} (tick {}; budget {}: {})\n  rig_step_instructions_mean {:.0}",
+                c.ticks,
+                c.machine,
+                c.rig_step_instructions_max,
+                c.max_tick,
+                c.rig_step_budget_max,
+                if c.within_budget { "within" } else { "OVER" },
+                c.rig_step_instructions_mean
+            );
+        }
+        return Ok(());
+    }
     let c = measure(&args)?;
     if args.json {
         println!("{}", serde_json::to_string(&c)?);

@@ -1,4 +1,4 @@
-//! Stage 3: parse what the emulator printed (`H`, `K`, `F`, `B`, `R`, `C`, `E`, `X` lines;
+//! Stage 3: parse what the emulator printed (`H`, `K`, `F`, `B`, `R`, `C`, `E`, `G`, `X` lines;
 //! see `firmware/qemu/src/main.rs`).
 
 use anyhow::{Result, anyhow, bail};
@@ -55,6 +55,19 @@ pub struct FunctionCost {
     pub max: u32,
 }
 
+/// Instructions per tick of the rig's step over its cost sequence (a `G` line).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct RigStepCost {
+    /// Ticks measured.
+    pub ticks: u32,
+    pub mean: f64,
+    pub max: u32,
+    /// Tick (0-based) at which the maximum occurred.
+    pub max_tick: u32,
+    /// Commands of the sequence the rig refused (0 expected).
+    pub rejected_commands: u32,
+}
+
 /// Everything the emulator printed, parsed.
 #[derive(Clone, Debug, Default)]
 pub struct EmulatorOutput {
@@ -64,6 +77,8 @@ pub struct EmulatorOutput {
     pub calibration: Vec<CalibrationPoint>,
     pub functions: Vec<FunctionCost>,
     pub runs: Vec<TargetRun>,
+    /// The rig's step over its cost sequence.
+    pub rig: Option<RigStepCost>,
 }
 
 impl EmulatorOutput {
@@ -139,6 +154,7 @@ impl Parser {
                 self.run(&at, "costs")?.parts.push(cost);
             }
             "E" => self.end_run(line, &at)?,
+            "G" => self.out.rig = Some(rig_step_cost(line)?),
             "X" => bail!(
                 "the emulated target reported an error: {}",
                 &line[1..].trim()
@@ -190,6 +206,22 @@ impl Parser {
         }
         Ok(self.out)
     }
+}
+
+/// A `G` line.
+fn rig_step_cost(line: &str) -> Result<RigStepCost> {
+    let ticks: u32 = num(line, "n")?;
+    let sum: u64 = num(line, "sum")?;
+    if ticks == 0 {
+        bail!("emulator line: the rig's cost sequence measured no tick: {line}");
+    }
+    Ok(RigStepCost {
+        ticks,
+        mean: sum as f64 / ticks as f64,
+        max: num(line, "max")?,
+        max_tick: num(line, "max_tick")?,
+        rejected_commands: num(line, "rejected")?,
+    })
 }
 
 /// An `F` line.
