@@ -16,7 +16,9 @@ use hils_rig_core::can::Command;
 use hils_rig_core::can_tx::QueuedFrame;
 use hils_rig_core::hw::{RigIo, TelemetryEvent};
 use hils_rig_core::pulse::PulseRegisters;
-use hils_rig_core::rig::{CommandError, Rig, Simulation, StartRequest};
+use hils_rig_core::rig::{CommandError, Rig};
+#[cfg(not(feature = "bringup"))]
+use hils_rig_core::rig::{Simulation, StartRequest};
 use hils_rig_core::sensor::ADC_SEQUENCE_LEN;
 
 use crate::ceiling::StepChannel;
@@ -36,9 +38,12 @@ pub static CAN_TX: StepChannel<QueuedFrame<Frame>, 32> = StepChannel::new();
 pub static CAN_RX: StepChannel<Frame, 8> = StepChannel::new();
 /// Local commands (user button, autostart), for the step.
 pub static LOCAL_CMD: StepChannel<Command, 2> = StepChannel::new();
-/// Runs the step requested, for the builder task (thread mode).
+/// Runs the step requested, for the builder task (thread mode). Not in the bring-up image
+/// (it builds its one run in thread mode before timing it), which saves the slot's 6 KiB.
+#[cfg(not(feature = "bringup"))]
 pub static START_REQUESTS: StepChannel<StartRequest, 1> = StepChannel::new();
 /// Simulations the builder built (or why not), for the step to move into the rig.
+#[cfg(not(feature = "bringup"))]
 pub static BUILT: Handoff<Result<Simulation, CommandError>, 1> = Handoff::new();
 /// Telemetry events from the step to the logging task.
 pub static TELEMETRY: StepChannel<TelemetryEvent, 16> = StepChannel::new();
@@ -174,6 +179,7 @@ fn step_tick() {
         return;
     };
     take_commands(&mut rt.rig);
+    #[cfg(not(feature = "bringup"))]
     hand_over_runs(&mut rt.rig);
     if rt.rig.take_bus_clear() {
         crate::can_io::BUS_CLEAR.store(true, Ordering::Relaxed);
@@ -197,6 +203,7 @@ fn step_tick() {
 }
 
 /// Passes a start request to the builder and installs a built simulation (a move).
+#[cfg(not(feature = "bringup"))]
 #[inline(always)]
 fn hand_over_runs(rig: &mut Rig) {
     if let Some(req) = rig.take_start_request()
