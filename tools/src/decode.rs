@@ -10,10 +10,13 @@
 //!
 //! The board logs `tlm1-start ...` when a run starts, `tlm1 ...` records every `divider`
 //! steps and `tlm1-end ...` when it ends (layout and parser: `hils_rig_core::telemetry`).
-//! Each run becomes one CSV. Nothing is dropped silently: malformed defmt frames, missing
-//! records (gaps in the step count: the board's log queue or the RTT buffer overflowed) and
-//! a missing end line are counted, printed, and written into the metadata; a malformed
-//! telemetry line is an error naming its line.
+//! Each run becomes one CSV. Nothing is dropped silently: malformed defmt frames, corrupt
+//! records (their CRC-32 does not match their values: a damaged capture that still decodes;
+//! left out of the CSV), missing records (gaps in the records' sequence numbers: the
+//! board's log queue or the RTT buffer overflowed, or a record was corrupt) and a missing
+//! end line are counted, printed, and written into the metadata; any other malformed
+//! telemetry line is an error naming its line. So the CSV holds only records whose values
+//! are the board's.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -23,7 +26,9 @@ use clap::Args;
 pub use hils_rig_core as rig_core;
 use hils_rig_core::Code;
 use hils_rig_core::can::RigState;
-use hils_rig_core::telemetry::{Line, RunHeader, TelemetryRecord, WSP_KNOWN, parse_line};
+use hils_rig_core::telemetry::{
+    Line, ParseError, RunHeader, TelemetryRecord, WSP_KNOWN, parse_line,
+};
 use hils_sil::Cmd;
 use hils_sil::record::Channel;
 use hils_sil::record::run_log::{self, *};
@@ -93,8 +98,10 @@ pub struct Run {
     pub records: Vec<TelemetryRecord>,
     /// The end line (step, state) if the log has it.
     pub end: Option<(u32, u8)>,
-    /// Records missing in gaps of the step count.
+    /// Records missing: gaps in the sequence numbers (corrupt ones included).
     pub missing_records: u64,
+    /// Records that failed their CRC-32 (left out).
+    pub corrupt_records: u64,
 }
 
 /// Finds the runs in the text lines of a log. A malformed telemetry line, a record before
@@ -103,7 +110,16 @@ pub fn parse_runs<'a>(lines: impl IntoIterator<Item = &'a str>) -> Result<Vec<Ru
     let mut runs: Vec<Run> = Vec::new();
     for (i, text) in lines.into_iter().enumerate() {
         let n = i + 1;
-        let line = parse_line(text).map_err(|e| anyhow!("line {n}: bad telemetry line: {e}"))?;
+        let line = match parse_line(text) {
+            Err(ParseError::Crc { .. }) => {
+                let run = runs.last_mut().ok_or_else(|| {
+                    anyhow!("line {n}: corrupt telemetry record before any run header")
+                })?;
+                run.corrupt_records += 1;
+                continue;
+            }
+            other => other.map_err(|e| anyhow!("line {n}: bad telemetry line: {e}"))?,
+        };
         match line {
             None => {}
             Some(Line::Header(header)) => {
@@ -116,6 +132,7 @@ pub fn parse_runs<'a>(lines: impl IntoIterator<Item = &'a str>) -> Result<Vec<Ru
                     records: Vec::new(),
                     end: None,
                     missing_records: 0,
+                    corrupt_records: 0,
                 });
             }
             Some(Line::Record(r)) => {
@@ -133,12 +150,17 @@ pub fn parse_runs<'a>(lines: impl IntoIterator<Item = &'a str>) -> Result<Vec<Ru
                             last.step
                         );
                     }
-                    let gap = (r.step - last.step) as u64;
-                    let d = run.header.divider as u64;
-                    // The last record of a run may come after fewer steps than the divider.
-                    if gap > d {
-                        run.missing_records += gap.div_ceil(d) - 1;
+                    if r.seq <= last.seq {
+                        bail!(
+                            "line {n}: record number {} does not increase (previous: {})",
+                            r.seq,
+                            last.seq
+                        );
                     }
+                    run.missing_records += (r.seq - last.seq - 1) as u64;
+                } else {
+                    // Records lost before the first one that arrived.
+                    run.missing_records += r.seq as u64;
                 }
                 run.records.push(r);
             }
@@ -257,6 +279,7 @@ impl Run {
         m.push(("teeth", h.teeth.to_string()));
         m.push(("records", self.records.len().to_string()));
         m.push(("missing_records", self.missing_records.to_string()));
+        m.push(("corrupt_records", self.corrupt_records.to_string()));
         m.push((
             "end",
             match self.end {
@@ -406,12 +429,19 @@ pub fn main(args: DecodeArgs) -> Result<()> {
         run.write_csv(file, &source)?;
         let last = run.records.last().map(|r| run.time_s(r)).unwrap_or(0.0);
         println!(
-            "run {k}: {} records, 0 to {last:.3} s, {} missing, end: {} -> {}",
+            "run {k}: {} records, 0 to {last:.3} s, {} missing, {} corrupt, end: {} -> {}",
             run.records.len(),
             run.missing_records,
+            run.corrupt_records,
             run.end.map(|(_, s)| state_text(s)).unwrap_or("none"),
             path.display()
         );
+        if run.corrupt_records > 0 {
+            eprintln!(
+                "warning: run {k}: {} records corrupt (CRC-32 mismatch: the capture was damaged) and left out; see `corrupt_records`",
+                run.corrupt_records
+            );
+        }
         if run.missing_records > 0 {
             eprintln!(
                 "warning: run {k}: {} records missing (the board's log queue or the RTT buffer overflowed; see `missing_records`)",

@@ -271,6 +271,8 @@ pub struct Rig {
     end_event: bool,
     /// Plant step of the last telemetry record of the run (no record twice for a step).
     last_record_step: Option<u32>,
+    /// Sequence number of the run's next telemetry record (sent or dropped).
+    record_seq: u32,
     /// The run requested, while `Starting`.
     start_request: Option<StartRequest>,
     /// The request has not been handed to the builder yet.
@@ -310,6 +312,7 @@ impl Rig {
             start_events: false,
             end_event: false,
             last_record_step: None,
+            record_seq: 0,
             start_request: None,
             start_request_new: false,
             state_before_start: RigState::Idle,
@@ -529,6 +532,7 @@ impl Rig {
         self.stale_ticks = 0;
         self.start_events = true;
         self.last_record_step = None;
+        self.record_seq = 0;
         Ok(())
     }
 
@@ -754,6 +758,8 @@ impl Rig {
         }
         if let Some(r) = self.record() {
             self.last_record_step = Some(r.step);
+            // Counted whether or not the queue takes it: a dropped record is a gap.
+            self.record_seq = self.record_seq.wrapping_add(1);
             self.emit(io, &TelemetryEvent::Record(r));
         }
     }
@@ -824,6 +830,7 @@ impl Rig {
             missed_ticks: self.timing.missed_ticks,
             faults,
             sensor_faults,
+            seq: self.record_seq,
         })
     }
 

@@ -1,7 +1,7 @@
 //! Telemetry: the decimated record of a run, its defmt lines and their parser.
 //!
 //! The board logs one [`TelemetryRecord`] every `divider` plant steps (default 100: 100 Hz)
-//! as a defmt line `tlm1 <41 fields>`, a [`RunHeader`] line `tlm1-start ...` when a run
+//! as a defmt line `tlm1 <43 fields>`, a [`RunHeader`] line `tlm1-start ...` when a run
 //! starts and a `tlm1-end <step> <state>` line when it ends. The host decoder (`hils decode`)
 //! gets the lines' text from defmt's decoder (or from a probe-rs log), parses them here
 //! ([`parse_line`]) and writes a run-log CSV (`spec/measured-data.md`, section 1).
@@ -10,12 +10,19 @@
 //! Floats go through defmt as `{=f32}` (the decoder prints the shortest text that reads
 //! back to the same f32), so a decoded record equals the board's bit for bit. NaN in
 //! `p_cyl`/`f_clamp` means "not measured" (an empty cell in the CSV).
+//!
+//! **Integrity.** The last two fields are the record's sequence number in the run (`seq`:
+//! 0, 1, 2, ... for every record the step made, sent or dropped, so a gap is a lost record)
+//! and a CRC-32 ([`TelemetryRecord::crc32`]) over the binary values of all other fields,
+//! computed by the logging task. A record whose values were changed on the way (a flipped
+//! byte in the RTT capture that still decodes) fails the CRC and is rejected by
+//! [`parse_line`] ([`ParseError::Crc`]) instead of being read as plausible data.
 
 use crate::Code;
 use crate::can::{RigMode, RigState};
 
-/// Names of the fields of a `tlm1` line, in order (41).
-pub const FIELDS: [&str; 41] = [
+/// Names of the fields of a `tlm1` line, in order (43).
+pub const FIELDS: [&str; 43] = [
     "step",
     "state",
     "mode",
@@ -57,6 +64,8 @@ pub const FIELDS: [&str; 41] = [
     "missed_ticks",
     "faults",
     "sensor_faults",
+    "seq",
+    "crc32",
 ];
 
 /// Tag of a record line.
@@ -108,6 +117,8 @@ pub struct TelemetryRecord {
     pub faults: u32,
     /// Sensor fault codes, 4 bits per channel (channel 1 in bits 0-3).
     pub sensor_faults: u16,
+    /// Number of the record in its run (0 = the t = 0 record), counting dropped ones.
+    pub seq: u32,
 }
 
 /// The header of a run.
@@ -145,6 +156,8 @@ pub enum ParseError {
     FieldCount { expected: usize, found: usize },
     /// Field `index` (0-based, named in [`FIELDS`] for records) is not a number of its type.
     BadField { index: usize },
+    /// The record's CRC-32 does not match its values (corrupted on the way).
+    Crc { computed: u32, received: u32 },
 }
 
 impl core::fmt::Display for ParseError {
@@ -157,6 +170,10 @@ impl core::fmt::Display for ParseError {
                 Some(name) => write!(f, "field {} (`{name}`) is not a number", index + 1),
                 None => write!(f, "field {} is not a number", index + 1),
             },
+            ParseError::Crc { computed, received } => write!(
+                f,
+                "record corrupted: CRC-32 {received:#010x} received, {computed:#010x} computed from its values"
+            ),
         }
     }
 }
@@ -220,7 +237,7 @@ pub fn parse_line(text: &str) -> Result<Option<Line>, ParseError> {
     Ok(Some(match tag {
         RECORD_TAG => {
             expect(FIELDS.len())?;
-            Line::Record(TelemetryRecord {
+            let r = TelemetryRecord {
                 step: f.next()?,
                 state: f.next()?,
                 mode: f.next()?,
@@ -241,7 +258,14 @@ pub fn parse_line(text: &str) -> Result<Option<Line>, ParseError> {
                 missed_ticks: f.next()?,
                 faults: f.next()?,
                 sensor_faults: f.next()?,
-            })
+                seq: f.next()?,
+            };
+            let received: u32 = f.next()?;
+            let computed = r.crc32();
+            if received != computed {
+                return Err(ParseError::Crc { computed, received });
+            }
+            Line::Record(r)
         }
         HEADER_TAG => {
             expect(9)?;
@@ -267,7 +291,61 @@ pub fn parse_line(text: &str) -> Result<Option<Line>, ParseError> {
     }))
 }
 
+/// CRC-32/ISO-HDLC (the zlib/Ethernet CRC: reflected polynomial 0xEDB88320, init and final
+/// xor 0xFFFFFFFF; check value of "123456789" = 0xCBF43926), bitwise: run once per record
+/// in the logging task, 170 bytes.
+fn crc32_update(mut crc: u32, bytes: &[u8]) -> u32 {
+    for &b in bytes {
+        crc ^= b as u32;
+        for _ in 0..8 {
+            crc = (crc >> 1) ^ (0xEDB8_8320 & (crc & 1).wrapping_neg());
+        }
+    }
+    crc
+}
+
 impl TelemetryRecord {
+    /// CRC-32 over the little-endian bytes of every field but the CRC itself, in the order
+    /// of [`FIELDS`]; floats as their bit patterns, every NaN as the canonical quiet NaN
+    /// (the text line says only `NaN`, whatever the payload).
+    pub fn crc32(&self) -> u32 {
+        let bits = |x: f32| {
+            if x.is_nan() {
+                f32::NAN.to_bits().to_le_bytes()
+            } else {
+                x.to_bits().to_le_bytes()
+            }
+        };
+        let mut c = crc32_update(!0, &self.step.to_le_bytes());
+        c = crc32_update(c, &[self.state, self.mode, self.cmd, self.wsp]);
+        c = crc32_update(c, &bits(self.v_ref));
+        for a in [
+            self.omega,
+            self.p_cyl,
+            self.f_clamp,
+            self.f_brake,
+            self.t_disc,
+            self.q,
+            self.mu_d,
+        ] {
+            for x in a {
+                c = crc32_update(c, &bits(x));
+            }
+        }
+        c = crc32_update(c, &bits(self.a_x));
+        for x in [
+            self.step_max_cycles,
+            self.step_mean_cycles,
+            self.overruns,
+            self.missed_ticks,
+            self.faults,
+        ] {
+            c = crc32_update(c, &x.to_le_bytes());
+        }
+        c = crc32_update(c, &self.sensor_faults.to_le_bytes());
+        !crc32_update(c, &self.seq.to_le_bytes())
+    }
+
     pub fn rig_state(&self) -> Option<RigState> {
         RigState::from_raw(self.state)
     }
@@ -280,7 +358,7 @@ impl TelemetryRecord {
     pub fn log(&self) {
         let r = self;
         defmt::println!(
-            "tlm1 {=u32} {=u8} {=u8} {=u8} {=u8} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=u32} {=u32} {=u32} {=u32} {=u32} {=u16}",
+            "tlm1 {=u32} {=u8} {=u8} {=u8} {=u8} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=u32} {=u32} {=u32} {=u32} {=u32} {=u16} {=u32} {=u32}",
             r.step,
             r.state,
             r.mode,
@@ -321,7 +399,9 @@ impl TelemetryRecord {
             r.overruns,
             r.missed_ticks,
             r.faults,
-            r.sensor_faults
+            r.sensor_faults,
+            r.seq,
+            r.crc32()
         );
     }
 }
@@ -372,14 +452,16 @@ mod tests {
             }
         }
         s += &format!(
-            " {} {} {} {} {} {} {}",
+            " {} {} {} {} {} {} {} {} {}",
             r.a_x,
             r.step_max_cycles,
             r.step_mean_cycles,
             r.overruns,
             r.missed_ticks,
             r.faults,
-            r.sensor_faults
+            r.sensor_faults,
+            r.seq,
+            r.crc32()
         );
         s
     }
@@ -406,6 +488,7 @@ mod tests {
             missed_ticks: 1,
             faults: 0x8001_0010,
             sensor_faults: 0x4010,
+            seq: 410,
         }
     }
 
@@ -420,7 +503,8 @@ mod tests {
             v
         };
         fa(a) == fa(b)
-            && (a.step, a.state, a.mode, a.cmd, a.wsp) == (b.step, b.state, b.mode, b.cmd, b.wsp)
+            && (a.step, a.state, a.mode, a.cmd, a.wsp, a.seq)
+                == (b.step, b.state, b.mode, b.cmd, b.wsp, b.seq)
             && (
                 a.step_max_cycles,
                 a.step_mean_cycles,
@@ -496,8 +580,8 @@ mod tests {
         assert_eq!(
             parse_line(short),
             Err(ParseError::FieldCount {
-                expected: 41,
-                found: 40
+                expected: 43,
+                found: 42
             })
         );
         let bad = line.replacen(" 38.5 ", " 38.5x ", 1);
@@ -515,6 +599,44 @@ mod tests {
                 found: 1
             })
         );
+    }
+
+    #[test]
+    fn crc32_is_the_iso_hdlc_crc() {
+        // The catalogue check value of CRC-32/ISO-HDLC.
+        assert_eq!(!crc32_update(!0, b"123456789"), 0xCBF4_3926);
+    }
+
+    #[test]
+    fn a_changed_value_fails_the_crc() {
+        let r = sample();
+        let line = text(&r);
+        // v_ref 38.5 -> 38.25, p_cyl2 one digit lost, seq 410 -> 411.
+        for (from, to) in [
+            (" 38.5 ", " 38.25 "),
+            (" 312345.66 ", " 312345.6 "),
+            (" 410 ", " 411 "),
+        ] {
+            let bad = line.replacen(from, to, 1);
+            assert_ne!(bad, line);
+            assert!(
+                matches!(parse_line(&bad), Err(ParseError::Crc { .. })),
+                "{from}"
+            );
+        }
+        // Every single-bit change of any field's binary value changes the CRC.
+        let base = r.crc32();
+        for bit in 0..32 {
+            let mut m = r;
+            m.v_ref = f32::from_bits(m.v_ref.to_bits() ^ (1 << bit));
+            if m.v_ref.is_nan() {
+                continue;
+            }
+            assert_ne!(m.crc32(), base, "v_ref bit {bit}");
+            let mut m = r;
+            m.faults ^= 1 << bit;
+            assert_ne!(m.crc32(), base, "faults bit {bit}");
+        }
     }
 
     proptest::proptest! {
