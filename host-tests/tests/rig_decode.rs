@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use hils::decode::rig_core::hw::TelemetryEvent;
 use hils::decode::rig_core::script;
 use hils::decode::rig_core::telemetry::{RunHeader, TelemetryRecord};
-use hils::decode::{Run, defmt_to_text, parse_runs};
+use hils::decode::{Run, defmt_to_text, parse_runs, time_text};
 
 fn fixture_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../firmware/rig-fixture/fixture")
@@ -245,6 +245,17 @@ fn a_flipped_byte_changes_no_value_silently() {
         corrupt > 0 && missing >= corrupt,
         "{corrupt} corrupt, {missing} missing"
     );
+}
+
+/// Issue 11, item 8: `t_s` cells are exact (integer ns) and distinct even for records
+/// under 1 us apart (six decimals repeated them, and the reader refused the file).
+#[test]
+fn times_are_exact_and_distinct_below_a_microsecond() {
+    assert_eq!(time_text(0), "0.000000000");
+    assert_eq!(time_text(100_000), "0.000100000");
+    assert_eq!(time_text(29_060_000_000), "29.060000000");
+    let t: Vec<String> = (0..20).map(|k| time_text(k * 100)).collect();
+    assert!(t.windows(2).all(|w| w[0] != w[1]), "{t:?}");
 }
 
 #[test]

@@ -180,6 +180,12 @@ fn cmd_text(code: u8) -> &'static str {
     Cmd::try_from(code).map_or("", Cmd::text)
 }
 
+/// The `t_s` cell: the exact time of a step in ns as seconds with 9 decimals, so distinct
+/// steps never share a time (six decimals did when a record interval was under 1 us).
+pub fn time_text(ns: u64) -> String {
+    format!("{}.{:09}", ns / 1_000_000_000, ns % 1_000_000_000)
+}
+
 /// The `state` cell of a run-state code.
 fn state_text(code: u8) -> &'static str {
     match RigState::from_raw(code) {
@@ -317,7 +323,7 @@ impl Run {
             )
         };
         match c {
-            T => format!("{:.6}", self.time_s(r)),
+            T => time_text(r.step as u64 * self.header.step_ns as u64),
             V_REF => cell(r.v_ref),
             OMEGA => cell(r.omega[j]),
             P_CYL => cell(r.p_cyl[j]),
