@@ -22,6 +22,9 @@
 //! implementation of the functions below an f32 run is bit-identical on both.
 
 mod expf;
+mod tracked;
+
+pub use tracked::{TRACK_MAX_REL_ERROR, TRACK_WINDOW, TrackedExp};
 
 #[cfg(all(feature = "math-libm", feature = "math-micromath"))]
 compile_error!("the features math-libm and math-micromath exclude each other");
