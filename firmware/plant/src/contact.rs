@@ -104,11 +104,7 @@ impl<F: Real> Polach<F> {
         let x_a = self.k_a * eps;
         let x_s = self.k_s * eps;
         let adhesion_part = self.k_a / (F::ONE + x_a * x_a);
-        let atan_over_x = if x_s.abs() < F::of(1.0e-3) {
-            F::ONE - x_s * x_s / F::of(3.0)
-        } else {
-            x_s.atan() / x_s
-        };
+        let atan_over_x = x_s.atan_over_x();
         let chord =
             self.two_over_pi_stiffness * inv_v_floor * (adhesion_part + self.k_s * atan_over_x);
         ContactForce {
