@@ -142,3 +142,48 @@ pub fn atan_f64(x: f64) -> f64 {
 pub fn sqrt_f64(x: f64) -> f64 {
     libm::sqrt(x)
 }
+
+/// Test support: the worst error seen over a sweep and the check of a stated bound.
+#[cfg(test)]
+pub(crate) struct Worst<T> {
+    pub error: f64,
+    pub at: Option<T>,
+}
+
+#[cfg(test)]
+impl<T: core::fmt::Debug> Worst<T> {
+    pub fn new() -> Self {
+        Self {
+            error: 0.0,
+            at: None,
+        }
+    }
+    /// Keeps `error` if it is the largest so far.
+    pub fn see(&mut self, error: f64, at: T) {
+        if error > self.error || self.at.is_none() {
+            self.error = error;
+            self.at = Some(at);
+        }
+    }
+    /// Asserts the worst error within `bound` and above `tight` times it (a bound loose by
+    /// orders of magnitude would hide a wrong method); prints it.
+    pub fn check(&self, name: &str, bound: f64, tight: f64) {
+        std::eprintln!(
+            "{name}: worst relative error {:.3e} at {:?}",
+            self.error,
+            self.at
+        );
+        assert!(
+            self.error <= bound,
+            "{name}: {} at {:?}",
+            self.error,
+            self.at
+        );
+        assert!(
+            self.error > tight * bound,
+            "{name}: {} at {:?}",
+            self.error,
+            self.at
+        );
+    }
+}

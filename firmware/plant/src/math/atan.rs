@@ -53,6 +53,7 @@ pub fn atan_over_x(x: f32) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::{ATAN_OVER_X_MAX_REL_ERROR, atan_over_x};
+    use crate::math::Worst;
 
     fn reference(x: f32) -> f64 {
         let x = x as f64;
@@ -64,25 +65,16 @@ mod tests {
     /// loose by orders of magnitude.
     #[test]
     fn within_the_bound_over_the_contacts_range() {
-        let mut worst = (0.0f64, 0.0f32);
+        let mut worst = Worst::new();
         let mut bits = 1.0e-9f32.to_bits();
         while f32::from_bits(bits) <= 1.0e9 {
             for x in [f32::from_bits(bits), -f32::from_bits(bits)] {
                 let r = reference(x);
-                let e = (atan_over_x(x) as f64 - r).abs() / r;
-                if e > worst.0 {
-                    worst = (e, x);
-                }
+                worst.see((atan_over_x(x) as f64 - r).abs() / r, x);
             }
             bits += 17;
         }
-        std::eprintln!(
-            "atan(x)/x: worst relative error {:.3e} at {}",
-            worst.0,
-            worst.1
-        );
-        assert!(worst.0 <= ATAN_OVER_X_MAX_REL_ERROR, "{worst:?}");
-        assert!(worst.0 > 0.05 * ATAN_OVER_X_MAX_REL_ERROR, "{worst:?}");
+        worst.check("atan(x)/x", ATAN_OVER_X_MAX_REL_ERROR, 0.05);
     }
 
     #[test]

@@ -64,6 +64,7 @@ impl<F: Real> TrackedExp<F> {
 #[cfg(test)]
 mod tests {
     use super::{TRACK_MAX_REL_ERROR, TRACK_WINDOW, TrackedExp};
+    use crate::math::Worst;
 
     fn rel_error(got: f32, x: f32) -> f64 {
         let exact = libm::exp(x as f64);
@@ -74,7 +75,7 @@ mod tests {
     /// step of the window around it (both signs), against the f64 exp: within the bound.
     #[test]
     fn within_the_bound_over_the_window() {
-        let mut worst = (0.0f64, 0.0f32, 0.0f32);
+        let mut worst = Worst::new();
         let mut anchor = -20.0f32;
         while anchor <= 0.5 {
             let t = TrackedExp::<f32>::at(anchor);
@@ -83,22 +84,11 @@ mod tests {
                 let mut tt = t;
                 let y = tt.exp(x);
                 assert_eq!(tt, t, "x = {x} moved the anchor {anchor}");
-                let e = rel_error(y, x);
-                if e > worst.0 {
-                    worst = (e, anchor, x);
-                }
+                worst.see(rel_error(y, x), (anchor, x));
             }
             anchor += 0.0137;
         }
-        std::eprintln!(
-            "tracked exp: worst relative error {:.3e} (anchor {}, x {})",
-            worst.0,
-            worst.1,
-            worst.2
-        );
-        assert!(worst.0 <= TRACK_MAX_REL_ERROR, "{worst:?}");
-        // The bound is not loose by orders of magnitude (it would hide a wrong polynomial).
-        assert!(worst.0 > 0.1 * TRACK_MAX_REL_ERROR, "{worst:?}");
+        worst.check("tracked exp", TRACK_MAX_REL_ERROR, 0.1);
     }
 
     /// A slow ramp (as a decelerating wheel) and jumps (as a slide onset): every value
