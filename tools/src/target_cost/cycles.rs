@@ -110,6 +110,17 @@ fn is_conditional_branch(op: &str) -> bool {
     op.starts_with("cb") || (op.len() == 3 && op.starts_with('b') && CONDS.contains(&&op[1..]))
 }
 
+/// Address, mnemonic and operands of an llvm-objdump line
+/// (`"    ae0:      \tpush\t{r4, r5, r7, lr}"`; comments after `@` dropped).
+fn parse_insn(line: &str) -> Option<(u64, String, String)> {
+    let (addr, rest) = line.trim_start().split_once(':')?;
+    let addr = u64::from_str_radix(addr, 16).ok()?;
+    let rest = rest.trim_start();
+    let (op, operands) = rest.split_once('\t').unwrap_or((rest, ""));
+    let operands = operands.split(" @").next().unwrap_or("").trim();
+    Some((addr, op.trim().to_string(), operands.to_string()))
+}
+
 /// The step's instructions (address -> instruction) and the entry of `Plant::step`.
 fn disassemble(elf: &Path) -> Result<(HashMap<u64, Insn>, u64)> {
     let out = Command::new("llvm-objdump")
@@ -130,10 +141,7 @@ fn disassemble(elf: &Path) -> Result<(HashMap<u64, Insn>, u64)> {
             }
             continue;
         }
-        let Some((addr, rest)) = line.trim_start().split_once(":\t") else {
-            continue;
-        };
-        let Ok(addr) = u64::from_str_radix(addr, 16) else {
+        let Some((addr, op, operands)) = parse_insn(line) else {
             continue;
         };
         if let Some(prev) = last.take() {
@@ -145,13 +153,10 @@ fn disassemble(elf: &Path) -> Result<(HashMap<u64, Insn>, u64)> {
         if !inside {
             continue;
         }
-        let rest = rest.trim_start_matches('\t');
-        let (op, operands) = rest.split_once('\t').unwrap_or((rest, ""));
-        let operands = operands.split(" @").next().unwrap_or("").trim().to_string();
         insns.insert(
             addr,
             Insn {
-                op: op.trim().to_string(),
+                op,
                 operands,
                 size: 2,
             },
@@ -321,7 +326,22 @@ pub fn estimate(qemu: &str, elf: &Path, instructions_mean: f64) -> Result<CycleE
 
 #[cfg(test)]
 mod tests {
-    use super::{base_cycles, is_conditional_branch};
+    use super::{base_cycles, is_conditional_branch, parse_insn};
+
+    #[test]
+    fn reads_objdump_lines() {
+        let line = "    16ee:      \tbl\t0xc6c8 <libm::math::atanf::atanf::h7e> @ imm = #45014";
+        assert_eq!(
+            parse_insn(line),
+            Some((
+                0x16ee,
+                "bl".into(),
+                "0xc6c8 <libm::math::atanf::atanf::h7e>".into()
+            ))
+        );
+        assert_eq!(parse_insn("Disassembly of section .text:"), None);
+        assert_eq!(parse_insn("00000ae0 <hils_plant::plant::step>:"), None);
+    }
 
     #[test]
     fn timings_of_the_model() {
