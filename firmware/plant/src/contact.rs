@@ -1,5 +1,6 @@
 //! Wheel-rail adhesion: Polach's simplified contact model, paper Eqs (9)-(12).
 
+use crate::math::TrackedExp;
 use crate::params::{ContactParams, Rail};
 use crate::real::Real;
 
@@ -17,6 +18,8 @@ pub struct Polach<F> {
     /// (2/3) C pi a^2 b, N: Eq (10) reads eps = stiffness s / (Q mu).
     stiffness: F,
     creep_speed_floor: F,
+    /// (2/pi) times `stiffness`, N (Eq 9 times Eq 10, folded).
+    two_over_pi_stiffness: F,
 }
 
 /// The contact of one wheelset (two wheels lumped: Q is the axle load).
@@ -52,6 +55,7 @@ impl<F: Real> Polach<F> {
             b_exp: F::of(set.b_exp),
             stiffness: F::of(stiffness),
             creep_speed_floor: F::of(contact.creep_speed_floor),
+            two_over_pi_stiffness: F::of(2.0 / core::f64::consts::PI * stiffness),
         }
     }
 
@@ -71,9 +75,23 @@ impl<F: Real> Polach<F> {
     /// x = k_s eps, which has no division by u and stays finite at u = 0 and Q -> 0.
     #[inline(always)]
     pub fn evaluate(&self, slip_velocity: F, speed: F, load: F) -> ContactForce<F> {
+        self.evaluate_with_mu(slip_velocity, speed, load, self.friction(slip_velocity))
+    }
+
+    /// Eq (11) with e^(-B |w|) from a [`TrackedExp`] (the plant's step: w moves little
+    /// from step to step; within [`crate::math::TRACK_MAX_REL_ERROR`] of [`Self::friction`]).
+    #[inline(always)]
+    pub fn friction_tracked(&self, slip_velocity: F, decay: &mut TrackedExp<F>) -> F {
+        self.mu_decaying * decay.exp(-self.b_exp * slip_velocity.abs()) + self.mu_inf
+    }
+
+    /// [`Self::evaluate`] with a given friction coefficient `mu` (Eq 11) of this slip
+    /// velocity: Eqs (9), (10) and (12).
+    #[inline(always)]
+    pub fn evaluate_with_mu(&self, slip_velocity: F, speed: F, load: F, mu: F) -> ContactForce<F> {
         let v_floor = speed.abs().max(self.creep_speed_floor);
-        let mu = self.friction(slip_velocity);
-        let creepage = slip_velocity / v_floor;
+        let inv_v_floor = F::ONE / v_floor;
+        let creepage = slip_velocity * inv_v_floor;
         if !(load > F::ZERO) {
             return ContactForce {
                 force: F::ZERO,
@@ -86,14 +104,9 @@ impl<F: Real> Polach<F> {
         let x_a = self.k_a * eps;
         let x_s = self.k_s * eps;
         let adhesion_part = self.k_a / (F::ONE + x_a * x_a);
-        let atan_over_x = if x_s.abs() < F::of(1.0e-3) {
-            F::ONE - x_s * x_s / F::of(3.0)
-        } else {
-            x_s.atan() / x_s
-        };
-        let chord = self.two_over_pi
-            * (self.stiffness / v_floor)
-            * (adhesion_part + self.k_s * atan_over_x);
+        let atan_over_x = x_s.atan_over_x();
+        let chord =
+            self.two_over_pi_stiffness * inv_v_floor * (adhesion_part + self.k_s * atan_over_x);
         ContactForce {
             force: chord * slip_velocity,
             chord,

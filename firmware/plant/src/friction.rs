@@ -1,5 +1,6 @@
 //! Disc-pad friction coefficient, paper Eq (2).
 
+use crate::math::TrackedExp;
 use crate::params::{FrictionModel, FrictionParams};
 use crate::real::Real;
 
@@ -52,11 +53,42 @@ impl<F: Real> DiscPadFriction<F> {
         }
     }
 
+    /// The tracker of the speed factor's e^(-m_v v_d), anchored at friction speed `v_d`.
+    pub fn speed_decay_at(&self, v_d: F) -> TrackedExp<F> {
+        TrackedExp::at(-self.m_v * v_d.abs())
+    }
+
     /// mu_d at friction speed `v_d` with a precomputed [`Self::temperature_factor`].
     #[inline(always)]
     pub fn mu_d_with(&self, v_d: F, temperature_factor: F, f_clamp: F) -> F {
+        self.mu_d_with_decay(|x: F| x.exp(), v_d, temperature_factor, f_clamp)
+    }
+
+    /// [`Self::mu_d_with`] with e^(-m_v v_d) from a [`TrackedExp`] (the plant's step: the
+    /// friction speed moves little from step to step; within
+    /// [`crate::math::TRACK_MAX_REL_ERROR`] of the exact factor).
+    #[inline(always)]
+    pub fn mu_d_tracked(
+        &self,
+        v_d: F,
+        temperature_factor: F,
+        f_clamp: F,
+        decay: &mut TrackedExp<F>,
+    ) -> F {
+        self.mu_d_with_decay(|x: F| decay.exp(x), v_d, temperature_factor, f_clamp)
+    }
+
+    /// Eq (2) with the speed factor's e^x from `exp`.
+    #[inline(always)]
+    fn mu_d_with_decay(
+        &self,
+        mut exp: impl FnMut(F) -> F,
+        v_d: F,
+        temperature_factor: F,
+        f_clamp: F,
+    ) -> F {
         let base = if self.variable {
-            let speed_factor = self.n_v * (-self.m_v * v_d.abs()).exp() + F::ONE;
+            let speed_factor = self.n_v * exp(-self.m_v * v_d.abs()) + F::ONE;
             self.c_mu_d0 * speed_factor * temperature_factor
         } else {
             self.mu_d0

@@ -21,7 +21,13 @@
 //! Cortex-M4F FPU, and Rust never fuses a multiply and an add on its own, so with one
 //! implementation of the functions below an f32 run is bit-identical on both.
 
+mod atan;
 mod expf;
+mod tracked;
+
+pub use atan::ATAN_OVER_X_MAX_REL_ERROR;
+
+pub use tracked::{TRACK_MAX_REL_ERROR, TRACK_WINDOW, TrackedExp};
 
 #[cfg(all(feature = "math-libm", feature = "math-micromath"))]
 compile_error!("the features math-libm and math-micromath exclude each other");
@@ -48,6 +54,17 @@ mod f32_impl {
         libm::atanf(x)
     }
     #[inline(always)]
+    pub fn atan_over_x(x: f32) -> f32 {
+        #[cfg(feature = "math-libm")]
+        {
+            super::quotient(x, libm::atanf(x))
+        }
+        #[cfg(not(feature = "math-libm"))]
+        {
+            super::atan::atan_over_x(x)
+        }
+    }
+    #[inline(always)]
     pub fn sqrt(x: f32) -> f32 {
         libm::sqrtf(x)
     }
@@ -69,6 +86,10 @@ mod f32_impl {
         F32Ext::atan(x)
     }
     #[inline(always)]
+    pub fn atan_over_x(x: f32) -> f32 {
+        super::quotient(x, F32Ext::atan(x))
+    }
+    #[inline(always)]
     pub fn sqrt(x: f32) -> f32 {
         libm::sqrtf(x)
     }
@@ -83,7 +104,27 @@ pub const IMPLEMENTATION: &str = if cfg!(feature = "math-micromath") {
     "expf+libm"
 };
 
-pub use f32_impl::{atan as atan_f32, exp as exp_f32, ln as ln_f32, sqrt as sqrt_f32};
+pub use f32_impl::{
+    atan as atan_f32, atan_over_x as atan_over_x_f32, exp as exp_f32, ln as ln_f32,
+    sqrt as sqrt_f32,
+};
+
+/// atan(x)/x from atan(x) (1 - x^2/3 for |x| < 1e-3, where the quotient loses digits):
+/// the f64 reference and the f32 baselines.
+#[inline(always)]
+#[allow(dead_code)]
+fn quotient<F: crate::real::Real>(x: F, atan_x: F) -> F {
+    if x.abs() < F::of(1.0e-3) {
+        F::ONE - x * x / F::of(3.0)
+    } else {
+        atan_x / x
+    }
+}
+
+#[inline(always)]
+pub fn atan_over_x_f64(x: f64) -> f64 {
+    quotient(x, libm::atan(x))
+}
 
 #[inline(always)]
 pub fn exp_f64(x: f64) -> f64 {
@@ -100,4 +141,49 @@ pub fn atan_f64(x: f64) -> f64 {
 #[inline(always)]
 pub fn sqrt_f64(x: f64) -> f64 {
     libm::sqrt(x)
+}
+
+/// Test support: the worst error seen over a sweep and the check of a stated bound.
+#[cfg(test)]
+pub(crate) struct Worst<T> {
+    pub error: f64,
+    pub at: Option<T>,
+}
+
+#[cfg(test)]
+impl<T: core::fmt::Debug> Worst<T> {
+    pub fn new() -> Self {
+        Self {
+            error: 0.0,
+            at: None,
+        }
+    }
+    /// Keeps `error` if it is the largest so far.
+    pub fn see(&mut self, error: f64, at: T) {
+        if error > self.error || self.at.is_none() {
+            self.error = error;
+            self.at = Some(at);
+        }
+    }
+    /// Asserts the worst error within `bound` and above `tight` times it (a bound loose by
+    /// orders of magnitude would hide a wrong method); prints it.
+    pub fn check(&self, name: &str, bound: f64, tight: f64) {
+        std::eprintln!(
+            "{name}: worst relative error {:.3e} at {:?}",
+            self.error,
+            self.at
+        );
+        assert!(
+            self.error <= bound,
+            "{name}: {} at {:?}",
+            self.error,
+            self.at
+        );
+        assert!(
+            self.error > tight * bound,
+            "{name}: {} at {:?}",
+            self.error,
+            self.at
+        );
+    }
 }

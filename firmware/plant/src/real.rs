@@ -30,6 +30,8 @@ pub trait Real:
     fn exp(self) -> Self;
     fn ln(self) -> Self;
     fn atan(self) -> Self;
+    /// atan(x)/x (1 at 0), Eq (9)'s bracket without a division by the creepage.
+    fn atan_over_x(self) -> Self;
     fn sqrt(self) -> Self;
     fn is_finite(self) -> bool;
     fn is_nan(self) -> bool;
@@ -103,5 +105,5 @@ macro_rules! impl_real {
     };
 }
 
-impl_real! { f32, [exp = math::exp_f32, ln = math::ln_f32, atan = math::atan_f32, sqrt = math::sqrt_f32], 0x7f80_0000, 0x7fff_ffff }
-impl_real! { f64, [exp = math::exp_f64, ln = math::ln_f64, atan = math::atan_f64, sqrt = math::sqrt_f64], 0x7ff0_0000_0000_0000, 0x7fff_ffff_ffff_ffff }
+impl_real! { f32, [exp = math::exp_f32, ln = math::ln_f32, atan = math::atan_f32, atan_over_x = math::atan_over_x_f32, sqrt = math::sqrt_f32], 0x7f80_0000, 0x7fff_ffff }
+impl_real! { f64, [exp = math::exp_f64, ln = math::ln_f64, atan = math::atan_f64, atan_over_x = math::atan_over_x_f64, sqrt = math::sqrt_f64], 0x7ff0_0000_0000_0000, 0x7fff_ffff_ffff_ffff }

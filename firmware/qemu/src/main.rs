@@ -50,6 +50,7 @@ mod emulator {
     use cortex_m_rt::{ExceptionFrame, entry, exception};
     use cortex_m_semihosting::{debug, hio};
     use hils_plant::friction::DiscPadFriction;
+    use hils_plant::math::TrackedExp;
     use hils_plant::thermal::DiscThermal;
     use hils_plant::{BrakeInput, FrictionModel, WHEELSETS};
     use hils_sil::trace::{LINE_LEN, PARTS, RECORD_EVERY};
@@ -310,6 +311,25 @@ mod emulator {
             .1
     }
 
+    /// As [`four`] for a sub-model that updates a per-wheelset tracker.
+    #[inline(always)]
+    fn four_tracked(
+        timer: &Timer,
+        args: &[[f32; 3]; WHEELSETS],
+        trackers: &mut [TrackedExp<f32>; WHEELSETS],
+        f: impl Fn([f32; 3], &mut TrackedExp<f32>) -> f32,
+    ) -> u32 {
+        timer
+            .measure(|| {
+                let mut acc = 0.0f32;
+                for (a, t) in args.iter().zip(trackers.iter_mut()) {
+                    acc += f(black_box(*a), t);
+                }
+                black_box(acc);
+            })
+            .1
+    }
+
     /// As [`four`] for a single call.
     fn one(timer: &Timer, args: &[[f32; 3]; 1], f: impl Fn([f32; 3]) -> f32) -> u32 {
         timer
@@ -399,6 +419,11 @@ mod emulator {
             "B friction={name} harness_baseline={baseline}"
         ));
         host.row(&TraceRow::of(&sc.sim));
+        // The step's trackers of e^(-B|w|) and e^(-m_v v_d), replayed from the same
+        // arguments (the sub-model measurements below follow the step's anchors).
+        let v_d0 = sc.sim.outputs().wheelsets[0].omega * friction_radius;
+        let mut rail_decay = [TrackedExp::<f32>::default(); WHEELSETS];
+        let mut speed_decay = [fr.speed_decay_at(v_d0); WHEELSETS];
         let mut stats = [const { Stat::new() }; PARTS.len()];
         let mut rows = 1u32;
         loop {
@@ -439,9 +464,10 @@ mod emulator {
                 ]
             });
             // Friction and heat as the step computes them: Eq (2) with the temperature
-            // bracket and Eq (5) with the loss coefficient that the step refreshes for one
-            // wheelset (`slow`), plus that refresh.
-            let slow = (prev.steps % WHEELSETS as u32) as usize;
+            // bracket and Eq (5) with the loss coefficient, one of which the step refreshes
+            // for one wheelset (`slow`) in an 8-step turn, plus that refresh.
+            let turn = prev.steps % (2 * WHEELSETS as u32);
+            let slow = (turn % WHEELSETS as u32) as usize;
             let friction_args = [0, 1, 2, 3].map(|j| {
                 [
                     w(&prev, j).omega * friction_radius,
@@ -457,16 +483,27 @@ mod emulator {
                 ]
             });
             let refresh_args = [[w(&prev, slow).disc_temp, r * w(&prev, slow).omega, 0.0]; 1];
-            let contact = four(timer, &contact_args, |a| {
-                let c = polach.evaluate(a[0], a[1], a[2]);
+            let contact = four_tracked(timer, &contact_args, &mut rail_decay, |a, d| {
+                let mu = polach.friction_tracked(a[0], d);
+                let c = polach.evaluate_with_mu(a[0], a[1], a[2], mu);
                 c.chord + c.mu + c.creepage
             })
             .saturating_sub(baseline);
-            let friction = (four(timer, &friction_args, |a| fr.mu_d_with(a[0], a[1], a[2]))
-                + one(timer, &refresh_args, |a| fr.temperature_factor(a[0])))
+            let refresh_friction = turn < WHEELSETS as u32;
+            let friction = (four_tracked(timer, &friction_args, &mut speed_decay, |a, d| {
+                fr.mu_d_tracked(a[0], a[1], a[2], d)
+            }) + if refresh_friction {
+                one(timer, &refresh_args, |a| fr.temperature_factor(a[0]))
+            } else {
+                baseline_one
+            })
             .saturating_sub(baseline + baseline_one);
             let thermal = (four(timer, &thermal_args, |a| th.rate_with(a[0], a[1], a[2]))
-                + one(timer, &refresh_args, |a| th.loss_coefficient(a[1])))
+                + if refresh_friction {
+                    baseline_one
+                } else {
+                    one(timer, &refresh_args, |a| th.loss_coefficient(a[1]))
+                })
             .saturating_sub(baseline + baseline_one);
             let suspension = step_cost.saturating_sub(contact + friction + thermal);
             let unit = loop_cost.saturating_sub(step_cost);

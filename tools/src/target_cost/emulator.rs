@@ -7,17 +7,24 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, anyhow, bail};
 
-/// Runs the emulator binary in QEMU and returns its standard output. Fails if QEMU is
-/// missing, exits with failure (the target's own checks failed) or takes longer than
-/// `timeout`.
-pub fn run_emulator(qemu: &str, elf: &Path, timeout: Duration) -> Result<String> {
-    let mut child = Command::new(qemu)
-        .args(["-machine", "mps2-an386", "-cpu", "cortex-m4"])
+/// QEMU running the emulator binary: mps2-an386 (Cortex-M4F), semihosting, one
+/// nanosecond of virtual time per instruction (`-icount shift=0`).
+pub fn qemu_command(qemu: &str, elf: &Path) -> Command {
+    let mut cmd = Command::new(qemu);
+    cmd.args(["-machine", "mps2-an386", "-cpu", "cortex-m4"])
         .args(["-nographic", "-monitor", "none", "-serial", "none"])
         .args(["-semihosting-config", "enable=on,target=native"])
         .args(["-icount", "shift=0"])
         .arg("-kernel")
-        .arg(elf)
+        .arg(elf);
+    cmd
+}
+
+/// Runs the emulator binary in QEMU and returns its standard output. Fails if QEMU is
+/// missing, exits with failure (the target's own checks failed) or takes longer than
+/// `timeout`.
+pub fn run_emulator(qemu: &str, elf: &Path, timeout: Duration) -> Result<String> {
+    let mut child = qemu_command(qemu, elf)
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())

@@ -31,6 +31,7 @@ pub fn report(c: &TargetCost) -> String {
         c.math, c.instructions_per_systick_tick, c.calibration_max_error
     );
     costs(&mut s, c);
+    cycles(&mut s, c);
     let _ = writeln!(s, "Math functions (instructions per call):");
     for f in &c.functions {
         let _ = writeln!(
@@ -81,6 +82,38 @@ fn costs(s: &mut String, c: &TargetCost) {
         c.instructions_max,
         met(c.instructions_max <= c.target_max)
     );
+}
+
+/// Estimated cycles per step (CCM SRAM and flash) with the model stated.
+fn cycles(s: &mut String, c: &TargetCost) {
+    let Some(e) = &c.cycles else {
+        let _ = writeln!(
+            s,
+            "Cycles per step: not estimated ({})",
+            c.cycles_error.as_deref().unwrap_or("no profile")
+        );
+        return;
+    };
+    let _ = writeln!(
+        s,
+        "Cycles per step, estimated (executed mix of the first {} step calls, {:.0} \
+         instructions each, times the run's mean):",
+        e.steps_profiled, e.profile_instructions_per_step
+    );
+    let _ = writeln!(
+        s,
+        "  CCM SRAM (zero wait): CPI {:.2}, {:.0} cycles = {:.1} us at 170 MHz ({:.0} % of 100 us)",
+        e.cpi_ccm, e.cycles_per_step_ccm, e.us_per_step_ccm, e.us_per_step_ccm
+    );
+    let _ = writeln!(
+        s,
+        "  flash, no cache hits: CPI {:.2}, {:.0} cycles = {:.1} us",
+        e.cpi_flash, e.cycles_per_step_flash, e.us_per_step_flash
+    );
+    let _ = writeln!(s, "  model: {}", e.model);
+    for (class, i, cyc) in &e.classes {
+        let _ = writeln!(s, "    {class:<22} {i:6.0} instructions {cyc:6.0} cycles");
+    }
 }
 
 /// Host f32 against the emulated target, per friction model.
