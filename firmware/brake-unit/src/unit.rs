@@ -164,6 +164,21 @@ pub fn eb_pressure(p: &Params, eb_deceleration_mps2: f64) -> f64 {
 #[derive(Clone, Copy, Debug, Default)]
 struct Cylinder<F> {
     pressure: F,
+    /// Rounding error of the last lag update, carried into the next (compensated
+    /// summation): a plain `p += (target - p) * gain` stalls in f32 where the increment
+    /// falls below half an ulp of p (78 Pa short of 355 kPa at gain 2e-4).
+    carry: F,
+}
+
+impl<F: Real> Cylinder<F> {
+    /// First-order lag toward `target`: p += (target - p) gain, compensated.
+    #[inline]
+    fn approach(&mut self, target: F, gain: F) {
+        let step = (target - self.pressure) * gain - self.carry;
+        let next = self.pressure + step;
+        self.carry = (next - self.pressure) - step;
+        self.pressure = next;
+    }
 }
 
 /// The brake unit.
@@ -346,10 +361,10 @@ impl<F: Real> BrakeUnit<F> {
                     } else {
                         self.vent_gain
                     };
-                    c.pressure += (self.acting_pressure - c.pressure) * gain;
+                    c.approach(self.acting_pressure, gain);
                 }
                 Valve::Hold => {}
-                Valve::Vent => c.pressure -= c.pressure * self.vent_gain,
+                Valve::Vent => c.approach(F::ZERO, self.vent_gain),
             }
             out.cylinder_pressure[j] = c.pressure;
             out.valves[j] = self.channels[j].valve;
