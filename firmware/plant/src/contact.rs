@@ -1,6 +1,6 @@
 //! Wheel-rail adhesion: Polach's simplified contact model, paper Eqs (9)-(12).
 
-use crate::params::{ContactParams, Rail};
+use crate::params::{AdhesionSet, ContactParams, Rail};
 use crate::real::Real;
 
 /// Precomputed constants of the Polach model for one rail condition.
@@ -36,7 +36,12 @@ pub struct ContactForce<F> {
 
 impl<F: Real> Polach<F> {
     pub fn new(contact: &ContactParams, rail: Rail) -> Self {
-        let set = contact.set(rail);
+        Self::with_set(contact, &contact.set(rail))
+    }
+
+    /// The model of one parameter set `set` on the contact geometry of `contact` (the
+    /// track's low-adhesion sets, [`crate::track`]).
+    pub fn with_set(contact: &ContactParams, set: &AdhesionSet) -> Self {
         let stiffness = 2.0 / 3.0
             * contact.shear_stiffness_c
             * core::f64::consts::PI
@@ -71,8 +76,14 @@ impl<F: Real> Polach<F> {
     /// x = k_s eps, which has no division by u and stays finite at u = 0 and Q -> 0.
     #[inline(always)]
     pub fn evaluate(&self, slip_velocity: F, speed: F, load: F) -> ContactForce<F> {
+        self.evaluate_with_mu(slip_velocity, speed, load, self.friction(slip_velocity))
+    }
+
+    /// [`Self::evaluate`] with the friction coefficient `mu` given (Eq 11 scaled by the
+    /// degraded-adhesion recovery of [`crate::track`]).
+    #[inline(always)]
+    pub fn evaluate_with_mu(&self, slip_velocity: F, speed: F, load: F, mu: F) -> ContactForce<F> {
         let v_floor = speed.abs().max(self.creep_speed_floor);
-        let mu = self.friction(slip_velocity);
         let creepage = slip_velocity / v_floor;
         if !(load > F::ZERO) {
             return ContactForce {
