@@ -107,6 +107,11 @@ fn allowed_stop<'a>(run: &'a Run, adhesion: &'a AvailableAdhesion) -> AllowedSto
         BrakeDemand::Service { deceleration_mps2 } => {
             (deceleration_mps2 as f64).min(u.eb_deceleration_mps2)
         }
+        BrakeDemand::ServiceStep { step } => {
+            let steps = u.service_steps.max(1);
+            (u.full_service_deceleration_mps2 * step.min(steps) as f64 / steps as f64)
+                .min(u.eb_deceleration_mps2)
+        }
         BrakeDemand::Release => 0.0,
     };
     AllowedStop {

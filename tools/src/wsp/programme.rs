@@ -14,7 +14,7 @@
 //! [[run]]
 //! name = "low-160"
 //! speed_kmh = 160.0
-//! demand = "emergency"        # or "service:<deceleration m/s^2>"
+//! demand = "emergency"        # or "service:<deceleration m/s^2>", "step:<service step>"
 //! track = "low"               # a [tracks.X] name
 //! vehicle = "tare"            # optional; the parameter file's vehicle when absent
 //! ```
@@ -124,16 +124,27 @@ pub struct Run {
     pub file: ParamFile,
 }
 
-/// Parses a demand: `emergency` or `service:<m/s^2>`.
+/// Parses a demand: `emergency`, `service:<m/s^2>` or `step:<service brake step>`.
 pub fn parse_demand(text: &str) -> Result<BrakeDemand> {
     if text == "emergency" {
         return Ok(BrakeDemand::Emergency);
+    }
+    if let Some(step) = text.strip_prefix("step:") {
+        let step = step
+            .trim()
+            .parse::<u8>()
+            .ok()
+            .filter(|s| *s >= 1)
+            .ok_or_else(|| anyhow!("demand `{text}`: `step:<1..>`"))?;
+        return Ok(BrakeDemand::ServiceStep { step });
     }
     let decel = text
         .strip_prefix("service:")
         .and_then(|d| d.trim().parse::<f32>().ok())
         .filter(|d| d.is_finite() && *d > 0.0)
-        .ok_or_else(|| anyhow!("demand `{text}`: `emergency` or `service:<m/s^2 > 0>`"))?;
+        .ok_or_else(|| {
+            anyhow!("demand `{text}`: `emergency`, `service:<m/s^2 > 0>` or `step:<n>`")
+        })?;
     Ok(BrakeDemand::Service {
         deceleration_mps2: decel,
     })
