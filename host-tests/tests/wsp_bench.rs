@@ -172,3 +172,28 @@ fn bad_programmes_are_refused_with_the_cause() {
         assert!(msg.contains(cause), "case {i}: {msg}");
     }
 }
+
+#[test]
+fn degraded_adhesion_section_is_optional_and_checked() {
+    use hils::params_file::parse_params;
+    let reference = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/spec/reference-parameters.toml"),
+    )
+    .or_else(|_| std::fs::read_to_string("/work/shared/spec/reference-parameters.toml"))
+    .unwrap();
+    let off = parse_params(&reference, "reference").unwrap();
+    assert!(!off.degraded_adhesion.enabled);
+    let section = "\n[degraded_adhesion]\nenabled = true\nrecovered_mu_ratio = 1.5\n\
+                   energy_scale_j_per_m = 800.0\ntime_constant_s = 0.2\ncell_length_m = 0.5\n";
+    let on = parse_params(&(reference.clone() + section), "on").unwrap();
+    assert!(on.degraded_adhesion.enabled);
+    assert_eq!(on.degraded_adhesion.recovered_mu_ratio, 1.5);
+    let bad = section.replace("1.5", "0.5");
+    let err = parse_params(&(reference.clone() + &bad), "bad").unwrap_err();
+    assert!(
+        format!("{err}").contains("degraded_adhesion.recovered_mu_ratio"),
+        "{err}"
+    );
+    let unknown = section.replace("enabled", "enable");
+    assert!(parse_params(&(reference + &unknown), "unknown").is_err());
+}
