@@ -279,6 +279,24 @@ pub fn eb_pressure(p: &Params, eb_deceleration_mps2: f64) -> f64 {
     hils_plant::brake::pressure_for_clamp_force(b, clamp).min(b.supply_pressure)
 }
 
+/// Most service brake steps.
+pub const MAX_SERVICE_STEPS: usize = 20;
+
+/// Demand pressure of each service step n (n / steps of the full service deceleration, in
+/// proportion to the EB pressure, limited to EB and the supply), n = 0..=MAX_SERVICE_STEPS.
+fn service_step_pressures<F: Real>(
+    params: &Params,
+    u: &BrakeUnitParams,
+) -> [F; MAX_SERVICE_STEPS + 1] {
+    let eb = eb_pressure(params, u.eb_deceleration_mps2);
+    let steps = u.service_steps.clamp(1, MAX_SERVICE_STEPS as u8) as f64;
+    core::array::from_fn(|n| {
+        let decel = (u.full_service_deceleration_mps2 * (n as f64).min(steps) / steps)
+            .min(u.eb_deceleration_mps2);
+        F::of((eb * decel / u.eb_deceleration_mps2).min(params.brake.supply_pressure))
+    })
+}
+
 /// One wheelset's cylinder: pressure state with fill and vent lags.
 #[derive(Clone, Copy, Debug, Default)]
 struct Cylinder<F> {
@@ -313,7 +331,8 @@ pub struct BrakeUnit<F: Real> {
     wsp_k: WspConstants<F>,
     ep_k: Option<EpConstants<F>>,
     ep: EpValve<F>,
-    full_service: F,
+    /// Demand pressure of each service step (index 0: release; the last repeats).
+    service_step_pressure: [F; MAX_SERVICE_STEPS + 1],
     service_steps: u8,
     /// Pulsed reapply: plant steps of a pulse's fill and of a whole pulse (0: off).
     pulse_fill_steps: u32,
@@ -385,8 +404,8 @@ impl<F: Real> BrakeUnit<F> {
                 .ep_valve
                 .then(|| EpConstants::new(u, cycle, params.brake.supply_pressure)),
             ep: EpValve::default(),
-            full_service: F::of(u.full_service_deceleration_mps2),
-            service_steps: u.service_steps.max(1),
+            service_step_pressure: service_step_pressures(params, u),
+            service_steps: u.service_steps.clamp(1, MAX_SERVICE_STEPS as u8),
             pulse_fill_steps: (u.reapply_pulse_fill_s / dt + 0.5) as u32,
             pulse_steps: ((u.reapply_pulse_fill_s + u.reapply_pulse_hold_s) / dt + 0.5) as u32,
             reapply: [None; WHEELSETS],
@@ -438,10 +457,7 @@ impl<F: Real> BrakeUnit<F> {
                 (self.eb_pressure * d / self.eb_deceleration).min(self.supply_pressure)
             }
             BrakeDemand::ServiceStep { step } => {
-                let share =
-                    F::of(step.min(self.service_steps) as f64) / F::of(self.service_steps as f64);
-                let d = (self.full_service * share).min(self.eb_deceleration);
-                (self.eb_pressure * d / self.eb_deceleration).min(self.supply_pressure)
+                self.service_step_pressure[step.min(self.service_steps) as usize]
             }
         }
     }

@@ -370,7 +370,12 @@ struct Recovery<F> {
     inv_energy_scale: F,
     /// Filter gain of the own dissipation per refresh (every 4 steps).
     own_gain: F,
-    inv_cell: f64,
+    cell_length: F,
+    inv_cell: F,
+    /// Cell under each wheelset and where it ends, m (followed step by step in the
+    /// plant's precision: no f64 in the board's step).
+    cell: [i32; crate::WHEELSETS],
+    cell_end: [F; crate::WHEELSETS],
     /// Energy per metre deposited in each cell, J/m, and the cell's index along the track.
     cell_energy: [F; CELLS],
     cell_tag: [i32; CELLS],
@@ -398,7 +403,10 @@ impl<F: Real> TrackAdhesion<F> {
             ratio_minus_one: F::of(degraded.recovered_mu_ratio - 1.0),
             inv_energy_scale: F::of(1.0 / degraded.energy_scale_j_per_m),
             own_gain: F::of(1.0 - crate::math::exp_f64(-4.0 * dt_s / degraded.time_constant_s)),
-            inv_cell: 1.0 / degraded.cell_length_m,
+            cell_length: F::of(degraded.cell_length_m),
+            inv_cell: F::of(1.0 / degraded.cell_length_m),
+            cell: [0; crate::WHEELSETS],
+            cell_end: [F::of(degraded.cell_length_m); crate::WHEELSETS],
             cell_energy: [F::ZERO; CELLS],
             cell_tag: [i32::MIN; CELLS],
             own: [F::ZERO; crate::WHEELSETS],
@@ -439,6 +447,22 @@ impl<F: Real> TrackAdhesion<F> {
         self.surface
     }
 
+    /// Places wheelset `j` at track position `x_m` (m) for the cell ring (construction; the
+    /// step then follows it cell by cell).
+    pub fn place(&mut self, j: usize, x_m: F) {
+        if let Some(r) = self.degraded.as_mut() {
+            let len = r.cell_length.to_f64();
+            let cell = libm::floor(x_m.to_f64() / len);
+            let cell = if cell.is_finite() {
+                cell.clamp(-1e9, 1e9)
+            } else {
+                0.0
+            };
+            r.cell[j] = cell as i32;
+            r.cell_end[j] = F::of((cell + 1.0) * len);
+        }
+    }
+
     /// Refreshes wheelset `j` at track position `x_m` (m) with its speed (m/s) and the
     /// power dissipated in its contact (W), `elapsed_s` since its last refresh.
     pub fn refresh(&mut self, j: usize, x_m: F, speed: F, contact_power: F, elapsed_s: F) {
@@ -452,8 +476,17 @@ impl<F: Real> TrackAdhesion<F> {
         let Some(r) = self.degraded.as_mut() else {
             return;
         };
-        let cell = libm::floor(x_m.to_f64() * r.inv_cell);
-        let tag = if cell.is_finite() { cell as i32 } else { 0 };
+        // Follow the cell under the wheelset (a few cells per refresh at most).
+        for _ in 0..4 {
+            if x_m >= r.cell_end[j] {
+                r.cell[j] = r.cell[j].wrapping_add(1);
+                r.cell_end[j] += r.cell_length;
+            } else if x_m < r.cell_end[j] - r.cell_length {
+                r.cell[j] = r.cell[j].wrapping_sub(1);
+                r.cell_end[j] -= r.cell_length;
+            }
+        }
+        let tag = r.cell[j];
         let slot = tag.rem_euclid(CELLS as i32) as usize;
         if r.cell_tag[slot] != tag {
             r.cell_tag[slot] = tag;
@@ -465,7 +498,7 @@ impl<F: Real> TrackAdhesion<F> {
         }
         let power = contact_power.abs();
         let power = if power.is_finite() { power } else { F::ZERO };
-        let deposit = power * elapsed_s * F::of(r.inv_cell);
+        let deposit = power * elapsed_s * r.inv_cell;
         let ahead = (r.cell_energy[slot] - r.own_in_cell[j]).max(F::ZERO);
         r.cell_energy[slot] += deposit;
         r.own_in_cell[j] += deposit;

@@ -51,7 +51,10 @@ impl<F: Real> ClosedLoop<F> {
         Self::with_config(&file.plant, rail, initial_speed, &file.unit_config())
     }
 
-    /// A loop of a plant and a brake unit configuration (its step is the plant's).
+    /// A loop of a plant and a brake unit configuration (its step is the plant's). Never
+    /// inlined: the board builds a run from code in CCM SRAM, and construction must stay a
+    /// cold call to flash (firmware/board/ccm.x, size.sh allows `with_config`).
+    #[inline(never)]
     pub fn with_config(
         params: &Params,
         rail: Rail,
