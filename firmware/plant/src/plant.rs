@@ -643,7 +643,7 @@ impl<F: Real> Plant<F> {
         s.temperature_factor[slow] = k.friction.temperature_factor(s.disc_temp[slow]);
         s.heat_loss[slow] = k.thermal.loss_coefficient(k.r * omega[slow]);
         let track = &mut self.track;
-        track.refresh(
+        track.step(
             slow,
             s.x_c + self.track_offset[slow],
             v_w[slow],
@@ -862,7 +862,7 @@ impl<F: Real> Plant<F> {
         for j in 0..WHEELSETS {
             let x = self.s.x_c + self.track_offset[j];
             self.track
-                .refresh(j, x, self.out.wheelsets[j].speed, F::ZERO, F::ZERO);
+                .step(j, x, self.out.wheelsets[j].speed, F::ZERO, F::ZERO);
         }
     }
 

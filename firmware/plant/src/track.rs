@@ -439,7 +439,10 @@ impl<F: Real> TrackAdhesion<F> {
     /// The contact model under wheelset `j` (0-based) and its friction factor.
     #[inline(always)]
     pub fn contact(&self, j: usize) -> (&Polach<F>, F) {
-        (&self.polach[self.surface[j] as usize], self.mu_factor[j])
+        (
+            &self.polach[self.surface[j & 3] as usize & 3],
+            self.mu_factor[j & 3],
+        )
     }
 
     /// The surface under each wheelset.
@@ -464,8 +467,11 @@ impl<F: Real> TrackAdhesion<F> {
     }
 
     /// Refreshes wheelset `j` at track position `x_m` (m) with its speed (m/s) and the
-    /// power dissipated in its contact (W), `elapsed_s` since its last refresh.
-    pub fn refresh(&mut self, j: usize, x_m: F, speed: F, contact_power: F, elapsed_s: F) {
+    /// power dissipated in its contact (W), `elapsed_s` since its last refresh. Kept out of
+    /// line (the plant's wheelset loop stays as it was); named `step` so the board places it in
+    /// CCM SRAM with the plant's step (firmware/board/ccm.x).
+    #[inline(never)]
+    pub fn step(&mut self, j: usize, x_m: F, speed: F, contact_power: F, elapsed_s: F) {
         let mut surface = self.track.base;
         for i in 0..self.track.count {
             if x_m >= self.starts[i] && x_m < self.ends[i] {
