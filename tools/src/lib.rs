@@ -18,3 +18,4 @@ pub mod runlog;
 pub mod scenario;
 pub mod simulate;
 pub mod target_cost;
+pub mod wsp;

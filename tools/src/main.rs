@@ -25,6 +25,9 @@ enum Command {
     TargetCost(hils::target_cost::TargetCostArgs),
     /// Turn a captured defmt telemetry log into a run-log CSV.
     Decode(hils::decode::DecodeArgs),
+    /// WSP test bench: a programme of low-adhesion runs in SIL (or a captured rig log),
+    /// judged against the stopping distance the adhesion allows.
+    WspTest(hils::wsp::WspTestArgs),
 }
 
 fn main() -> Result<()> {
@@ -35,5 +38,6 @@ fn main() -> Result<()> {
         Command::Diagnose(a) => hils::diagnose::main(a),
         Command::TargetCost(a) => hils::target_cost::main(a),
         Command::Decode(a) => hils::decode::main(a),
+        Command::WspTest(a) => hils::wsp::main(a),
     }
 }

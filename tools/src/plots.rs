@@ -52,6 +52,8 @@ pub struct Chart {
     pub y_range: Option<(f64, f64)>,
     /// Legend in the lower right corner instead of the upper right.
     pub legend_lower_right: bool,
+    /// Shaded x intervals (from, to, palette index), drawn under the series.
+    pub shades: Vec<(f64, f64, usize)>,
 }
 
 pub const PALETTE: [RGBColor; 8] = [
@@ -153,6 +155,13 @@ impl Chart {
             .y_desc(self.y_label.as_str())
             .light_line_style(RGBColor(235, 235, 235))
             .draw()?;
+        for &(from, to, c) in &self.shades {
+            let color = PALETTE[c % PALETTE.len()].mix(0.15);
+            chart.draw_series(std::iter::once(Rectangle::new(
+                [(from.max(x.0), y.0), (to.min(x.1), y.1)],
+                color.filled(),
+            )))?;
+        }
         for s in &self.series {
             let color = PALETTE[s.color % PALETTE.len()];
             let pts = thin(&s.points, 4000);

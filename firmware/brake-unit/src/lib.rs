@@ -10,6 +10,7 @@
 #![no_std]
 #![forbid(unsafe_code)]
 
+pub mod ep;
 pub mod unit;
 pub mod wsp;
 

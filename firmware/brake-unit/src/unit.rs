@@ -6,6 +6,7 @@ use hils_plant::{Real, WHEELSETS};
 #[cfg(feature = "serde")]
 use serde::Deserialize;
 
+use crate::ep::{EpConstants, EpValve};
 use crate::wsp::{ReferenceSpeed, Valve, WspChannel, WspConstants, WspTuning};
 
 /// Brake demand given to the unit.
@@ -20,6 +21,12 @@ pub enum BrakeDemand {
     Service {
         /// Demanded deceleration, m/s^2 (limited to the EB deceleration).
         deceleration_mps2: f32,
+    },
+    /// Service brake step `step` of `service_steps`: `step / service_steps` of the full
+    /// service deceleration (0: release; above the last: the last).
+    ServiceStep {
+        /// The step, 1-based.
+        step: u8,
     },
 }
 
@@ -40,6 +47,70 @@ pub struct BrakeUnitParams {
     /// Pneumatic transport delay, s.
     #[cfg_attr(feature = "serde", serde(rename = "dead_time"))]
     pub dead_time_s: f64,
+    /// Whether the ECU sets the pressure through the EP valve with PI control
+    /// ([`crate::ep`]); off: the demand acts directly (the unit before issue 13).
+    #[cfg_attr(feature = "serde", serde(default = "defaults::ep_valve"))]
+    pub ep_valve: bool,
+    /// EP valve PI proportional gain.
+    #[cfg_attr(feature = "serde", serde(default = "defaults::ep_kp"))]
+    pub ep_kp: f64,
+    /// EP valve PI integral gain, 1/s.
+    #[cfg_attr(feature = "serde", serde(default = "defaults::ep_ki_per_s"))]
+    pub ep_ki_per_s: f64,
+    /// EP valve hysteresis (play width), Pa.
+    #[cfg_attr(feature = "serde", serde(default = "defaults::ep_hysteresis_pa"))]
+    pub ep_hysteresis_pa: f64,
+    /// Whether the ECU compensates the EP valve's hysteresis.
+    #[cfg_attr(feature = "serde", serde(default = "defaults::ep_valve"))]
+    pub ep_hysteresis_compensation: bool,
+    /// Pilot pressure lag of the EP valve, s.
+    #[cfg_attr(feature = "serde", serde(default = "defaults::ep_time_constant_s"))]
+    pub ep_time_constant_s: f64,
+    /// WSP reapply in pulses: fill time of a pulse, s (0: one continuous refill).
+    #[cfg_attr(feature = "serde", serde(default = "defaults::reapply_pulse_fill_s"))]
+    pub reapply_pulse_fill_s: f64,
+    /// WSP reapply in pulses: hold between pulses, s.
+    #[cfg_attr(feature = "serde", serde(default = "defaults::reapply_pulse_hold_s"))]
+    pub reapply_pulse_hold_s: f64,
+    /// Deceleration of the highest service brake step, m/s^2.
+    #[cfg_attr(feature = "serde", serde(default = "defaults::full_service_mps2"))]
+    pub full_service_deceleration_mps2: f64,
+    /// Number of service brake steps.
+    #[cfg_attr(feature = "serde", serde(default = "defaults::service_steps"))]
+    pub service_steps: u8,
+}
+
+/// Defaults of the `[brake_unit]` keys added by issue 13 (the reference file predates
+/// them). Assumed values: a proportional EP valve of ~15 kPa hysteresis and 30 ms pilot
+/// lag; pulsed reapply of 30 ms fill / 50 ms hold; 7 service steps up to 1.0 m/s^2.
+mod defaults {
+    pub fn ep_valve() -> bool {
+        true
+    }
+    pub fn ep_kp() -> f64 {
+        0.5
+    }
+    pub fn ep_ki_per_s() -> f64 {
+        20.0
+    }
+    pub fn ep_hysteresis_pa() -> f64 {
+        15e3
+    }
+    pub fn ep_time_constant_s() -> f64 {
+        0.03
+    }
+    pub fn reapply_pulse_fill_s() -> f64 {
+        0.03
+    }
+    pub fn reapply_pulse_hold_s() -> f64 {
+        0.05
+    }
+    pub fn full_service_mps2() -> f64 {
+        1.0
+    }
+    pub fn service_steps() -> u8 {
+        7
+    }
 }
 
 impl Default for BrakeUnitParams {
@@ -49,6 +120,16 @@ impl Default for BrakeUnitParams {
             fill_time_constant_s: 0.5,
             vent_time_constant_s: 0.15,
             dead_time_s: 0.05,
+            ep_valve: defaults::ep_valve(),
+            ep_kp: defaults::ep_kp(),
+            ep_ki_per_s: defaults::ep_ki_per_s(),
+            ep_hysteresis_pa: defaults::ep_hysteresis_pa(),
+            ep_hysteresis_compensation: defaults::ep_valve(),
+            ep_time_constant_s: defaults::ep_time_constant_s(),
+            reapply_pulse_fill_s: defaults::reapply_pulse_fill_s(),
+            reapply_pulse_hold_s: defaults::reapply_pulse_hold_s(),
+            full_service_deceleration_mps2: defaults::full_service_mps2(),
+            service_steps: defaults::service_steps(),
         }
     }
 }
@@ -75,7 +156,45 @@ impl BrakeUnitParams {
             1e-3,
             100.0,
         )?;
-        check("brake_unit.dead_time", self.dead_time_s, 0.0, 1.0)
+        check("brake_unit.dead_time", self.dead_time_s, 0.0, 1.0)?;
+        check("brake_unit.ep_kp", self.ep_kp, 0.0, 10.0)?;
+        check("brake_unit.ep_ki_per_s", self.ep_ki_per_s, 0.0, 1000.0)?;
+        check(
+            "brake_unit.ep_hysteresis_pa",
+            self.ep_hysteresis_pa,
+            0.0,
+            1e5,
+        )?;
+        check(
+            "brake_unit.ep_time_constant_s",
+            self.ep_time_constant_s,
+            1e-3,
+            1.0,
+        )?;
+        check(
+            "brake_unit.reapply_pulse_fill_s",
+            self.reapply_pulse_fill_s,
+            0.0,
+            1.0,
+        )?;
+        check(
+            "brake_unit.reapply_pulse_hold_s",
+            self.reapply_pulse_hold_s,
+            0.0,
+            1.0,
+        )?;
+        check(
+            "brake_unit.full_service_deceleration_mps2",
+            self.full_service_deceleration_mps2,
+            0.01,
+            10.0,
+        )?;
+        check(
+            "brake_unit.service_steps",
+            self.service_steps as f64,
+            1.0,
+            20.0,
+        )
     }
 }
 
@@ -160,10 +279,40 @@ pub fn eb_pressure(p: &Params, eb_deceleration_mps2: f64) -> f64 {
     hils_plant::brake::pressure_for_clamp_force(b, clamp).min(b.supply_pressure)
 }
 
+/// Most service brake steps.
+pub const MAX_SERVICE_STEPS: usize = 20;
+
+/// Demand pressure of each service step n (n / steps of the full service deceleration, in
+/// proportion to the EB pressure, limited to EB and the supply), n = 0..=MAX_SERVICE_STEPS.
+fn service_step_pressures<F: Real>(
+    params: &Params,
+    u: &BrakeUnitParams,
+) -> [F; MAX_SERVICE_STEPS + 1] {
+    let eb = eb_pressure(params, u.eb_deceleration_mps2);
+    let steps = u.service_steps.clamp(1, MAX_SERVICE_STEPS as u8) as f64;
+    core::array::from_fn(|n| {
+        let decel = (u.full_service_deceleration_mps2 * (n as f64).min(steps) / steps)
+            .min(u.eb_deceleration_mps2);
+        F::of((eb * decel / u.eb_deceleration_mps2).min(params.brake.supply_pressure))
+    })
+}
+
 /// One wheelset's cylinder: pressure state with fill and vent lags.
 #[derive(Clone, Copy, Debug, Default)]
 struct Cylinder<F> {
     pressure: F,
+    /// Rounding error of the last lag update, carried into the next (compensated
+    /// summation): a plain `p += (target - p) * gain` stalls in f32 where the increment
+    /// falls below half an ulp of p (78 Pa short of 355 kPa at gain 2e-4).
+    carry: F,
+}
+
+impl<F: Real> Cylinder<F> {
+    /// First-order lag toward `target`: p += (target - p) gain, compensated.
+    #[inline]
+    fn approach(&mut self, target: F, gain: F) {
+        crate::ep::approach(&mut self.pressure, &mut self.carry, target, gain);
+    }
 }
 
 /// The brake unit.
@@ -180,6 +329,18 @@ pub struct BrakeUnit<F: Real> {
     supply_pressure: F,
     wsp_enabled: bool,
     wsp_k: WspConstants<F>,
+    ep_k: Option<EpConstants<F>>,
+    ep: EpValve<F>,
+    /// Demand pressure of each service step (index 0: release; the last repeats).
+    service_step_pressure: [F; MAX_SERVICE_STEPS + 1],
+    service_steps: u8,
+    /// Pulsed reapply: plant steps of a pulse's fill and of a whole pulse (0: off).
+    pulse_fill_steps: u32,
+    pulse_steps: u32,
+    /// Per wheelset: Some(steps into the reapply) while reapplying after a WSP action.
+    reapply: [Option<u32>; WHEELSETS],
+    /// A pulsed reapply ends at this share of the demand (then the relay fills on).
+    reapply_until: F,
     reference: ReferenceSpeed<F>,
     channels: [WspChannel<F>; WHEELSETS],
     cylinders: [Cylinder<F>; WHEELSETS],
@@ -239,6 +400,16 @@ impl<F: Real> BrakeUnit<F> {
             supply_pressure: F::of(params.brake.supply_pressure),
             wsp_enabled: config.wsp_enabled,
             wsp_k: WspConstants::new(&config.wsp, cycle),
+            ep_k: u
+                .ep_valve
+                .then(|| EpConstants::new(u, cycle, params.brake.supply_pressure)),
+            ep: EpValve::default(),
+            service_step_pressure: service_step_pressures(params, u),
+            service_steps: u.service_steps.clamp(1, MAX_SERVICE_STEPS as u8),
+            pulse_fill_steps: (u.reapply_pulse_fill_s / dt + 0.5) as u32,
+            pulse_steps: ((u.reapply_pulse_fill_s + u.reapply_pulse_hold_s) / dt + 0.5) as u32,
+            reapply: [None; WHEELSETS],
+            reapply_until: F::of(0.95),
             reference: ReferenceSpeed::default(),
             channels: [WspChannel::default(); WHEELSETS],
             cylinders: [Cylinder::default(); WHEELSETS],
@@ -285,6 +456,9 @@ impl<F: Real> BrakeUnit<F> {
                 };
                 (self.eb_pressure * d / self.eb_deceleration).min(self.supply_pressure)
             }
+            BrakeDemand::ServiceStep { step } => {
+                self.service_step_pressure[step.min(self.service_steps) as usize]
+            }
         }
     }
 
@@ -303,8 +477,12 @@ impl<F: Real> BrakeUnit<F> {
             }
             packed |= (valve as u8) << (2 * j);
         }
+        // The ECU's EP valve makes the pilot pressure (PI + hysteresis compensation).
         // Delay line: write now, read what was written `delay` cycles ago.
-        let demand = self.demand_pressure();
+        let demand = match &self.ep_k {
+            Some(k) => self.ep.update(k, self.demand_pressure()),
+            None => self.demand_pressure(),
+        };
         self.delay_pressure[self.head] = demand;
         self.delay_valves[self.head] = packed;
         let tail = (self.head + DELAY_CAPACITY - self.delay) % DELAY_CAPACITY;
@@ -340,16 +518,37 @@ impl<F: Real> BrakeUnit<F> {
             match self.acting_valves[j] {
                 Valve::Apply => {
                     // BOU relay: fill toward the demand with the fill lag, exhaust toward a
-                    // lower demand with the vent lag.
-                    let gain = if self.acting_pressure > c.pressure {
+                    // lower demand with the vent lag. After a WSP action the refill comes in
+                    // pulses (fill, hold, ...) until the cylinder is back at the demand.
+                    let filling = self.acting_pressure > c.pressure;
+                    let in_pulse = match self.reapply[j] {
+                        Some(n)
+                            if filling
+                                && self.pulse_fill_steps > 0
+                                && c.pressure < self.reapply_until * self.acting_pressure =>
+                        {
+                            self.reapply[j] = Some(n.wrapping_add(1));
+                            n % self.pulse_steps.max(1) < self.pulse_fill_steps
+                        }
+                        _ => {
+                            self.reapply[j] = None;
+                            true
+                        }
+                    };
+                    let gain = if filling {
                         self.fill_gain
                     } else {
                         self.vent_gain
                     };
-                    c.pressure += (self.acting_pressure - c.pressure) * gain;
+                    if in_pulse {
+                        c.approach(self.acting_pressure, gain);
+                    }
                 }
-                Valve::Hold => {}
-                Valve::Vent => c.pressure -= c.pressure * self.vent_gain,
+                Valve::Hold => self.reapply[j] = Some(0),
+                Valve::Vent => {
+                    self.reapply[j] = Some(0);
+                    c.approach(F::ZERO, self.vent_gain);
+                }
             }
             out.cylinder_pressure[j] = c.pressure;
             out.valves[j] = self.channels[j].valve;

@@ -153,7 +153,8 @@ impl<F: Real> WspConstants<F> {
     }
 }
 
-/// Reference speed estimate from the wheel speeds.
+/// Reference speed estimate from the wheel speeds; `accel` is the filtered rate of its
+/// falls (rises re-anchor it and are left out, so `accel <= 0` under braking).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct ReferenceSpeed<F> {
     pub speed: F,
@@ -173,7 +174,12 @@ impl<F: Real> ReferenceSpeed<F> {
         let previous = self.speed;
         let floor = previous - k.ref_fall_per_cycle;
         self.speed = fastest.max(floor).max(F::ZERO);
-        let raw = (self.speed - previous) * k.inv_dt;
+        // Only the fall of the reference is a vehicle deceleration. A rise re-anchors the
+        // estimate to a wheel that has spun back up to the rail speed (issue 13: when
+        // wheelset 4 recovered, the rise drove the filtered derivative to ~+4 m/s^2 and
+        // the runaway test fired on a normally braking wheelset 2); it is not fed to the
+        // derivative filter.
+        let raw = (self.speed - previous).min(F::ZERO) * k.inv_dt;
         self.accel += (raw - self.accel) * k.accel_gain;
     }
 }

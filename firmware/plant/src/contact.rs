@@ -1,7 +1,7 @@
 //! Wheel-rail adhesion: Polach's simplified contact model, paper Eqs (9)-(12).
 
 use crate::math::TrackedExp;
-use crate::params::{ContactParams, Rail};
+use crate::params::{AdhesionSet, ContactParams, Rail};
 use crate::real::Real;
 
 /// Precomputed constants of the Polach model for one rail condition.
@@ -39,7 +39,12 @@ pub struct ContactForce<F> {
 
 impl<F: Real> Polach<F> {
     pub fn new(contact: &ContactParams, rail: Rail) -> Self {
-        let set = contact.set(rail);
+        Self::with_set(contact, &contact.set(rail))
+    }
+
+    /// The model of one parameter set `set` on the contact geometry of `contact` (the
+    /// track's low-adhesion sets, [`crate::track`]).
+    pub fn with_set(contact: &ContactParams, set: &AdhesionSet) -> Self {
         let stiffness = 2.0 / 3.0
             * contact.shear_stiffness_c
             * core::f64::consts::PI
@@ -85,8 +90,8 @@ impl<F: Real> Polach<F> {
         self.mu_decaying * decay.exp(-self.b_exp * slip_velocity.abs()) + self.mu_inf
     }
 
-    /// [`Self::evaluate`] with a given friction coefficient `mu` (Eq 11) of this slip
-    /// velocity: Eqs (9), (10) and (12).
+    /// [`Self::evaluate`] with the friction coefficient `mu` given (Eq 11, possibly scaled
+    /// by the degraded-adhesion recovery of [`crate::track`]): Eqs (9), (10) and (12).
     #[inline(always)]
     pub fn evaluate_with_mu(&self, slip_velocity: F, speed: F, load: F, mu: F) -> ContactForce<F> {
         let v_floor = speed.abs().max(self.creep_speed_floor);

@@ -22,7 +22,9 @@ pub mod params;
 pub mod plant;
 pub mod real;
 pub mod thermal;
+pub mod track;
 
 pub use params::{FrictionModel, ParamError, Params, Rail, STEP_S};
 pub use plant::{BrakeInput, Energy, Flags, Outputs, Plant, WHEELSETS, WheelsetOutput};
 pub use real::Real;
+pub use track::{DegradedAdhesionParams, Surface, Track, TrackAdhesion, Zone};

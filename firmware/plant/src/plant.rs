@@ -52,6 +52,7 @@ use crate::math::TrackedExp;
 use crate::params::{ParamError, Params, Rail};
 use crate::real::Real;
 use crate::thermal::DiscThermal;
+use crate::track::{DegradedAdhesionParams, Surface, Track, TrackAdhesion};
 
 /// Number of wheelsets.
 pub const WHEELSETS: usize = 4;
@@ -303,6 +304,10 @@ pub struct Plant<F: Real> {
     out: Outputs<F>,
     sticky: Flags,
     initial_speed: F,
+    /// Adhesion along the track ([`crate::track`]): one surface everywhere unless set.
+    track: TrackAdhesion<F>,
+    /// Track position of each wheelset relative to the carbody distance, m.
+    track_offset: [F; WHEELSETS],
 }
 
 #[inline(always)]
@@ -330,12 +335,26 @@ impl<F: Real> Plant<F> {
     ) -> Result<Self, ParamError> {
         params.validate()?;
         let k = Self::constants(params, rail, dt)?;
+        let surface = match rail {
+            Rail::Wet => Surface::Wet,
+            Rail::Dry => Surface::Dry,
+        };
+        let track = TrackAdhesion::new(
+            &params.contact,
+            &Default::default(),
+            Track::uniform(surface),
+            &DegradedAdhesionParams::default(),
+            dt,
+        )?;
+        let lead = k.x_bogie[0] + k.x_axle[0];
         let mut plant = Plant {
             k,
             s: State::default(),
             out: Outputs::default(),
             sticky: Flags::default(),
             initial_speed: F::ZERO,
+            track,
+            track_offset: core::array::from_fn(|j| k.x_bogie[j / 2] + k.x_axle[j % 2] - lead),
         };
         let mut flags = 0;
         let v0 = if initial_speed.is_finite() && initial_speed >= F::ZERO {
@@ -647,14 +666,23 @@ impl<F: Real> Plant<F> {
         } else {
             s.heat_loss[slow] = k.thermal.loss_coefficient(k.r * omega[slow]);
         }
+        // Degraded adhesion along the track (crate::track): one wheelset per step, in turn.
+        let track = &mut self.track;
+        track.step(
+            slow,
+            s.x_c + self.track_offset[slow],
+            v_w[slow],
+            self.out.wheelsets[slow].contact_power,
+            F::of(WHEELSETS as f64) * dt,
+        );
 
         // ---- Wheelsets: contact (Eqs 9-12), friction (Eq 2), brake (Eq 1), spin (Eqs 7-8)
         let mut a_w = [F::ZERO; WHEELSETS];
         let mut brake_torque = [F::ZERO; WHEELSETS];
         for j in 0..WHEELSETS {
-            let rail_mu = k.polach.friction_tracked(s.slip[j], &mut s.rail_decay[j]);
-            let contact: ContactForce<F> =
-                k.polach.evaluate_with_mu(s.slip[j], v_w[j], q[j], rail_mu);
+            let (polach, mu_factor) = track.contact(j);
+            let mu = polach.friction_tracked(s.slip[j], &mut s.rail_decay[j]) * mu_factor;
+            let contact: ContactForce<F> = polach.evaluate_with_mu(s.slip[j], v_w[j], q[j], mu);
             if !(q[j] > F::ZERO) {
                 flags |= Flags::wheelset_bit(Flags::WHEEL_UNLOADED, j);
             }
@@ -854,6 +882,21 @@ impl<F: Real> Plant<F> {
             potential += 0.5 * f(k.k_pv) * e * e + 0.5 * f(k.k_pl) * d * d;
         }
         Energy { kinetic, potential }
+    }
+
+    /// Sets the adhesion along the track (zones, contact sets, degraded adhesion).
+    pub fn set_track(&mut self, track: TrackAdhesion<F>) {
+        self.track = track;
+        for j in 0..WHEELSETS {
+            let x = self.s.x_c + self.track_offset[j];
+            self.track
+                .step(j, x, self.out.wheelsets[j].speed, F::ZERO, F::ZERO);
+        }
+    }
+
+    /// The adhesion along the track and the surface under each wheelset.
+    pub fn track(&self) -> &TrackAdhesion<F> {
+        &self.track
     }
 
     /// The Polach model in use (for adhesion curves, Fig 11).

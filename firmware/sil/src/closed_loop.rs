@@ -3,7 +3,8 @@
 
 use hils_brake_unit::{BrakeDemand, BrakeUnit, UnitConfig, UnitError, UnitOutputs, Valve};
 use hils_plant::params::{ParamError, Params, Rail, STEP_S};
-use hils_plant::{BrakeInput, Outputs, Plant, Real, WHEELSETS};
+use hils_plant::track::ContactSets;
+use hils_plant::{BrakeInput, Outputs, Plant, Real, Track, TrackAdhesion, WHEELSETS};
 
 use crate::params::ParamFile;
 
@@ -50,7 +51,10 @@ impl<F: Real> ClosedLoop<F> {
         Self::with_config(&file.plant, rail, initial_speed, &file.unit_config())
     }
 
-    /// A loop of a plant and a brake unit configuration (its step is the plant's).
+    /// A loop of a plant and a brake unit configuration (its step is the plant's). Never
+    /// inlined: the board builds a run from code in CCM SRAM, and construction must stay a
+    /// cold call to flash (firmware/board/ccm.x, size.sh allows `with_config`).
+    #[inline(never)]
     pub fn with_config(
         params: &Params,
         rail: Rail,
@@ -72,6 +76,26 @@ impl<F: Real> ClosedLoop<F> {
             unit,
             unit_out,
         })
+    }
+
+    /// Puts the loop on a track of adhesion zones with the file's `[contact]` and
+    /// `[degraded_adhesion]` ([`hils_plant::track`]).
+    pub fn set_track(
+        &mut self,
+        file: &ParamFile,
+        track: Track,
+        sets: &ContactSets,
+    ) -> Result<(), ParamError> {
+        let step_s = file.scenario.paper_eb.step_s;
+        let adhesion = TrackAdhesion::new(
+            &file.plant.contact,
+            sets,
+            track,
+            &file.degraded_adhesion,
+            step_s,
+        )?;
+        self.plant.set_track(adhesion);
+        Ok(())
     }
 
     /// Sets the brake unit's demand.

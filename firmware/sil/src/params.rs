@@ -6,6 +6,7 @@
 //! unknown section or key, a missing section or a wrong type is an error that names it.
 
 use hils_brake_unit::{BrakeUnitParams, UnitConfig};
+use hils_plant::DegradedAdhesionParams;
 use hils_plant::params::{ParamError, Params, Rail, STEP_S, check};
 #[cfg(feature = "serde")]
 use serde::Deserialize;
@@ -88,6 +89,9 @@ pub struct ParamFile {
     pub brake_unit: BrakeUnitParams,
     /// `[scenario]`.
     pub scenario: ScenarioParams,
+    /// `[degraded_adhesion]` (optional; off when absent): recovery of contaminated rails,
+    /// [`hils_plant::track`].
+    pub degraded_adhesion: DegradedAdhesionParams,
 }
 
 impl ParamFile {
@@ -95,6 +99,7 @@ impl ParamFile {
     pub fn validate(&self) -> Result<(), ParamError> {
         self.plant.validate()?;
         self.brake_unit.validate()?;
+        self.degraded_adhesion.validate()?;
         self.scenario.validate()
     }
 
@@ -114,9 +119,10 @@ mod de {
 
     const PLANT: usize = Params::SECTIONS.len();
 
-    /// Every section of the file: the plant's, then `brake_unit`, `scenario`.
-    const SECTIONS: [&str; PLANT + 2] = {
-        let mut s = [""; PLANT + 2];
+    /// Every section of the file: the plant's, then `brake_unit`, `scenario` and the
+    /// optional `degraded_adhesion` (the last).
+    const SECTIONS: [&str; PLANT + 3] = {
+        let mut s = [""; PLANT + 3];
         let mut k = 0;
         while k < PLANT {
             s[k] = Params::SECTIONS[k];
@@ -124,8 +130,11 @@ mod de {
         }
         s[PLANT] = "brake_unit";
         s[PLANT + 1] = "scenario";
+        s[PLANT + 2] = "degraded_adhesion";
         s
     };
+    /// Sections a file may leave out.
+    const OPTIONAL: usize = PLANT + 2;
 
     /// A section name, as its index in [`SECTIONS`].
     struct Section(usize);
@@ -168,10 +177,11 @@ mod de {
                 match k {
                     k if k < PLANT => file.plant.read_section(k, &mut map)?,
                     k if k == PLANT => file.brake_unit = map.next_value()?,
-                    _ => file.scenario = map.next_value()?,
+                    k if k == PLANT + 1 => file.scenario = map.next_value()?,
+                    _ => file.degraded_adhesion = map.next_value()?,
                 }
             }
-            match seen.iter().position(|s| !s) {
+            match seen[..OPTIONAL].iter().position(|s| !s) {
                 Some(k) => Err(A::Error::missing_field(SECTIONS[k])),
                 None => Ok(file),
             }

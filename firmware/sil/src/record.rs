@@ -211,7 +211,7 @@ impl Cmd {
         match demand {
             BrakeDemand::Release => Cmd::Release,
             BrakeDemand::Emergency => Cmd::Emergency,
-            BrakeDemand::Service { .. } => Cmd::Service,
+            BrakeDemand::Service { .. } | BrakeDemand::ServiceStep { .. } => Cmd::Service,
         }
     }
 
