@@ -9,6 +9,12 @@
 //!    `rail`. The model is compared with v_ref, the wheel speeds r omega_1..4 and every other
 //!    logged quantity it predicts, in 20 ms bins, each residual over its noise
 //!    (1 = noise level).
+//!    Noise model (issue 9): v_ref's slow correlated error (a radar's drift) is the part of
+//!    its baseline replay error that the rolling wheels do not share
+//!    ([`replay::Prepared::vref_slow_sigma`]); speeds have a resolution relative to the
+//!    speed lost ([`replay::SPEED_RESOLUTION`]); the initial speed is the median over v_ref
+//!    and the wheels; a brake force at standstill (static friction) is not compared; where
+//!    `t_disc` is logged, Eq (2) is evaluated at the measured disc temperature.
 //! 2. Every third 0.2 s block of each run is validation data: fits never see it, and every
 //!    decision (keep an effect, combine, confounded, gains) is made on it.
 //! 3. **Discrepancy**: the baseline explains the data when its validation RMS (in noise
@@ -24,7 +30,13 @@
 //!    and refined at the command's replay step (LM, then a coordinate search).
 //! 5. **Confounded**: an effect outside the result that, put in the place of a cause,
 //!    explains the validation data as well (within [`CONFOUND_TOLERANCE`]) is listed with it.
-//! 6. **Unexplained**: the share of the baseline's excess error over noise that remains;
+//!    Look-alikes the linearised screen misses are refitted in a cause's place from their
+//!    fits alone ([`lookalike_swaps`]); the notes say which channel would separate them.
+//! 6. **Localisation** ([`links`]): each link of the signal chain that the logged channels
+//!    observe (pad force, disc-pad friction, disc thermal, wheel-rail per wheelset, vehicle)
+//!    with its baseline and extended error in noise units; a link that the effects found
+//!    leave beyond [`links::LINK_EXPLAINED_RMS`] is `explained: false`.
+//! 7. **Unexplained**: the share of the baseline's excess error over noise that remains;
 //!    when the effects leave more than [`MAX_UNEXPLAINED`] of it, no cause is claimed.
 //!
 //! See docs/diagnosis.md for the user's view.
