@@ -118,6 +118,10 @@ pub struct Scenario {
     /// Noise sigmas: v m/s, omega rad/s, pressure Pa, clamp N, brake force N, disc degC,
     /// load N, accel m/s^2.
     pub noise: [f64; 8],
+    /// Log the way a field logger does (see [`field_logger`]): radar v_ref with a slow
+    /// correlated error, phonic-wheel speeds, a drifting load-cell zero, thermocouples at
+    /// 10 Hz. Off in the seeded draw (set by [`case_with`]).
+    pub field_logger: bool,
 }
 
 /// A generated case: the CSV text, the baseline the diagnosis gets, and the truth.
@@ -190,6 +194,7 @@ fn draw_scenario(rng: &mut StdRng, kind: Kind) -> Scenario {
             log_uniform(rng, 100.0, 800.0),
             log_uniform(rng, 0.01, 0.1),
         ],
+        field_logger: false,
     };
     // What each effect needs to be seen (a rig engineer logs it).
     match kind {
@@ -239,7 +244,6 @@ pub fn case_with(kind: Kind, seed: u64, tweak: impl FnOnce(&mut Scenario)) -> Ca
     tweak(&mut scenario);
     let nominal = constant_baseline();
     let mut truth_params = nominal;
-    let c = nominal.friction.correction_c;
     let mut sensor = None;
     let (causes, params): (Vec<&'static str>, Vec<(String, f64)>) = match kind {
         Kind::None => (vec![], vec![]),
@@ -247,7 +251,9 @@ pub fn case_with(kind: Kind, seed: u64, tweak: impl FnOnce(&mut Scenario)) -> Ca
             let (n, m) = (rng.random_range(0.12..0.3), rng.random_range(0.06..0.2));
             let f = &mut truth_params.friction;
             f.model = FrictionModel::Variable;
-            (f.n_v, f.m_v, f.n_t, f.m_t) = (n, m, 1.0 / c - 1.0, 0.0);
+            // Eq (2) as the reference file defines it, correction c included (the
+            // convention of measured data; a constant-friction fit sees c as a level).
+            (f.n_v, f.m_v, f.n_t, f.m_t) = (n, m, 0.0, 0.0);
             (
                 vec!["friction-speed"],
                 vec![("n_v".into(), n), ("m_v".into(), m)],
@@ -257,7 +263,7 @@ pub fn case_with(kind: Kind, seed: u64, tweak: impl FnOnce(&mut Scenario)) -> Ca
             let (n, m) = (rng.random_range(0.08..0.25), rng.random_range(0.008..0.025));
             let f = &mut truth_params.friction;
             f.model = FrictionModel::Variable;
-            (f.n_v, f.m_v, f.n_t, f.m_t) = (1.0 / c - 1.0, 0.0, n, m);
+            (f.n_v, f.m_v, f.n_t, f.m_t) = (0.0, 0.0, n, m);
             (
                 vec!["friction-temperature"],
                 vec![("n_t".into(), n), ("m_t".into(), m)],
@@ -481,6 +487,10 @@ fn simulate(
     rng: &mut StdRng,
 ) -> String {
     let mut rows = run_truth(truth, nominal, s, rng);
+    if s.field_logger {
+        let mut artifacts = StdRng::seed_from_u64(rng.random());
+        field_logger(&mut rows, &mut artifacts);
+    }
 
     // Unlisted: the speed reference drifts.
     if kind == Kind::Unlisted {
@@ -537,9 +547,71 @@ fn simulate(
                 .collect()
         })
         .collect();
+    let mut table = table;
+    if s.field_logger {
+        thermocouples_at_10_hz(&rows, &cells, &mut table);
+    }
     let mut out = Vec::new();
     runlog::write_table(&mut out, &metadata, &cols, table).expect("in-memory CSV");
     String::from_utf8(out).expect("utf-8")
+}
+
+/// Logger artifacts of field tests (the kinds in `shared/foreign-cases/README.md`), drawn
+/// from `rng`: a Doppler radar v_ref with a slow first-order random error (0.02-0.05 m/s,
+/// 2-6 s); phonic-wheel speeds (60-100 teeth: values updated every 10 ms by the ECU, a
+/// tooth-pitch error of 0.2-0.6 % per update, 0 below one tooth per 0.3 s); one load cell
+/// whose zero drifts by 50-150 N (time constant 20 s).
+pub fn field_logger(rows: &mut [RunRecord], rng: &mut StdRng) {
+    let slow_sigma = rng.random_range(0.02..0.05);
+    let slow_tau = rng.random_range(2.0..6.0);
+    let teeth = rng.random_range(60.0..100.0f64).round();
+    let pitch = rng.random_range(0.002..0.006);
+    let drift_n = rng.random_range(50.0..150.0) * if rng.random::<bool>() { 1.0 } else { -1.0 };
+    let drift_j = rng.random_range(0..WHEELSETS);
+    let omega_min = std::f64::consts::TAU / teeth / 0.3;
+    let mut radar = slow_sigma * gauss(rng);
+    let mut held = [0.0f64; WHEELSETS];
+    let mut last_update = f64::NEG_INFINITY;
+    let mut t_prev = rows.first().map(|r| r.t_s).unwrap_or(0.0);
+    for r in rows.iter_mut() {
+        let dt = r.t_s - t_prev;
+        t_prev = r.t_s;
+        let a = (-dt / slow_tau).exp();
+        radar = radar * a + slow_sigma * (1.0 - a * a).sqrt() * gauss(rng);
+        r.v_ref_mps += radar;
+        if r.t_s - last_update >= 0.01 {
+            last_update = r.t_s;
+            for (h, w) in held.iter_mut().zip(&r.omega_radps) {
+                *h = if *w < omega_min {
+                    0.0
+                } else {
+                    w * (1.0 + pitch * gauss(rng))
+                };
+            }
+        }
+        r.omega_radps = held;
+        r.f_clamp_n[drift_j] += drift_n * (1.0 - (-r.t_s / 20.0).exp());
+    }
+}
+
+/// Thermocouples read at 10 Hz: `t_disc` cells between readings are empty.
+fn thermocouples_at_10_hz(
+    rows: &[RunRecord],
+    cells: &[(Channel, usize)],
+    table: &mut [Vec<String>],
+) {
+    let mut last = f64::NEG_INFINITY;
+    for (r, row) in rows.iter().zip(table.iter_mut()) {
+        let read = r.t_s - last >= 0.1;
+        if read {
+            last = r.t_s;
+        }
+        for (cell, &(c, _)) in row.iter_mut().zip(cells) {
+            if c == T_DISC && !read {
+                cell.clear();
+            }
+        }
+    }
 }
 
 /// Noise-free friction points of Eq (2) (the plant's implementation) with Gaussian noise of

@@ -19,7 +19,7 @@ use std::path::PathBuf;
 
 use hils::diagnose::{Report, diagnose};
 use hils::measured::parse_run_log;
-use host_tests::generator::{Case, KINDS, Kind, Sensor, case};
+use host_tests::generator::{Case, KINDS, Kind, Sensor, case, case_with};
 
 /// Diagnoses a generated case.
 fn run(case: &Case) -> Report {
@@ -148,7 +148,17 @@ fn check(case: &Case, r: &Report) -> Vec<String> {
 }
 
 fn assert_case(kind: Kind, seed: u64) {
-    let c = case(kind, seed);
+    assert_generated(case(kind, seed));
+}
+
+/// A held-out seed logged the way a field logger does (radar slow error, phonic wheels,
+/// load-cell drift, thermocouples at 10 Hz): the diagnosis must hold as on clean logs.
+fn assert_field_case(kind: Kind, seed: u64) {
+    assert_generated(case_with(kind, seed, |s| s.field_logger = true));
+}
+
+fn assert_generated(c: Case) {
+    let (kind, seed) = (c.truth.kind, c.seed);
     let r = run(&c);
     eprintln!(
         "{kind:?} seed {seed}: causes {:?} confounded {:?} reduction {:.3} unexplained {:.3} in {:.1} s; truth {:?}; fitted {:?}",
@@ -165,17 +175,17 @@ fn assert_case(kind: Kind, seed: u64) {
 }
 
 macro_rules! cases {
-    ($($name:ident: $kind:expr, $seed:expr;)*) => {
+    ($assert:ident; $($name:ident: $kind:expr, $seed:expr;)*) => {
         $(
             #[test]
             fn $name() {
-                assert_case($kind, $seed);
+                $assert($kind, $seed);
             }
         )*
     };
 }
 
-cases! {
+cases! { assert_case;
     null_1: Kind::None, 1;
     null_2: Kind::None, 2;
     paper_table1: Kind::Paper, 3;
@@ -200,6 +210,27 @@ cases! {
     sensor_gain_1: Kind::SensorGain, 22;
     sensor_gain_2: Kind::SensorGain, 23;
     unlisted_speed_sensor_drift: Kind::Unlisted, 24;
+}
+
+// Held-out seeds (never used while the method was developed), field-logger artifacts.
+cases! { assert_field_case;
+    field_logger_friction_temperature: Kind::FrictionTemperature, 103;
+    field_logger_mass: Kind::Mass, 104;
+    field_logger_gradient: Kind::Gradient, 105;
+}
+
+// Held-out field-logger seeds the diagnosis does not yet pass (open, see the report of
+// issue 9): run with `--ignored`.
+#[test]
+#[ignore = "open: phonic-wheel timeout near standstill reads as a discrepancy"]
+fn field_logger_null() {
+    assert_field_case(Kind::None, 101);
+}
+
+#[test]
+#[ignore = "open: gain.reduction 0.69 < 0.8 with phonic wheels on wet rail"]
+fn field_logger_friction_speed() {
+    assert_field_case(Kind::FrictionSpeed, 102);
 }
 
 /// `HILS_DIAG_CASES=N`: N more seeded cases over every effect (not in plain `cargo test`).

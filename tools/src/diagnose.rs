@@ -9,6 +9,12 @@
 //!    `rail`. The model is compared with v_ref, the wheel speeds r omega_1..4 and every other
 //!    logged quantity it predicts, in 20 ms bins, each residual over its noise
 //!    (1 = noise level).
+//!    Noise model (issue 9): v_ref's slow correlated error (a radar's drift) is the part of
+//!    its baseline replay error that the rolling wheels do not share
+//!    ([`replay::Prepared::vref_slow_sigma`]); speeds have a resolution relative to the
+//!    speed lost ([`replay::SPEED_RESOLUTION`]); the initial speed is the median over v_ref
+//!    and the wheels; a brake force at standstill (static friction) is not compared; where
+//!    `t_disc` is logged, Eq (2) is evaluated at the measured disc temperature.
 //! 2. Every third 0.2 s block of each run is validation data: fits never see it, and every
 //!    decision (keep an effect, combine, confounded, gains) is made on it.
 //! 3. **Discrepancy**: the baseline explains the data when its validation RMS (in noise
@@ -24,12 +30,19 @@
 //!    and refined at the command's replay step (LM, then a coordinate search).
 //! 5. **Confounded**: an effect outside the result that, put in the place of a cause,
 //!    explains the validation data as well (within [`CONFOUND_TOLERANCE`]) is listed with it.
-//! 6. **Unexplained**: the share of the baseline's excess error over noise that remains;
+//!    Look-alikes the linearised screen misses are refitted in a cause's place from their
+//!    fits alone ([`lookalike_swaps`]); the notes say which channel would separate them.
+//! 6. **Localisation** ([`links`]): each link of the signal chain that the logged channels
+//!    observe (pad force, disc-pad friction, disc thermal, wheel-rail per wheelset, vehicle)
+//!    with its baseline and extended error in noise units; a link that the effects found
+//!    leave beyond [`links::LINK_EXPLAINED_RMS`] is `explained: false`.
+//! 7. **Unexplained**: the share of the baseline's excess error over noise that remains;
 //!    when the effects leave more than [`MAX_UNEXPLAINED`] of it, no cause is claimed.
 //!
 //! See docs/diagnosis.md for the user's view.
 
 pub mod effects;
+pub mod links;
 pub mod lsq;
 pub mod replay;
 pub mod report;
@@ -139,6 +152,8 @@ pub struct Report {
     pub findings: Vec<Finding>,
     pub gain: Gain,
     pub slides: Slides,
+    /// Each checkable link of the signal chain, baseline and extended error (noise units).
+    pub localisation: Vec<links::LinkCheck>,
     /// Every effect tried alone: validation RMS and gain (extra key).
     pub tried: Vec<Tried>,
     /// What the reader or the replay skipped or repaired, per file (extra key).
@@ -229,6 +244,16 @@ struct Probe {
     factor_absent: bool,
     /// Parameter changes of the columns.
     directions: Vec<Vec<f64>>,
+    /// Residuals with the effect added at its neutral parameters minus the set's (zero
+    /// except for an Eq (2) factor added to a constant baseline: Eq (2) carries c).
+    shift: Vec<f64>,
+}
+
+impl Probe {
+    /// Residuals `r` of a set, moved to where this effect starts (its neutral point).
+    fn shifted(&self, r: &[f64]) -> Vec<f64> {
+        r.iter().zip(&self.shift).map(|(a, b)| a + b).collect()
+    }
 }
 
 impl Diagnoser {
@@ -610,6 +635,12 @@ impl Diagnoser {
                 })
                 .collect()
         };
+        let mut xs0 = s.x.clone();
+        xs0.push(neutral.clone());
+        let r0 = self.residuals(&effects, &xs0)?;
+        if r0.len() != s.residuals.len() {
+            return None;
+        }
         let cols: Vec<Option<Vec<f64>>> = directions
             .par_iter()
             .map(|dir| {
@@ -624,12 +655,7 @@ impl Diagnoser {
                 let mut xs = s.x.clone();
                 xs.push(x);
                 let r = self.residuals(&effects, &xs)?;
-                (r.len() == s.residuals.len()).then(|| {
-                    r.iter()
-                        .zip(&s.residuals)
-                        .map(|(a, b)| (a - b) / h)
-                        .collect()
-                })
+                (r.len() == r0.len()).then(|| r.iter().zip(&r0).map(|(a, b)| (a - b) / h).collect())
             })
             .collect();
         let m = s.residuals.len();
@@ -644,6 +670,7 @@ impl Diagnoser {
             specs,
             factor_absent,
             directions,
+            shift: r0.iter().zip(&s.residuals).map(|(a, b)| a - b).collect(),
         })
     }
 }
@@ -804,7 +831,8 @@ fn grow(
         let mut ranked: Vec<(f64, &Probe, Vec<f64>)> = probes
             .iter()
             .map(|p| {
-                let (ssr, delta) = lsq::linear_ssr(&current.residuals, &hcat(&j_s, &p.columns));
+                let (ssr, delta) =
+                    lsq::linear_ssr(&p.shifted(&current.residuals), &hcat(&j_s, &p.columns));
                 let own = delta[j_s.ncols()..].to_vec();
                 (ssr, p, own)
             })
@@ -949,6 +977,59 @@ fn grow(
     current
 }
 
+/// Look-alikes the linearised screen can miss (a swap whose linearisation fails, e.g. the
+/// cause removed lets a wheel lock): for each cause of a set of two or more, the effects
+/// whose fits alone explain the data about as well as that cause's fit alone (within
+/// [`BEAM_TOLERANCE`]), at most [`LOOKALIKES_PER_CAUSE`], refitted in its place from their
+/// fits alone and the other causes' values.
+fn lookalike_swaps(
+    d: &Diagnoser,
+    current: &SetFit,
+    singles: &[SetFit],
+    already: &[(usize, Effect, SetFit)],
+) -> Vec<(usize, Effect, SetFit)> {
+    if current.effects.len() < 2 {
+        return vec![];
+    }
+    let single_of = |e: Effect| singles.iter().find(|s| s.effects == [e]);
+    let mut jobs: Vec<(usize, Effect, Vec<Vec<f64>>)> = Vec::new();
+    for (k, e) in current.effects.iter().enumerate() {
+        let Some(own) = single_of(*e) else { continue };
+        let mut alts: Vec<&SetFit> = singles
+            .iter()
+            .filter(|s1| {
+                let a = s1.effects[0];
+                !current.effects.iter().any(|c| c.name() == a.name())
+                    && !already.iter().any(|(kk, b, _)| *kk == k && *b == a)
+                    && d.material(s1, 0)
+                    && {
+                        let (now, alt) = replay::compare(&own.validation, &s1.validation);
+                        alt <= BEAM_TOLERANCE * now
+                    }
+            })
+            .collect();
+        alts.sort_by(|a, b| a.val().total_cmp(&b.val()));
+        for s1 in alts.into_iter().take(LOOKALIKES_PER_CAUSE) {
+            let mut start = current.x.clone();
+            start.remove(k);
+            start.push(s1.x[0].clone());
+            jobs.push((k, s1.effects[0], start));
+        }
+    }
+    jobs.into_par_iter()
+        .filter_map(|(k, a, start)| {
+            let mut effects = current.effects.clone();
+            effects.remove(k);
+            effects.push(a);
+            d.fit_set_with(&effects, Some(&start), FIT_PATIENCE / 2, FIT_TOLERANCE)
+                .map(|f| (k, a, f))
+        })
+        .collect()
+}
+
+/// Look-alike swaps refitted per cause (see [`lookalike_swaps`]).
+pub const LOOKALIKES_PER_CAUSE: usize = 2;
+
 /// Forward selection with linearised candidate ranking, backward elimination, and the
 /// confounding check, all at the fit step.
 fn search(d: &Diagnoser, base: &SetFit, started: Instant) -> Search {
@@ -1017,7 +1098,8 @@ fn search(d: &Diagnoser, base: &SetFit, started: Instant) -> Search {
                 .collect();
             let j_rest = j_s.select_columns(&keep);
             for p in &probes {
-                let (ssr, delta) = lsq::linear_ssr(&r_without, &hcat(&j_rest, &p.columns));
+                let (ssr, delta) =
+                    lsq::linear_ssr(&p.shifted(&r_without), &hcat(&j_rest, &p.columns));
                 // Worth a real fit when the linearised swap comes near the result, or
                 // explains the data to within the noise (then a small relative gap means
                 // nothing).
@@ -1040,8 +1122,9 @@ fn search(d: &Diagnoser, base: &SetFit, started: Instant) -> Search {
                 d.fit_set(&effects, Some(&start)).map(|f| (*k, p.effect, f))
             })
             .collect();
-        // A single cause: the other effects' fits alone are the swaps (no refit needed).
         let mut confirmed = confirmed;
+        confirmed.extend(lookalike_swaps(d, &current, &singles, &confirmed));
+        // A single cause: the other effects' fits alone are the swaps (no refit needed).
         if current.effects.len() == 1 {
             for s1 in &singles {
                 let a = s1.effects[0];
@@ -1098,7 +1181,7 @@ pub fn diagnose(
     step_s: f64,
 ) -> Result<Outcome> {
     let started = Instant::now();
-    let d = Diagnoser::new(baseline, logs, step_s)?;
+    let mut d = Diagnoser::new(baseline, logs, step_s)?;
     let mut notes = Vec::new();
     for (log, run) in logs.iter().zip(&d.runs) {
         for n in log.notes.iter().chain(&run.notes) {
@@ -1116,11 +1199,63 @@ pub fn diagnose(
     let base_reps = d
         .replays(&base_models)
         .ok_or_else(|| anyhow::anyhow!("the baseline cannot replay these runs (numeric fault)"))?;
+    // Noise model of v_ref: its slow correlated error, from the baseline replay.
+    let slow: Vec<Option<f64>> = d
+        .runs
+        .iter()
+        .zip(&base_reps)
+        .map(|(r, rep)| r.vref_slow_sigma(rep))
+        .collect();
+    for (i, s) in slow.iter().enumerate() {
+        if let Some(s) = *s {
+            d.runs[i].set_vref_slow_sigma(s);
+            notes.push(format!(
+                "{}: v_ref's slow error (the part of its error the rolling wheels do not share) is {s:.4} m/s rms; its bins weigh at most that",
+                d.runs[i].name
+            ));
+        }
+    }
     let base_val = d.score(&base_reps, Split::Validation);
     let base_rms = base_val.rms();
     let discrepancy = base_rms > NO_DISCREPANCY_RMS || base_val.max_window_rms() > SCAN_RMS;
+    if std::env::var_os("HILS_DIAG_DEBUG").is_some() {
+        eprintln!("baseline validation rms {base_rms:.2}");
+        for (run, rep) in d.runs.iter().zip(&base_reps) {
+            for (c, p) in run.channels.iter().zip(&rep.predicted) {
+                let mut line = format!(
+                    "  {:>22} sig {:.4}:",
+                    c.quantity.label(),
+                    c.sigma[c.sigma.len() / 2]
+                );
+                let mut k = 0;
+                let mut t = 0.0;
+                while k < c.times.len() {
+                    let (mut sum, mut n) = (0.0, 0);
+                    while k < c.times.len() && c.times[k] < t + 3.0 {
+                        sum += p[k] - c.measured[k];
+                        n += 1;
+                        k += 1;
+                    }
+                    line += &format!(" {:.3}", sum / n.max(1) as f64);
+                    t += 3.0;
+                }
+                eprintln!("{line}");
+            }
+        }
+        for (k, (s, n)) in &base_val.windows {
+            let r = (s / *n as f64).sqrt();
+            if r > 2.0 {
+                eprintln!("  window {k:?}: rms {r:.2} over {n}");
+            }
+        }
+    }
 
-    let fit_d = Diagnoser::new(baseline, logs, FIT_STEP_S.max(step_s))?;
+    let mut fit_d = Diagnoser::new(baseline, logs, FIT_STEP_S.max(step_s))?;
+    for (run, s) in fit_d.runs.iter_mut().zip(&slow) {
+        if let Some(s) = *s {
+            run.set_vref_slow_sigma(s);
+        }
+    }
     let mut singles = Vec::new();
     let mut result_effects: (Vec<Effect>, Vec<Vec<f64>>, Vec<Vec<f64>>) = (vec![], vec![], vec![]);
     let mut confounded = Vec::new();
@@ -1187,6 +1322,13 @@ pub fn diagnose(
         confounded = s.confounded;
     }
     let evaluations = d.replays_done() + fit_d.replays_done();
+    for group in &confounded {
+        notes.push(format!(
+            "look-alikes {}: {}",
+            group.join(" / "),
+            what_separates(group)
+        ));
+    }
 
     // Final replays and scores at the command's step.
     let (mut effects_found, mut x_found, mut ci_found) = result_effects;
@@ -1339,6 +1481,7 @@ pub fn diagnose(
             speed_rms_mps: speed,
         },
         slides,
+        localisation: links::localise(&d.runs, &base_reps, &ext_reps),
         tried: singles
             .iter()
             .map(|s| {
@@ -1379,6 +1522,31 @@ pub fn diagnose(
         evaluations,
         analysis,
     })
+}
+
+/// Which measurement would tell a group of look-alike effects apart (issue 9, item 3).
+pub fn what_separates(group: &[String]) -> String {
+    let has = |e: &str| group.iter().any(|g| g == e);
+    let mut out = Vec::new();
+    if has("mass") && group.len() > 1 {
+        out.push("axle loads (q1..q4) measure the mass");
+    }
+    if has("friction-pressure") && group.len() > 1 {
+        out.push("a second run at another clamp force separates friction-pressure");
+    }
+    if has("sensor-gain") && group.len() > 1 {
+        out.push("f_brake, or both p_cyl and f_clamp, separate a sensor gain");
+    }
+    if has("friction-level") && group.len() > 1 {
+        out.push("f_brake logged measures mu_d directly");
+    }
+    if has("gradient") || has("running-resistance") {
+        out.push("a coasting phase or a second run at another speed separates gradient from running resistance");
+    }
+    if out.is_empty() {
+        out.push("a run under other conditions (speed, clamp force, rail)");
+    }
+    out.join("; ")
 }
 
 fn fitted_channel_names(runs: &[Prepared]) -> String {

@@ -2,13 +2,13 @@
 //! parameters a fit of it estimates (keys as in the spec), their start values, scales and
 //! bounds.
 //!
-//! Disc-pad friction (paper Eq 2) with a constant-friction baseline: an effect of friction
-//! speed alone makes mu_d = mu_d0 (1 + n_v e^(-m_v v_d)) (the baseline level where the
-//! factor has decayed); friction temperature alone likewise; both together make Eq (2) as
-//! printed, c mu_d0 (1 + n_v e^(-m_v v_d))(1 + n_T e^(-m_T T_d)) with the baseline's c.
-//! (The plant's variable model always applies c; a factor that is not fitted is held at
-//! the constant 1/c, i.e. n = 1/c - 1, m = 0.) With a variable baseline the effects free
-//! the baseline's own Eq (2) parameters.
+//! Disc-pad friction (paper Eq 2) with a constant-friction baseline: the extended model is
+//! always Eq (2) as the baseline file defines it, correction c included:
+//! mu_d = c mu_d0 (1 + n_v e^(-m_v v_d))(1 + n_T e^(-m_T T_d)). An effect of friction speed
+//! alone fits n_v, m_v with the temperature factor held at 1 (n_T = 0), and likewise.
+//! A level difference that remains (e.g. a c that the data do not have) is
+//! `friction-level`, never a bent shape parameter (issue 9, nuisances). With a variable
+//! baseline the effects free the baseline's own Eq (2) parameters.
 
 use hils_plant::{FrictionModel, Params, Rail};
 
@@ -182,8 +182,8 @@ impl Effect {
         let variable = f.model == FrictionModel::Variable;
         match self {
             // With a constant model the factor is absent at n = 0 (any m); with a variable
-            // model (baseline, or the other factor fitted, this one held at 1/c) the
-            // model's own values reproduce it.
+            // model (baseline, or the other factor fitted, this one held at 1) the model's
+            // own values reproduce it.
             Effect::FrictionSpeed => {
                 if variable {
                     vec![f.n_v, f.m_v]
@@ -217,19 +217,18 @@ impl Effect {
 pub fn build(base: &Params, rail: Rail, active: &[(Effect, &[f64])]) -> Model {
     let mut model = Model::new(base);
     let p = &mut model.params;
-    let c = p.friction.correction_c;
     let has = |e: Effect| active.iter().any(|(a, _)| *a == e);
     let speed = has(Effect::FrictionSpeed);
     let temperature = has(Effect::FrictionTemperature);
     if p.friction.model == FrictionModel::Constant && (speed || temperature) {
         p.friction.model = FrictionModel::Variable;
-        // A factor not fitted is held at 1/c: mu_d0 (1 + n e^(-m x)) for one factor.
+        // Eq (2) with the file's c; a factor not fitted is held at 1 (n = 0).
         if !speed {
-            p.friction.n_v = 1.0 / c - 1.0;
+            p.friction.n_v = 0.0;
             p.friction.m_v = 0.0;
         }
         if !temperature {
-            p.friction.n_t = 1.0 / c - 1.0;
+            p.friction.n_t = 0.0;
             p.friction.m_t = 0.0;
         }
     }

@@ -27,6 +27,7 @@
 //! data that no fit sees.
 
 use hils_plant::brake::Caliper;
+use hils_plant::friction::DiscPadFriction;
 use hils_plant::{BrakeInput, Params, Plant, Rail, WHEELSETS};
 
 use crate::measured::RunLog;
@@ -114,7 +115,7 @@ impl Group {
     pub fn floor(self, scale: f64) -> f64 {
         match self {
             Group::Speeds => 0.02,
-            Group::BrakeForces => (0.02 * scale).max(50.0),
+            Group::BrakeForces => (0.01 * scale).max(50.0),
             Group::AxleLoads => (0.02 * scale).max(200.0),
             Group::PadForces => (0.01 * scale).max(50.0),
             Group::DiscTemps => (0.03 * scale).max(1.0),
@@ -140,6 +141,15 @@ pub struct Channel {
     /// Typical magnitude (largest absolute bin mean).
     pub scale: f64,
 }
+
+/// Resolution of a replayed speed relative to the speed lost since the start: two
+/// simulators of the same vehicle (integration, rotating masses, creep) differ by about
+/// 0.1-0.2 % of the deceleration, which integrates to this share of the speed lost.
+/// Listed effects of interest change the deceleration by 1 % and more.
+pub const SPEED_RESOLUTION: f64 = 0.0025;
+
+/// Below this speed (v_ref and the wheel's) a brake force is static friction, m/s.
+pub const STANDSTILL_MPS: f64 = 0.5;
 
 /// Length of the blocks that alternate between fit (two) and validation (one), s: short,
 /// so that transients (brake application, WSP cycles) fall in both.
@@ -173,6 +183,9 @@ pub struct Prepared {
     pub input: [Vec<f64>; WHEELSETS],
     /// Pressure readings where the clamp force is the input (observation), Pa.
     pub pressure_obs: [Option<Vec<f64>>; WHEELSETS],
+    /// Measured disc temperature rise per wheelset at the samples (gaps filled), degC:
+    /// where logged, Eq (2) is evaluated at it (the disc-thermal link is checked on its own).
+    pub disc_temp_input: [Option<Vec<f64>>; WHEELSETS],
     pub bin_s: f64,
     pub n_bins: usize,
     /// Validation flag per bin.
@@ -351,6 +364,22 @@ impl Prepared {
             }
         }
 
+        let disc_temp_input: [Option<Vec<f64>>; WHEELSETS] = std::array::from_fn(|j| {
+            let mut x = log.t_disc_c[j].clone()?;
+            let known = x.iter().filter(|v| v.is_finite()).count();
+            // Too sparse to drive the friction (fewer than one reading per second).
+            if (known as f64) < duration.max(1.0) {
+                return None;
+            }
+            fill_gaps(&t, &mut x);
+            Some(x)
+        });
+        if disc_temp_input.iter().any(|x| x.is_some()) {
+            notes.push(
+                "t_disc logged: Eq (2) is evaluated at the measured disc temperature (empty cells interpolated); the thermal model is checked on the disc-thermal link".to_string(),
+            );
+        }
+
         // Bins and validation blocks.
         let bin_s = bin_width(log.median_interval_s());
         let n_bins = ((duration / bin_s).floor() as usize + 1).max(1);
@@ -380,6 +409,18 @@ impl Prepared {
             std::array::from_fn(|j| log.omega_radps[j].iter().map(|w| w * r_w).collect());
         let wheel_bin: [Vec<f64>; WHEELSETS] = std::array::from_fn(|j| bin_means(&wheel_speed[j]));
 
+        // Initial speed: the median of the intercepts of v_ref and the wheel speeds (the
+        // wheels roll freely before the brakes act; a radar's slow error or one sensor's
+        // offset does not move the median).
+        let v0 = {
+            let mut v: Vec<f64> = std::iter::once(initial_speed(&t, &log.v_ref_mps))
+                .chain(wheel_speed.iter().map(|w| initial_speed(&t, w)))
+                .filter(|x| x.is_finite())
+                .collect();
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+
         // Channels.
         let mut channels = Vec::new();
         let mut add = |quantity: Quantity, x: &[f64], slip_inflate: Option<&[f64]>| {
@@ -395,13 +436,31 @@ impl Prepared {
                     cnt[b] += 1;
                 }
             }
-            let bins: Vec<usize> = (0..n_bins).filter(|&b| cnt[b] > 0).collect();
+            // A brake force at standstill is static friction (any value up to the limit
+            // holds the wheel): compared only while the wheelset turns.
+            let turning = |b: usize| match quantity {
+                Quantity::BrakeForce(j) => {
+                    let w = wheel_bin[j][b];
+                    !(w.is_finite() && w < STANDSTILL_MPS && v_bin[b].abs() < STANDSTILL_MPS)
+                }
+                _ => true,
+            };
+            let bins: Vec<usize> = (0..n_bins).filter(|&b| cnt[b] > 0 && turning(b)).collect();
             if bins.is_empty() {
                 return;
             }
             let measured: Vec<f64> = bins.iter().map(|&b| sum[b] / cnt[b] as f64).collect();
             let scale = measured.iter().fold(0.0f64, |m, x| m.max(x.abs()));
             let floor = quantity.group().floor(scale);
+            // Speeds: a relative resolution of the integrated deceleration too.
+            let speed_floor = |b: usize| -> f64 {
+                let lost = v0 - v_bin[b];
+                if quantity.group() == Group::Speeds && lost.is_finite() {
+                    floor.max(SPEED_RESOLUTION * lost)
+                } else {
+                    floor
+                }
+            };
             // Noise of the bin means seen directly (catches correlated sensor noise that
             // the sample-to-sample estimate divided by sqrt(n) would underrate).
             let bin_t: Vec<f64> = bins.iter().map(|&b| tsum[b] / cnt[b] as f64).collect();
@@ -409,7 +468,9 @@ impl Prepared {
             let sigma = bins
                 .iter()
                 .map(|&b| {
-                    let s = (noise / (cnt[b] as f64).sqrt()).max(bin_noise).max(floor);
+                    let s = (noise / (cnt[b] as f64).sqrt())
+                        .max(bin_noise)
+                        .max(speed_floor(b));
                     match slip_inflate {
                         Some(slip) if slip[b].is_finite() => {
                             let extra = 0.1 * slip[b].abs();
@@ -478,7 +539,6 @@ impl Prepared {
             add(Quantity::Accel, a, None);
         }
 
-        let v0 = initial_speed(&t, &log.v_ref_mps);
         let disc_temp0 = {
             let firsts: Vec<f64> = log
                 .t_disc_c
@@ -551,6 +611,7 @@ impl Prepared {
             input_kind,
             input,
             pressure_obs,
+            disc_temp_input,
             bin_s,
             n_bins,
             validation,
@@ -589,6 +650,65 @@ impl Prepared {
             map.push((i as u32, w as f32));
         }
         self.step_map = map;
+    }
+
+    /// Slow, correlated error of v_ref (a radar's drift, a reference axle's creep): the part
+    /// of v_ref's replay error that the rolling wheels do not share, d = e_v - median_j e_w,
+    /// robust RMS (median of d^2 over that of a chi-square with one degree of freedom).
+    /// A model error moves v_ref and the wheels alike and cancels in d; a sensor error of
+    /// v_ref does not. None when fewer than 20 bins have two rolling wheels.
+    pub fn vref_slow_sigma(&self, rep: &Replay) -> Option<f64> {
+        let iv = self
+            .channels
+            .iter()
+            .position(|c| c.quantity == Quantity::VRef)?;
+        // Model-minus-measured wheel errors per bin, rolling wheels only.
+        let mut wheel_err: Vec<Vec<f64>> = vec![Vec::new(); self.n_bins];
+        for (c, pred) in self.channels.iter().zip(&rep.predicted) {
+            let Quantity::WheelSpeed(j) = c.quantity else {
+                continue;
+            };
+            for (k, &b) in c.bins.iter().enumerate() {
+                let slip = self.v_bin[b] - self.wheel_bin[j][b];
+                if slip.is_finite() && slip.abs() < 0.3 && self.v_bin[b] > 1.0 {
+                    wheel_err[b].push(pred[k] - c.measured[k]);
+                }
+            }
+        }
+        let cv = &self.channels[iv];
+        let mut d2: Vec<f64> = Vec::new();
+        for (k, &b) in cv.bins.iter().enumerate() {
+            let w = &mut wheel_err[b];
+            if w.len() < 2 {
+                continue;
+            }
+            w.sort_by(f64::total_cmp);
+            let n = w.len();
+            let med = if n % 2 == 1 {
+                w[n / 2]
+            } else {
+                0.5 * (w[n / 2 - 1] + w[n / 2])
+            };
+            let d = rep.predicted[iv][k] - cv.measured[k] - med;
+            if d.is_finite() {
+                d2.push(d * d);
+            }
+        }
+        if d2.len() < 20 {
+            return None;
+        }
+        d2.sort_by(f64::total_cmp);
+        Some((d2[d2.len() / 2] / 0.455).sqrt())
+    }
+
+    /// Raises v_ref's bin sigmas to at least `sigma` (its slow error, see
+    /// [`Prepared::vref_slow_sigma`]).
+    pub fn set_vref_slow_sigma(&mut self, sigma: f64) {
+        for c in self.channels.iter_mut() {
+            if c.quantity == Quantity::VRef {
+                c.sigma.iter_mut().for_each(|s| *s = s.max(sigma));
+            }
+        }
     }
 
     /// Whether any wheelset has both pressure and clamp force logged.
@@ -669,6 +789,8 @@ pub fn replay(run: &Prepared, model: &Model) -> Option<Replay> {
     let dt = run.dt;
     let mut plant = Plant::<f64>::with_step(&params, run.rail, run.v0, dt).ok()?;
     let caliper = Caliper::<f64>::new(&params.brake);
+    let friction = DiscPadFriction::<f64>::new(&params.friction);
+    let measured_temp = params.friction.model == hils_plant::FrictionModel::Variable;
     let lag = lag_gain(dt, model.actuator_lag_s);
     let r_w = params.vehicle.wheel_radius;
     let clamp_of = |j: usize, x: f64| -> f64 {
@@ -718,6 +840,16 @@ pub fn replay(run: &Prepared, model: &Model) -> Option<Replay> {
                     pad[j] += (target - pad[j]) * lag;
                     pad[j]
                 }
+            };
+            // Eq (2) at the measured disc temperature: the pad force scaled by the ratio of
+            // the temperature brackets (measured over modelled disc temperature).
+            let f = match (&run.disc_temp_input[j], measured_temp) {
+                (Some(td), true) => {
+                    let model_td = plant.outputs().wheelsets[j].disc_temp;
+                    f * friction.temperature_factor(at(td, k))
+                        / friction.temperature_factor(model_td)
+                }
+                _ => f,
             };
             inputs[j] = BrakeInput::ClampForce(f);
         }

@@ -328,6 +328,29 @@ fn t_series(run: &Prepared, y: &[f64], scale: f64) -> Vec<(f64, f64)> {
         .collect()
 }
 
+/// The localisation list as the report's lead: one line per link of the signal chain.
+fn localisation_table(links: &[super::links::LinkCheck]) -> String {
+    let mut md = String::from(
+        "## Where along the signal chain\n\n| link | channels | baseline error (x noise) | extended error | explained | note |\n|---|---|---|---|---|---|\n",
+    );
+    for l in links {
+        let name = match l.wheelset {
+            Some(w) => format!("{} (wheelset {w})", l.link),
+            None => l.link.clone(),
+        };
+        let _ = writeln!(
+            md,
+            "| {name} | {} | {:.2} | {:.2} | {} | {} |",
+            l.channels.join(", "),
+            l.baseline_error,
+            l.extended_error,
+            if l.explained { "yes" } else { "**no**" },
+            l.note
+        );
+    }
+    md + "\n"
+}
+
 /// Writes report.md and the SVG plots into `dir`.
 pub fn write(dir: &Path, out: &Outcome) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
@@ -340,6 +363,7 @@ pub fn write(dir: &Path, out: &Outcome) -> Result<Vec<PathBuf>> {
         r.baseline,
         r.files.join(", ")
     );
+    md += &localisation_table(&r.localisation);
     md += &cause_paragraph(out);
     md += "\n\n## Result\n\n";
     let _ = writeln!(
