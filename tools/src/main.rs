@@ -25,6 +25,9 @@ enum Command {
     TargetCost(hils::target_cost::TargetCostArgs),
     /// Turn a captured defmt telemetry log into a run-log CSV.
     Decode(hils::decode::DecodeArgs),
+    /// Operate the rig board over CAN (or `--interface sim`): start, stop, brake, inject,
+    /// calibrate, status, watch, record, session scripts, programmes.
+    Rig(hils::rig::RigArgs),
 }
 
 fn main() -> Result<()> {
@@ -35,5 +38,6 @@ fn main() -> Result<()> {
         Command::Diagnose(a) => hils::diagnose::main(a),
         Command::TargetCost(a) => hils::target_cost::main(a),
         Command::Decode(a) => hils::decode::main(a),
+        Command::Rig(a) => hils::rig::main(a),
     }
 }
