@@ -7,9 +7,9 @@
 //!
 //! One row per `RIG_WHEEL_SPEED` frame (1 ms) whose four speeds are available (a run is
 //! live), `t_s` from the first such frame. `omega*_radps` = frame speed / wheel radius of the
-//! board's plant. `v_ref_mps` and `a_x_mps2` come from `RIG_STATUS` (10 ms), linearly
-//! interpolated to the row's time; rows outside the status frames' span are left out (and
-//! counted). `state` and `faults` are the latest status frame's. `cmd` is the brake command
+//! board's plant. `v_ref_mps` and `a_x_mps2` come from `RIG_STATUS` (10 ms) of a live run
+//! (running or finished), linearly interpolated to the row's time; rows outside those
+//! frames' span are left out (and counted). `state` and `faults` are the latest status frame's. `cmd` is the brake command
 //! in force (the session's own commands and any seen on the bus). Diagnostic frames give
 //! `step_max_us`, `step_mean_us`, `overruns` (latest).
 //!
@@ -25,7 +25,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use hils_plant::{Params, WHEELSETS};
 use hils_rig_core::KMH_PER_MPS;
-use hils_rig_core::can::{Command, DiagFrame, StatusFrame, WheelSpeedFrame};
+use hils_rig_core::can::{Command, DiagFrame, RigState, StatusFrame, WheelSpeedFrame};
 use hils_rig_core::hw::TelemetryEvent;
 use hils_sil::Cmd;
 use hils_sil::record::Channel;
@@ -167,13 +167,18 @@ impl Recorder {
         end: &str,
     ) -> Result<Written> {
         let r_w = Params::default().vehicle.wheel_radius;
-        let v: Vec<(f64, f64)> = self
+        // Outside a live run the status frame's speed and deceleration are 0 by rule (safe
+        // state), not measurements: only live frames are interpolated.
+        let live: Vec<&(f64, StatusFrame)> = self
             .status
+            .iter()
+            .filter(|(_, s)| matches!(s.state, RigState::Running | RigState::Finished))
+            .collect();
+        let v: Vec<(f64, f64)> = live
             .iter()
             .map(|(t, s)| (*t, s.vehicle_speed_kmh as f64 / KMH_PER_MPS as f64))
             .collect();
-        let a: Vec<(f64, f64)> = self
-            .status
+        let a: Vec<(f64, f64)> = live
             .iter()
             .map(|(t, s)| (*t, -s.deceleration_mps2 as f64))
             .collect();
