@@ -37,6 +37,18 @@ fn out_dir(name: &str) -> PathBuf {
     d
 }
 
+/// Independent reference: the SIL loop in f64 from the same start, brake at t = 0; the time
+/// to standstill, s.
+fn sil_stop_s(rail: Rail, demand: BrakeDemand, speed_kmh: f64) -> f64 {
+    let mut sil = ClosedLoop::<f64>::new(&Params::default(), rail, speed_kmh / 3.6).unwrap();
+    sil.set_demand(demand);
+    let mut steps = 0u32;
+    while !at_standstill(sil.step().vehicle_speed) {
+        steps += 1;
+    }
+    steps as f64 * 1e-4
+}
+
 fn script(text: &str) -> Vec<Line> {
     parse_script(&PathBuf::from("test.rig"), text).expect("script parses")
 }
@@ -176,14 +188,7 @@ fn eb_run_over_the_bus_matches_sil_and_its_log_is_diagnosed() {
     run_session(&mut s, &lines, false).expect("session");
     assert_eq!(s.link.rig().state(), RigState::Finished);
 
-    // Independent reference: the SIL loop in f64 from the same start.
-    let mut sil = ClosedLoop::<f64>::new(&Params::default(), Rail::Wet, 100.0 / 3.6).unwrap();
-    sil.set_demand(BrakeDemand::Emergency);
-    let mut steps = 0u32;
-    while !at_standstill(sil.step().vehicle_speed) {
-        steps += 1;
-    }
-    let sil_stop_s = steps as f64 * 1e-4;
+    let sil_stop_s = sil_stop_s(Rail::Wet, BrakeDemand::Emergency, 100.0);
 
     let log = hils::measured::read_run_log(&csv).expect("reader accepts the rig log");
     assert_eq!(log.rail, Some(Rail::Wet));
@@ -297,4 +302,137 @@ fn a_rejected_script_line_ends_the_session_with_a_non_zero_result() {
     );
     assert!(parse_script(&PathBuf::from("x"), "brake sideways\n").is_err());
     assert!(parse_script(&PathBuf::from("x"), "inject 9 open\n").is_ok());
+}
+
+const PROGRAMME: &str = r#"
+[criteria]              # wsp-test's; the rig ignores it
+max_distance_ratio = 1.35
+[tracks.wet]
+base = "wet"
+[tracks.dry]
+base = "dry"
+[tracks.low]
+base = "low"
+[[run]]
+name = "wet-eb-50"
+speed_kmh = 50.0
+demand = "emergency"
+track = "wet"
+[[run]]
+name = "low-eb-50"
+speed_kmh = 50.0
+demand = "emergency"
+track = "low"
+[[run]]
+name = "dry-service-40"
+speed_kmh = 40.0
+demand = "service:0.8"
+track = "dry"
+"#;
+
+fn programme_args(
+    dir: &std::path::Path,
+    faults: &[&str],
+) -> (hils::rig::RigArgs, hils::rig::programme::RunArgs) {
+    let file = dir.join("programme.toml");
+    std::fs::write(&file, PROGRAMME).unwrap();
+    let run = hils::rig::programme::RunArgs {
+        programme: file,
+        json: Some(dir.join("out.json")),
+        report: Some(dir.join("report")),
+        friction: hils::rig::FrictionArg::Variable,
+        max_run_s: 120.0,
+        settle_s: 3.0,
+        only: None,
+    };
+    let rig = hils::rig::RigArgs {
+        interface: "sim".into(),
+        lost_after_s: 0.5,
+        realtime: false,
+        sim_faults: faults.iter().map(|s| s.to_string()).collect(),
+        command: hils::rig::RigCommand::Run(run.clone()),
+    };
+    (rig, run)
+}
+
+/// `hils rig run --programme` against the in-process board: the runs the board can run are
+/// run and recorded, the service brake reaches its demanded deceleration, the others are
+/// listed with the reason.
+#[test]
+fn programme_runs_each_run_on_the_board_and_reports() {
+    let dir = out_dir("programme");
+    let (rig, run) = programme_args(&dir, &[]);
+    hils::rig::programme::main(&rig, &run).expect("programme");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out.json")).unwrap()).unwrap();
+    let runs = json.as_array().unwrap();
+    assert_eq!(runs.len(), 3);
+    assert_eq!(runs[0]["end"], "finished");
+    assert_eq!(runs[0]["on_rig"], true);
+    assert!(runs[1]["end"].as_str().unwrap().contains("surface `low`"));
+    assert_eq!(runs[1]["on_rig"], false);
+    // Each run stops as the SIL loop of the same start does (3 %).
+    for (k, rail, demand, v) in [
+        (0, Rail::Wet, BrakeDemand::Emergency, 50.0),
+        (
+            2,
+            Rail::Dry,
+            BrakeDemand::Service {
+                deceleration_mps2: 0.8,
+            },
+            40.0,
+        ),
+    ] {
+        let rig = runs[k]["stop_time_s"].as_f64().unwrap();
+        let sil = sil_stop_s(rail, demand, v);
+        assert!(
+            (rig - sil).abs() < 0.03 * sil,
+            "{}: rig {rig} s, SIL {sil} s",
+            runs[k]["name"]
+        );
+    }
+    // Stopping distance v0 t / 2 .. v0 t (decelerating throughout).
+    let (t, x) = (
+        runs[0]["stop_time_s"].as_f64().unwrap(),
+        runs[0]["stop_distance_m"].as_f64().unwrap(),
+    );
+    let v0 = 50.0 / 3.6;
+    assert!(x > 0.5 * v0 * t && x < v0 * t, "x {x} t {t}");
+    for name in ["wet-eb-50", "dry-service-40"] {
+        let log =
+            hils::measured::read_run_log(&dir.join("report").join(format!("{name}.csv"))).unwrap();
+        assert_eq!(log.metadata.get("run"), Some(name));
+        assert!(
+            log.v_ref_mps[0] > 10.0,
+            "{name} starts at its speed: {}",
+            log.v_ref_mps[0]
+        );
+    }
+    let report = std::fs::read_to_string(dir.join("report").join("report.md")).unwrap();
+    assert!(report.contains("| wet-eb-50 | wet | 50.0 | emergency | finished |"));
+}
+
+#[test]
+fn a_lost_board_ends_the_programme_and_keeps_what_ran() {
+    let dir = out_dir("programme-lost");
+    let (rig, run) = programme_args(&dir, &["board-lost=6.0"]);
+    let e = hils::rig::programme::main(&rig, &run).unwrap_err();
+    assert!(e.to_string().contains("board lost"), "{e}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out.json")).unwrap()).unwrap();
+    let runs = json.as_array().unwrap();
+    assert!(
+        runs[0]["end"]
+            .as_str()
+            .unwrap()
+            .contains("ended early: board lost")
+    );
+    assert!(
+        runs[2]["end"]
+            .as_str()
+            .unwrap()
+            .starts_with("not run: the programme ended")
+    );
+    let log = hils::measured::read_run_log(&dir.join("report").join("wet-eb-50.csv")).unwrap();
+    assert!(*log.t_s.last().unwrap() > 2.5);
 }

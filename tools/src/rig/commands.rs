@@ -177,8 +177,10 @@ impl<T: Transport> Session<T> {
         let last = self.board.last_frame_s.unwrap_or(self.started_s);
         let left = (last + self.lost_after_s - now).max(0.0);
         let got = self.link.receive(timeout_s.min(left));
+        // The probe's telemetry is taken always (kept only while recording).
+        let probe = self.link.take_probe();
         if let Some(rec) = &mut self.recorder {
-            rec.push_probe(self.link.take_probe());
+            rec.push_probe(probe);
         }
         let Some(r) = got? else {
             let silent_s = self.link.now_s() - last;

@@ -359,6 +359,8 @@ pub const WAIT_MAX_S: f64 = 600.0;
 /// The open recording of a session.
 pub struct Recording {
     pub out: PathBuf,
+    /// The programme run recorded (`# run:` metadata).
+    pub run: Option<String>,
 }
 
 /// Runs one line in a session; prints what it does.
@@ -394,7 +396,10 @@ pub fn run_line<T: Transport>(
         }
         Line::Record { out, for_s } => {
             s.recorder = Some(Recorder::default());
-            *recording = Some(Recording { out: out.clone() });
+            *recording = Some(Recording {
+                out: out.clone(),
+                run: None,
+            });
             println!("recording to {}", out.display());
             if alone {
                 let mut end = RunEnd::default();
@@ -443,12 +448,13 @@ pub fn finish<T: Transport>(
     if let (Some(rec), Some(r)) = (s.recorder.take(), recording) {
         let mut rec = rec;
         rec.push_probe(s.link.take_probe());
-        let w = rec.write(
-            &r.out,
-            &format!("hils rig record over {}", s.link.describe()),
-            s.last_start,
-            end,
-        )?;
+        let meta = record::RunMeta {
+            source: format!("hils rig record over {}", s.link.describe()),
+            run: r.run,
+            start: s.last_start,
+            end: end.to_string(),
+        };
+        let w = rec.write(&r.out, &meta)?;
         println!(
             "wrote {} ({} rows, {} probe records; end: {end})",
             r.out.display(),

@@ -6,7 +6,9 @@
 //! # Rows
 //!
 //! One row per `RIG_WHEEL_SPEED` frame (1 ms) whose four speeds are available (a run is
-//! live), `t_s` from the first such frame. `omega*_radps` = frame speed / wheel radius of the
+//! live), from the first start command recorded (earlier frames are an earlier run's), `t_s`
+//! from the first such frame; `eb_command_s` / `brake_command_s` metadata: the first
+//! emergency / any non-release brake command after it. `omega*_radps` = frame speed / wheel radius of the
 //! board's plant. `v_ref_mps` and `a_x_mps2` come from `RIG_STATUS` (10 ms) of a live run
 //! (running or finished), linearly interpolated to the row's time; rows outside those
 //! frames' span are left out (and counted). `state` and `faults` are the latest status frame's. `cmd` is the brake command
@@ -46,6 +48,19 @@ pub struct Recorder {
     pub commands: Vec<(f64, Command)>,
     /// Frames of `hils.dbc` that did not decode.
     pub bad_frames: u64,
+}
+
+/// What the run log's metadata says beyond the frames.
+#[derive(Clone, Debug, Default)]
+pub struct RunMeta {
+    /// Where the frames came from.
+    pub source: String,
+    /// The programme run this is (`# run:`, what `hils wsp-test --log` judges it as).
+    pub run: Option<String>,
+    /// The start command of the run (rail, friction, initial speed).
+    pub start: Option<Command>,
+    /// Why the recording ended.
+    pub end: String,
 }
 
 /// What was written.
@@ -132,9 +147,10 @@ impl Recorder {
     }
 
     /// Probe samples of wheelset `j` of the brake input of `kind`.
-    fn probe_series(&self, j: usize, pressure: bool) -> Vec<(f64, f64)> {
+    fn probe_series(&self, j: usize, pressure: bool, t_from: f64) -> Vec<(f64, f64)> {
         self.probe
             .iter()
+            .filter(|p| p.t_s > t_from)
             .filter_map(|p| match p.event {
                 TelemetryEvent::Record(r) => {
                     let x = if pressure { r.p_cyl[j] } else { r.f_clamp[j] };
@@ -146,33 +162,30 @@ impl Recorder {
     }
 
     /// Writes the run log to `path`; `end` says why the recording ended.
-    pub fn write(
-        &self,
-        path: &Path,
-        source: &str,
-        start: Option<Command>,
-        end: &str,
-    ) -> Result<Written> {
+    pub fn write(&self, path: &Path, meta: &RunMeta) -> Result<Written> {
         let file = std::fs::File::create(path)
             .with_context(|| format!("cannot create {}", path.display()))?;
-        self.write_to(file, source, start, end)
+        self.write_to(file, meta)
     }
 
     /// Writes the run log.
-    pub fn write_to<W: std::io::Write>(
-        &self,
-        out: W,
-        source: &str,
-        start: Option<Command>,
-        end: &str,
-    ) -> Result<Written> {
+    pub fn write_to<W: std::io::Write>(&self, out: W, m: &RunMeta) -> Result<Written> {
         let r_w = Params::default().vehicle.wheel_radius;
+        // Frames up to the (first) start command belong to an earlier run (a frame stamped
+        // at the send's instant was made before the board took the command).
+        let t_from = self
+            .commands
+            .iter()
+            .find(|(_, c)| matches!(c, Command::Start { .. }))
+            .map_or(f64::NEG_INFINITY, |&(t, _)| t);
         // Outside a live run the status frame's speed and deceleration are 0 by rule (safe
         // state), not measurements: only live frames are interpolated.
         let live: Vec<&(f64, StatusFrame)> = self
             .status
             .iter()
-            .filter(|(_, s)| matches!(s.state, RigState::Running | RigState::Finished))
+            .filter(|(t, s)| {
+                *t > t_from && matches!(s.state, RigState::Running | RigState::Finished)
+            })
             .collect();
         let v: Vec<(f64, f64)> = live
             .iter()
@@ -183,9 +196,9 @@ impl Recorder {
             .map(|(t, s)| (*t, -s.deceleration_mps2 as f64))
             .collect();
         let pressure: [Vec<(f64, f64)>; WHEELSETS] =
-            core::array::from_fn(|j| self.probe_series(j, true));
+            core::array::from_fn(|j| self.probe_series(j, true, t_from));
         let clamp: [Vec<(f64, f64)>; WHEELSETS] =
-            core::array::from_fn(|j| self.probe_series(j, false));
+            core::array::from_fn(|j| self.probe_series(j, false, t_from));
         let has_clamp = clamp.iter().any(|c| !c.is_empty());
         let mut channels = vec![T, V_REF, OMEGA, P_CYL];
         if has_clamp {
@@ -201,7 +214,7 @@ impl Recorder {
         };
         let mut t0 = None;
         let mut rows = Vec::new();
-        for &(t, w) in &self.wheel_speed {
+        for &(t, w) in self.wheel_speed.iter().filter(|(t, _)| *t > t_from) {
             let Some(speeds) = w.speeds_kmh.iter().copied().collect::<Option<Vec<f32>>>() else {
                 written.not_available += 1;
                 continue;
@@ -239,15 +252,24 @@ impl Recorder {
             rows.push(row);
         }
         written.rows = rows.len();
-        let mut meta: Vec<(&str, String)> = vec![("source", source.to_string())];
-        meta.extend(start_metadata(start));
-        if let (Some(t0), Some(&(t_eb, _))) = (
-            t0,
-            self.commands
-                .iter()
-                .find(|(_, c)| matches!(c, Command::Brake(b) if b.code() == Cmd::Emergency as u8)),
-        ) {
-            meta.push(("eb_command_s", format!("{:.4}", (t_eb - t0).max(0.0))));
+        let mut meta: Vec<(&str, String)> = vec![("source", m.source.clone())];
+        if let Some(run) = &m.run {
+            meta.push(("run", run.clone()));
+        }
+        meta.extend(start_metadata(m.start));
+        let first_brake = |code: Option<u8>| {
+            self.commands.iter().find(|(t, c)| {
+                *t > t_from
+                    && matches!(c, Command::Brake(b) if code.map_or(b.code() != Cmd::Release as u8, |k| b.code() == k))
+            })
+        };
+        if let Some(t0) = t0 {
+            if let Some(&(t_eb, _)) = first_brake(Some(Cmd::Emergency as u8)) {
+                meta.push(("eb_command_s", format!("{:.4}", (t_eb - t0).max(0.0))));
+            }
+            if let Some(&(t_b, _)) = first_brake(None) {
+                meta.push(("brake_command_s", format!("{:.4}", (t_b - t0).max(0.0))));
+            }
         }
         meta.push(("sample_rate_hz", "1000".into()));
         meta.push((
@@ -267,7 +289,7 @@ impl Recorder {
                 written.not_available, written.outside_status
             ),
         ));
-        meta.push(("end", end.to_string()));
+        meta.push(("end", m.end.clone()));
         meta.push((
             "brake_inputs",
             if written.probe_records > 0 {
