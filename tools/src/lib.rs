@@ -14,6 +14,7 @@ pub mod fit_friction;
 pub mod measured;
 pub mod params_file;
 pub mod plots;
+pub mod rig;
 pub mod runlog;
 pub mod scenario;
 pub mod simulate;

@@ -28,6 +28,9 @@ enum Command {
     /// WSP test bench: a programme of low-adhesion runs in SIL (or a captured rig log),
     /// judged against the stopping distance the adhesion allows.
     WspTest(hils::wsp::WspTestArgs),
+    /// Operate the rig board over CAN (or `--interface sim`): start, stop, brake, inject,
+    /// calibrate, status, watch, record, session scripts, programmes.
+    Rig(hils::rig::RigArgs),
 }
 
 fn main() -> Result<()> {
@@ -39,5 +42,6 @@ fn main() -> Result<()> {
         Command::TargetCost(a) => hils::target_cost::main(a),
         Command::Decode(a) => hils::decode::main(a),
         Command::WspTest(a) => hils::wsp::main(a),
+        Command::Rig(a) => hils::rig::main(a),
     }
 }

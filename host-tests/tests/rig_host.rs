@@ -1,0 +1,441 @@
+//! `hils rig` end to end against the in-process board (`--interface sim`): the board's own
+//! logic (`hils_rig_core::rig::Rig`) behind the in-process bus, the simulated brake unit as
+//! the controller under test reading the wheel-speed frames. Every result here is read
+//! from frames only, and checked against the board's own state or an independent run.
+
+use std::path::PathBuf;
+
+use hils::decode::rig_core::can::{Command, InjectedFault, RigMode, RigState, WHEEL_SPEED_MAX_KMH};
+use hils::decode::rig_core::rig::Faults;
+use hils::decode::rig_core::sensor::SensorFault;
+use hils::rig::commands::Session;
+use hils::rig::monitor::Alarm;
+use hils::rig::sim::{SimBoard, SimFaults};
+use hils::rig::{Line, parse_script, run_session};
+use hils_brake_unit::BrakeDemand;
+use hils_plant::{FrictionModel, Params, Rail};
+use hils_sil::ClosedLoop;
+use hils_sil::scenario::at_standstill;
+
+fn session(faults: SimFaults) -> Session<SimBoard> {
+    Session::new(SimBoard::new(faults, false), 0.5)
+}
+
+fn start(speed_kmh: f32) -> Command {
+    Command::Start {
+        mode: RigMode::Rig,
+        rail: Rail::Wet,
+        friction: FrictionModel::Variable,
+        emergency: false,
+        initial_speed_kmh: speed_kmh,
+    }
+}
+
+fn out_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("hils-rig-test-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Independent reference: the SIL loop in f64 from the same start, brake at t = 0; the time
+/// to standstill, s.
+fn sil_stop_s(rail: Rail, demand: BrakeDemand, speed_kmh: f64) -> f64 {
+    let mut sil = ClosedLoop::<f64>::new(&Params::default(), rail, speed_kmh / 3.6).unwrap();
+    sil.set_demand(demand);
+    let mut steps = 0u32;
+    while !at_standstill(sil.step().vehicle_speed) {
+        steps += 1;
+    }
+    steps as f64 * 1e-4
+}
+
+fn script(text: &str) -> Vec<Line> {
+    parse_script(&PathBuf::from("test.rig"), text).expect("script parses")
+}
+
+#[test]
+fn start_status_stop_agree_with_the_board() {
+    let mut s = session(SimFaults::default());
+    assert_eq!(s.status().unwrap().state, RigState::Idle);
+    let o = s.command(start(80.0)).unwrap();
+    assert!(o.accepted, "{o}");
+    assert_eq!(o.status.state, RigState::Running);
+    assert_eq!(s.link.rig().state(), RigState::Running);
+    // The status frame's speed is the board's plant speed (0.01 km/h resolution).
+    let st = s.next_status(1).unwrap();
+    let v = s.link.rig().outputs().unwrap().vehicle_speed * 3.6;
+    assert!(
+        (st.vehicle_speed_kmh - v).abs() < 0.05,
+        "{} vs {v}",
+        st.vehicle_speed_kmh
+    );
+    // The wheel-speed frames carry the four speeds while the run is live.
+    let (_, w) = s.board.wheel_speed.unwrap();
+    assert!(
+        w.speeds_kmh
+            .iter()
+            .all(|x| x.is_some_and(|x| (x - 80.0).abs() < 1.0))
+    );
+    let o = s.command(Command::Stop).unwrap();
+    assert!(o.accepted, "{o}");
+    assert_eq!(o.status.state, RigState::Stopped);
+    assert_eq!(s.link.rig().state(), RigState::Stopped);
+    // Safe state: the speeds are "not available" in the next wheel-speed frames.
+    s.run_for(0.01, |_, _| hils::rig::commands::Flow::Continue)
+        .unwrap();
+    let (_, w) = s.board.wheel_speed.unwrap();
+    assert_eq!(w.speeds_kmh, [None; 4]);
+    assert_eq!(s.board.counts.bad, 0);
+    assert_eq!(
+        (s.board.wheel_alive.lost, s.board.status_alive.lost),
+        (0, 0)
+    );
+}
+
+#[test]
+fn rejections_are_reported_with_the_board_rule() {
+    let mut s = session(SimFaults::default());
+    let o = s.command(Command::Stop).unwrap();
+    assert!(!o.accepted);
+    assert!(
+        o.reason
+            .as_deref()
+            .unwrap()
+            .contains("no run to stop (state idle)"),
+        "{o}"
+    );
+    assert!(o.status.faults as u32 & Faults::COMMAND_REJECTED != 0);
+    let o = s.command(start(WHEEL_SPEED_MAX_KMH + 10.0)).unwrap();
+    assert!(!o.accepted);
+    assert!(
+        o.reason
+            .as_deref()
+            .unwrap()
+            .contains(&format!("outside 0-{WHEEL_SPEED_MAX_KMH} km/h")),
+        "{o}"
+    );
+    assert_eq!(s.link.rig().state(), RigState::Idle);
+    assert!(s.command(start(60.0)).unwrap().accepted);
+    let o = s.command(start(60.0)).unwrap();
+    assert!(!o.accepted);
+    assert!(
+        o.reason.as_deref().unwrap().contains("a run is active"),
+        "{o}"
+    );
+    // The run goes on: a rejected command changes nothing.
+    assert_eq!(s.link.rig().state(), RigState::Running);
+}
+
+#[test]
+fn injected_sensor_fault_ends_the_run_and_blocks_a_start_until_cleared() {
+    let mut s = session(SimFaults::default());
+    assert!(s.command(start(60.0)).unwrap().accepted);
+    let o = s
+        .command(Command::InjectFault {
+            channel: 1,
+            fault: Some(InjectedFault::Open),
+        })
+        .unwrap();
+    assert!(o.accepted, "{o}");
+    // The board latches the fault after its debounce and goes to its safe state.
+    let mut state = RigState::Running;
+    s.run_for(0.2, |b, _| {
+        state = b.status().unwrap().state;
+        if state == RigState::Fault {
+            hils::rig::commands::Flow::Done
+        } else {
+            hils::rig::commands::Flow::Continue
+        }
+    })
+    .unwrap();
+    assert_eq!(state, RigState::Fault);
+    let st = s.board.status().unwrap();
+    assert!(
+        st.faults as u32 & 0x2 != 0,
+        "sensor 2 flagged: {:#x}",
+        st.faults
+    );
+    assert!(st.faults as u32 & Faults::FAULT_INJECTED != 0);
+    s.run_for(0.2, |_, _| hils::rig::commands::Flow::Continue)
+        .unwrap();
+    assert_eq!(
+        s.board.diag.unwrap().1.sensor_faults[1],
+        Some(SensorFault::Open)
+    );
+    let o = s.command(start(60.0)).unwrap();
+    assert!(!o.accepted);
+    assert!(o.reason.as_deref().unwrap().contains("channel(s) 2"), "{o}");
+    let remove = Command::InjectFault {
+        channel: 1,
+        fault: None,
+    };
+    assert!(s.command(remove).unwrap().accepted);
+    let o = s.command(Command::ClearFaults).unwrap();
+    assert!(o.accepted);
+    assert_eq!(o.status.state, RigState::Stopped);
+    assert!(s.command(start(60.0)).unwrap().accepted);
+}
+
+/// The rig loop over CAN (speeds quantised to 0.01 km/h and held 1 ms, pressures through a
+/// 12-bit ADC with noise) stops the train as the SIL loop does, and its run log is read by
+/// the diagnosis, whose replay of the board-measured inputs explains it within the noise.
+#[test]
+fn eb_run_over_the_bus_matches_sil_and_its_log_is_diagnosed() {
+    let dir = out_dir("eb");
+    let csv = dir.join("run.csv");
+    let mut s = session(SimFaults::default());
+    let lines = script(&format!(
+        "record --out {}\nstart --speed-kmh 100 --rail wet --friction variable\nbrake eb\nwait --until-end\n",
+        csv.display()
+    ));
+    run_session(&mut s, &lines, false).expect("session");
+    assert_eq!(s.link.rig().state(), RigState::Finished);
+
+    let sil_stop_s = sil_stop_s(Rail::Wet, BrakeDemand::Emergency, 100.0);
+
+    let log = hils::measured::read_run_log(&csv).expect("reader accepts the rig log");
+    assert_eq!(log.rail, Some(Rail::Wet));
+    let eb_s: f64 = log.metadata.get("eb_command_s").unwrap().parse().unwrap();
+    let stop_row = log.v_ref_mps.iter().position(|&v| v < 0.05).expect("stops");
+    let rig_stop_s = log.t_s[stop_row] - eb_s;
+    assert!(
+        (rig_stop_s - sil_stop_s).abs() < 0.03 * sil_stop_s,
+        "rig {rig_stop_s} s vs SIL {sil_stop_s} s"
+    );
+    // 1 kHz rows; omega * r is the frame's wheel speed within its 0.01 km/h.
+    assert!((log.median_interval_s() - 1e-3).abs() < 1e-9);
+    assert!(log.p_cyl_pa.iter().all(|p| p.is_some()));
+    let r = Params::default().vehicle.wheel_radius;
+    let peak = log.p_cyl_pa[0]
+        .as_ref()
+        .unwrap()
+        .iter()
+        .cloned()
+        .fold(0.0, f64::max);
+    assert!(peak > 1e5, "EB pressure measured by the board: {peak} Pa");
+    assert!((log.omega_radps[0][0] * r * 3.6 - 100.0).abs() < 0.01);
+
+    let json = dir.join("diag.json");
+    hils::diagnose::main(hils::diagnose::DiagnoseArgs {
+        baseline: PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("../../shared/spec/reference-parameters.toml"),
+        json: Some(json.clone()),
+        report: None,
+        step_s: hils::diagnose::replay::REPLAY_STEP_S,
+        files: vec![csv],
+    })
+    .expect("hils diagnose reads the rig log");
+    let d: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(json).unwrap()).unwrap();
+    assert_eq!(d["discrepancy"], false, "{d}");
+}
+
+#[test]
+fn a_lost_board_ends_the_session_and_keeps_the_recording() {
+    let dir = out_dir("lost");
+    let csv = dir.join("run.csv");
+    let faults = SimFaults {
+        board_lost_at_s: Some(1.0),
+        ..Default::default()
+    };
+    let mut s = session(faults);
+    let lines = script(&format!(
+        "record --out {}\nstart --speed-kmh 100 --rail wet --friction variable\nbrake eb\nwait --until-end\n",
+        csv.display()
+    ));
+    let e = run_session(&mut s, &lines, false).unwrap_err();
+    assert!(e.to_string().contains("board lost"), "{e}");
+    // Silent from 1.0 s; declared lost 0.5 s later.
+    let now = hils::rig::transport::Transport::now_s(&s.link);
+    assert!((1.49..1.51).contains(&now), "{now}");
+    let log = hils::measured::read_run_log(&csv).expect("recording kept");
+    let last = *log.t_s.last().unwrap();
+    assert!((0.9..1.0).contains(&last), "recorded up to {last} s");
+    assert!(log.metadata.get("end").unwrap().contains("board lost"));
+}
+
+#[test]
+fn bus_off_and_a_stuck_alive_counter_end_the_session() {
+    let mut s = session(SimFaults {
+        bus_off_at_s: Some(0.3),
+        ..Default::default()
+    });
+    assert!(s.command(start(100.0)).unwrap().accepted);
+    let e = s
+        .run_for(5.0, |_, _| hils::rig::commands::Flow::Continue)
+        .unwrap_err();
+    assert_eq!(e, Alarm::HostBusOff);
+
+    let mut s = session(SimFaults {
+        status_alive_frozen_at_s: Some(0.5),
+        ..Default::default()
+    });
+    assert!(s.command(start(100.0)).unwrap().accepted);
+    let e = s
+        .run_for(5.0, |_, _| hils::rig::commands::Flow::Continue)
+        .unwrap_err();
+    assert_eq!(
+        e,
+        Alarm::AliveStuck {
+            frame: "RIG_STATUS",
+            repeats: 3
+        }
+    );
+    // Stuck at the third identical counter: two status periods after the freeze.
+    let now = hils::rig::transport::Transport::now_s(&s.link);
+    assert!((0.51..0.53).contains(&now), "{now}");
+}
+
+#[test]
+fn a_rejected_script_line_ends_the_session_with_a_non_zero_result() {
+    let mut s = session(SimFaults::default());
+    let lines = script("start --speed-kmh 50\nstart --speed-kmh 50\nbrake eb\n");
+    let e = run_session(&mut s, &lines, false).unwrap_err();
+    assert!(e.to_string().contains("rejected: a run is active"), "{e}");
+    // The line after the rejection did not run: no brake command reached the controller,
+    // the train coasts.
+    s.run_for(1.0, |_, _| hils::rig::commands::Flow::Continue)
+        .unwrap();
+    let st = s.board.status().unwrap();
+    assert_eq!(st.state, RigState::Running);
+    assert!(
+        st.deceleration_mps2.abs() < 0.05,
+        "{}",
+        st.deceleration_mps2
+    );
+    assert!(parse_script(&PathBuf::from("x"), "brake sideways\n").is_err());
+    assert!(parse_script(&PathBuf::from("x"), "inject 9 open\n").is_ok());
+}
+
+const PROGRAMME: &str = r#"
+[criteria]              # wsp-test's; the rig ignores it
+max_distance_ratio = 1.35
+[tracks.wet]
+base = "wet"
+[tracks.dry]
+base = "dry"
+[tracks.low]
+base = "low"
+[[run]]
+name = "wet-eb-50"
+speed_kmh = 50.0
+demand = "emergency"
+track = "wet"
+[[run]]
+name = "low-eb-50"
+speed_kmh = 50.0
+demand = "emergency"
+track = "low"
+[[run]]
+name = "dry-service-40"
+speed_kmh = 40.0
+demand = "service:0.8"
+track = "dry"
+"#;
+
+fn programme_args(
+    dir: &std::path::Path,
+    faults: &[&str],
+) -> (hils::rig::RigArgs, hils::rig::programme::RunArgs) {
+    let file = dir.join("programme.toml");
+    std::fs::write(&file, PROGRAMME).unwrap();
+    let run = hils::rig::programme::RunArgs {
+        programme: file,
+        json: Some(dir.join("out.json")),
+        report: Some(dir.join("report")),
+        friction: hils::rig::FrictionArg::Variable,
+        max_run_s: 120.0,
+        settle_s: 3.0,
+        only: None,
+    };
+    let rig = hils::rig::RigArgs {
+        interface: "sim".into(),
+        lost_after_s: 0.5,
+        realtime: false,
+        sim_faults: faults.iter().map(|s| s.to_string()).collect(),
+        command: hils::rig::RigCommand::Run(run.clone()),
+    };
+    (rig, run)
+}
+
+/// `hils rig run --programme` against the in-process board: the runs the board can run are
+/// run and recorded, the service brake reaches its demanded deceleration, the others are
+/// listed with the reason.
+#[test]
+fn programme_runs_each_run_on_the_board_and_reports() {
+    let dir = out_dir("programme");
+    let (rig, run) = programme_args(&dir, &[]);
+    hils::rig::programme::main(&rig, &run).expect("programme");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out.json")).unwrap()).unwrap();
+    let runs = json.as_array().unwrap();
+    assert_eq!(runs.len(), 3);
+    assert_eq!(runs[0]["end"], "finished");
+    assert_eq!(runs[0]["on_rig"], true);
+    assert!(runs[1]["end"].as_str().unwrap().contains("surface `low`"));
+    assert_eq!(runs[1]["on_rig"], false);
+    // Each run stops as the SIL loop of the same start does (3 %).
+    for (k, rail, demand, v) in [
+        (0, Rail::Wet, BrakeDemand::Emergency, 50.0),
+        (
+            2,
+            Rail::Dry,
+            BrakeDemand::Service {
+                deceleration_mps2: 0.8,
+            },
+            40.0,
+        ),
+    ] {
+        let rig = runs[k]["stop_time_s"].as_f64().unwrap();
+        let sil = sil_stop_s(rail, demand, v);
+        assert!(
+            (rig - sil).abs() < 0.03 * sil,
+            "{}: rig {rig} s, SIL {sil} s",
+            runs[k]["name"]
+        );
+    }
+    // Stopping distance v0 t / 2 .. v0 t (decelerating throughout).
+    let (t, x) = (
+        runs[0]["stop_time_s"].as_f64().unwrap(),
+        runs[0]["stop_distance_m"].as_f64().unwrap(),
+    );
+    let v0 = 50.0 / 3.6;
+    assert!(x > 0.5 * v0 * t && x < v0 * t, "x {x} t {t}");
+    for name in ["wet-eb-50", "dry-service-40"] {
+        let log =
+            hils::measured::read_run_log(&dir.join("report").join(format!("{name}.csv"))).unwrap();
+        assert_eq!(log.metadata.get("run"), Some(name));
+        assert!(
+            log.v_ref_mps[0] > 10.0,
+            "{name} starts at its speed: {}",
+            log.v_ref_mps[0]
+        );
+    }
+    let report = std::fs::read_to_string(dir.join("report").join("report.md")).unwrap();
+    assert!(report.contains("| wet-eb-50 | wet | 50.0 | emergency | finished |"));
+}
+
+#[test]
+fn a_lost_board_ends_the_programme_and_keeps_what_ran() {
+    let dir = out_dir("programme-lost");
+    let (rig, run) = programme_args(&dir, &["board-lost=6.0"]);
+    let e = hils::rig::programme::main(&rig, &run).unwrap_err();
+    assert!(e.to_string().contains("board lost"), "{e}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out.json")).unwrap()).unwrap();
+    let runs = json.as_array().unwrap();
+    assert!(
+        runs[0]["end"]
+            .as_str()
+            .unwrap()
+            .contains("ended early: board lost")
+    );
+    assert!(
+        runs[2]["end"]
+            .as_str()
+            .unwrap()
+            .starts_with("not run: the programme ended")
+    );
+    let log = hils::measured::read_run_log(&dir.join("report").join("wet-eb-50.csv")).unwrap();
+    assert!(*log.t_s.last().unwrap() > 2.5);
+}

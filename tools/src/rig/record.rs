@@ -1,0 +1,336 @@
+//! `hils rig record`: the wheel-speed and status frames (and the probe's telemetry when one
+//! is attached) written as a run log in the project's one schema (`hils_sil::record`,
+//! `spec/measured-data.md` section 1) through `crate::runlog::write_table`, so that
+//! `crate::measured` (and with it `hils diagnose`) reads it.
+//!
+//! # Rows
+//!
+//! One row per `RIG_WHEEL_SPEED` frame (1 ms) whose four speeds are available (a run is
+//! live), from the first start command recorded (earlier frames are an earlier run's), `t_s`
+//! from the first such frame; `eb_command_s` / `brake_command_s` metadata: the first
+//! emergency / any non-release brake command after it. `omega*_radps` = frame speed / wheel radius of the
+//! board's plant. `v_ref_mps` and `a_x_mps2` come from `RIG_STATUS` (10 ms) of a live run
+//! (running or finished), linearly interpolated to the row's time; rows outside those
+//! frames' span are left out (and counted). `state` and `faults` are the latest status frame's. `cmd` is the brake command
+//! in force (the session's own commands and any seen on the bus). Diagnostic frames give
+//! `step_max_us`, `step_mean_us`, `overruns` (latest).
+//!
+//! # Brake inputs
+//!
+//! The frames of `hils.dbc` carry no brake input. With a probe capture (the simulated
+//! board's telemetry; on hardware, the defmt capture, not yet merged here) the board's
+//! measured cylinder pressures / clamp forces are interpolated to the rows' times. Without
+//! one the `p_cyl*_pa` cells are empty (the spec's "not measured") and the metadata says so.
+
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use hils_plant::{Params, WHEELSETS};
+use hils_rig_core::KMH_PER_MPS;
+use hils_rig_core::can::{Command, DiagFrame, RigState, StatusFrame};
+use hils_rig_core::hw::TelemetryEvent;
+use hils_sil::Cmd;
+use hils_sil::record::Channel;
+use hils_sil::record::run_log::*;
+
+use super::commands::state_name;
+use super::monitor::{Pairing, Seen, WheelSpeeds};
+use super::transport::ProbeEvent;
+use crate::runlog;
+
+/// Everything recorded, on the transport's clock.
+#[derive(Clone, Debug, Default)]
+pub struct Recorder {
+    pub wheel_speed: Vec<(f64, WheelSpeeds)>,
+    /// Pairs the two wheel-speed frames of a cycle.
+    pub wheel_pairing: Pairing,
+    pub status: Vec<(f64, StatusFrame)>,
+    pub diag: Vec<(f64, DiagFrame)>,
+    pub probe: Vec<ProbeEvent>,
+    pub commands: Vec<(f64, Command)>,
+    /// Frames of `hils.dbc` that did not decode.
+    pub bad_frames: u64,
+}
+
+/// What the run log's metadata says beyond the frames.
+#[derive(Clone, Debug, Default)]
+pub struct RunMeta {
+    /// Where the frames came from.
+    pub source: String,
+    /// The programme run this is (`# run:`, what `hils wsp-test --log` judges it as).
+    pub run: Option<String>,
+    /// The start command of the run (rail, friction, initial speed).
+    pub start: Option<Command>,
+    /// Why the recording ended.
+    pub end: String,
+}
+
+/// What was written.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Written {
+    pub rows: usize,
+    /// Rows left out: outside the status frames' span.
+    pub outside_status: usize,
+    /// Wheel-speed frames with speeds not available (no run live).
+    pub not_available: usize,
+    pub probe_records: usize,
+}
+
+/// Linear interpolation of `(t, x)` samples at `t` (None outside their span).
+pub fn interpolate(samples: &[(f64, f64)], t: f64) -> Option<f64> {
+    let i = samples.partition_point(|&(ti, _)| ti < t);
+    match (i.checked_sub(1).map(|k| samples[k]), samples.get(i)) {
+        (_, Some(&(t1, x1))) if t1 == t => Some(x1),
+        (Some((t0, x0)), Some(&(t1, x1))) => Some(x0 + (x1 - x0) * (t - t0) / (t1 - t0)),
+        _ => None,
+    }
+}
+
+/// The latest entry at or before `t`.
+fn latest<T: Copy>(samples: &[(f64, T)], t: f64) -> Option<T> {
+    let i = samples.partition_point(|&(ti, _)| ti <= t);
+    i.checked_sub(1).map(|k| samples[k].1)
+}
+
+/// Run metadata from a start command.
+fn start_metadata(start: Option<Command>) -> Vec<(&'static str, String)> {
+    let Some(Command::Start {
+        rail,
+        friction,
+        initial_speed_kmh,
+        mode,
+        ..
+    }) = start
+    else {
+        return vec![(
+            "notes_run",
+            "run parameters unknown (recording began without a start command)".into(),
+        )];
+    };
+    vec![
+        ("rail", format!("{rail:?}").to_lowercase()),
+        ("friction", format!("{friction:?}").to_lowercase()),
+        ("initial_speed_kmh", format!("{initial_speed_kmh}")),
+        ("mode", format!("{mode:?}").to_lowercase()),
+    ]
+}
+
+impl Recorder {
+    pub fn push(&mut self, t_s: f64, seen: &Seen) {
+        match *seen {
+            Seen::WheelSpeed(w) => {
+                if let Some(c) = self.wheel_pairing.take(w) {
+                    self.wheel_speed.push((t_s, c))
+                }
+            }
+            Seen::Status(s) => self.status.push((t_s, s)),
+            Seen::Diag(d) => self.diag.push((t_s, d)),
+            Seen::Command(c) => self.commands.push((t_s, c.command)),
+            Seen::Bad(_) => self.bad_frames += 1,
+            Seen::Other => {}
+        }
+    }
+
+    pub fn push_probe(&mut self, events: Vec<ProbeEvent>) {
+        self.probe.extend(events);
+    }
+
+    pub fn note_command(&mut self, t_s: f64, c: Command) {
+        self.commands.push((t_s, c));
+    }
+
+    /// The brake command in force at `t` (None before any).
+    fn cmd_at(&self, t: f64) -> Option<Cmd> {
+        let brakes: Vec<(f64, Cmd)> = self
+            .commands
+            .iter()
+            .filter_map(|&(ti, c)| match c {
+                Command::Brake(b) => Cmd::try_from(b.code()).ok().map(|k| (ti, k)),
+                _ => None,
+            })
+            .collect();
+        latest(&brakes, t)
+    }
+
+    /// Probe samples of wheelset `j` of the brake input of `kind`.
+    fn probe_series(&self, j: usize, pressure: bool, t_from: f64) -> Vec<(f64, f64)> {
+        self.probe
+            .iter()
+            .filter(|p| p.t_s > t_from)
+            .filter_map(|p| match p.event {
+                TelemetryEvent::Record(r) => {
+                    let x = if pressure { r.p_cyl[j] } else { r.f_clamp[j] };
+                    x.is_finite().then_some((p.t_s, x as f64))
+                }
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// Writes the run log to `path`; `end` says why the recording ended.
+    pub fn write(&self, path: &Path, meta: &RunMeta) -> Result<Written> {
+        let file = std::fs::File::create(path)
+            .with_context(|| format!("cannot create {}", path.display()))?;
+        self.write_to(file, meta)
+    }
+
+    /// Writes the run log.
+    pub fn write_to<W: std::io::Write>(&self, out: W, m: &RunMeta) -> Result<Written> {
+        let r_w = Params::default().vehicle.wheel_radius;
+        // Frames up to the (first) start command belong to an earlier run (a frame stamped
+        // at the send's instant was made before the board took the command).
+        let t_from = self
+            .commands
+            .iter()
+            .find(|(_, c)| matches!(c, Command::Start { .. }))
+            .map_or(f64::NEG_INFINITY, |&(t, _)| t);
+        // Outside a live run the status frame's speed and deceleration are 0 by rule (safe
+        // state), not measurements: only live frames are interpolated.
+        let live: Vec<&(f64, StatusFrame)> = self
+            .status
+            .iter()
+            .filter(|(t, s)| {
+                *t > t_from && matches!(s.state, RigState::Running | RigState::Finished)
+            })
+            .collect();
+        let v: Vec<(f64, f64)> = live
+            .iter()
+            .map(|(t, s)| (*t, s.vehicle_speed_kmh as f64 / KMH_PER_MPS as f64))
+            .collect();
+        let a: Vec<(f64, f64)> = live
+            .iter()
+            .map(|(t, s)| (*t, -s.deceleration_mps2 as f64))
+            .collect();
+        let pressure: [Vec<(f64, f64)>; WHEELSETS] =
+            core::array::from_fn(|j| self.probe_series(j, true, t_from));
+        let clamp: [Vec<(f64, f64)>; WHEELSETS] =
+            core::array::from_fn(|j| self.probe_series(j, false, t_from));
+        let has_clamp = clamp.iter().any(|c| !c.is_empty());
+        let mut channels = vec![T, V_REF, OMEGA, P_CYL];
+        if has_clamp {
+            channels.push(F_CLAMP);
+        }
+        channels.extend([A_X, CMD, STATE, FAULTS, STEP_MAX, STEP_MEAN, OVERRUNS]);
+
+        let mut written = Written {
+            rows: 0,
+            outside_status: 0,
+            not_available: 0,
+            probe_records: pressure.iter().map(Vec::len).max().unwrap_or(0),
+        };
+        let mut t0 = None;
+        let mut rows = Vec::new();
+        for &(t, w) in self.wheel_speed.iter().filter(|(t, _)| *t > t_from) {
+            let Some(speeds) = w.speeds_kmh.iter().copied().collect::<Option<Vec<f32>>>() else {
+                written.not_available += 1;
+                continue;
+            };
+            let (Some(v_ref), Some(a_x), Some(status)) = (
+                interpolate(&v, t),
+                interpolate(&a, t),
+                latest(&self.status, t),
+            ) else {
+                written.outside_status += 1;
+                continue;
+            };
+            let t_rel = t - *t0.get_or_insert(t);
+            let diag = latest(&self.diag, t);
+            let num = |x: Option<f64>, d: usize| x.map_or(String::new(), |x| format!("{x:.d$}"));
+            let row: Vec<String> = channels
+                .iter()
+                .flat_map(|&c: &Channel| (0..c.width()).map(move |j| (c, j)))
+                .map(|(c, j)| match c {
+                    T => format!("{t_rel:.4}"),
+                    V_REF => format!("{v_ref:.5}"),
+                    OMEGA => format!("{:.5}", speeds[j] as f64 / KMH_PER_MPS as f64 / r_w),
+                    P_CYL => num(interpolate(&pressure[j], t), 1),
+                    F_CLAMP => num(interpolate(&clamp[j], t), 2),
+                    A_X => format!("{a_x:.4}"),
+                    CMD => self.cmd_at(t).map_or("", Cmd::text).to_string(),
+                    STATE => state_name(status.state).to_string(),
+                    FAULTS => format!("0x{:04x}", status.faults),
+                    STEP_MAX => num(diag.map(|d| d.step_max_us as f64), 2),
+                    STEP_MEAN => num(diag.map(|d| d.step_mean_us as f64), 2),
+                    OVERRUNS => diag.map_or(String::new(), |d| d.overruns.to_string()),
+                    _ => String::new(),
+                })
+                .collect();
+            rows.push(row);
+        }
+        written.rows = rows.len();
+        let mut meta: Vec<(&str, String)> = vec![("source", m.source.clone())];
+        if let Some(run) = &m.run {
+            meta.push(("run", run.clone()));
+        }
+        meta.extend(start_metadata(m.start));
+        let first_brake = |code: Option<u8>| {
+            self.commands.iter().find(|(t, c)| {
+                *t > t_from
+                    && matches!(c, Command::Brake(b) if code.map_or(b.code() != Cmd::Release as u8, |k| b.code() == k))
+            })
+        };
+        if let Some(t0) = t0 {
+            if let Some(&(t_eb, _)) = first_brake(Some(Cmd::Emergency as u8)) {
+                meta.push(("eb_command_s", format!("{:.4}", (t_eb - t0).max(0.0))));
+            }
+            if let Some(&(t_b, _)) = first_brake(None) {
+                meta.push(("brake_command_s", format!("{:.4}", (t_b - t0).max(0.0))));
+            }
+        }
+        meta.push(("sample_rate_hz", "1000".into()));
+        meta.push((
+            "frames",
+            format!(
+                "{} wheel-speed, {} status, {} diag, {} bad (checksum or range)",
+                self.wheel_speed.len(),
+                self.status.len(),
+                self.diag.len(),
+                self.bad_frames
+            ),
+        ));
+        meta.push((
+            "rows_left_out",
+            format!(
+                "{} with speeds not available (no run live), {} outside the status frames' span",
+                written.not_available, written.outside_status
+            ),
+        ));
+        meta.push(("end", m.end.clone()));
+        meta.push((
+            "brake_inputs",
+            if written.probe_records > 0 {
+                format!(
+                    "board-measured, from {} probe telemetry records, interpolated to the rows",
+                    written.probe_records
+                )
+            } else {
+                "not captured (no probe attached; the CAN frames carry none): p_cyl cells empty"
+                    .into()
+            },
+        ));
+        meta.push((
+            "notes",
+            "omega = RIG_WHEEL_SPEED / wheel radius; v_ref_mps, a_x_mps2 interpolated from RIG_STATUS (10 ms); state, faults = latest RIG_STATUS (faults = hils_rig_core::rig::Faults low 16 bits); step times from RIG_DIAG".into(),
+        ));
+        let header = runlog::column_names(&channels);
+        runlog::write_table(out, &meta, &header, rows)?;
+        Ok(written)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn interpolation_inside_and_outside_the_span() {
+        let s = [(0.0, 0.0), (1.0, 10.0), (3.0, 30.0)];
+        assert_eq!(interpolate(&s, 0.5), Some(5.0));
+        assert_eq!(interpolate(&s, 1.0), Some(10.0));
+        assert_eq!(interpolate(&s, 2.0), Some(20.0));
+        assert_eq!(interpolate(&s, 0.0), Some(0.0));
+        assert_eq!(interpolate(&s, -0.1), None);
+        assert_eq!(interpolate(&s, 3.1), None);
+        assert_eq!(interpolate(&[], 1.0), None);
+    }
+}

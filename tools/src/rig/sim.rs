@@ -1,0 +1,340 @@
+//! `--interface sim`: the board's own logic (`hils_rig_core::rig::Rig`) stepping at 10 kHz in
+//! this process behind an in-process bus, with a simulated brake controller under test.
+//!
+//! Per tick (0.1 ms of board time), in the order of the board's step interrupt
+//! (`firmware/board/src/step.rs`): the frames the host sent are handed to
+//! [`Rig::command_frame`] (and seen by the controller, as on a shared bus), the controller
+//! under test steps, [`Rig::step`] runs with a mock [`RigIo`], and the step is timed.
+//!
+//! * **The rig hardware** ([`SimIo`]): four brake cylinder pressure transducers. The ADC
+//!   reads each cylinder pressure of the controller through the transducer's nominal
+//!   characteristic (`SensorKind::PressureTransducer.default_calibration()`, inverted) with
+//!   +-2 counts of deterministic noise (a real ADC never reads the same sum for long; the
+//!   board's stuck-sensor check needs that). The board's channels are set to pressure
+//!   transducers at power-up, as a rig fitted with them would be calibrated.
+//! * **The controller under test** ([`SimController`]): the project's simulated brake unit
+//!   (`hils_brake_unit::BrakeUnit`, the one `hils simulate` runs, WSP on) at the plant step.
+//!   It reads the wheel speeds only from the `RIG_WHEEL_SPEED` frames on the bus (held
+//!   between frames, as an ECU's CAN input), and takes its brake demand from the
+//!   `RIG_COMMAND` brake frames it sees (standing in for the train line). While the speeds
+//!   are "not available" (board idle or in its safe state) it vents (no pressure); when
+//!   they come back it starts afresh (a new run).
+//! * **Step timing**: the host time of each [`Rig::step`] call, in cycles of the board's
+//!   170 MHz clock, so the diagnostic frame shows real (host) figures. Unless paced
+//!   (`--realtime`), board time is not wall time, so a step is capped just below the period
+//!   (a host preemption is no overrun of the board); paced, an overrun is flagged as on the
+//!   board.
+//! * **Fault injection for tests and demos** ([`SimFaults`]): the board goes silent, the
+//!   host's controller goes bus-off, or the status frame's alive counter freezes, at a
+//!   given board time.
+//!
+//! Board time runs as fast as the host can step it, or paced to the wall clock with
+//! `--realtime`.
+
+use std::collections::VecDeque;
+use std::time::{Duration, Instant};
+
+use hils_brake_unit::{BrakeDemand, BrakeUnit, UnitConfig};
+use hils_plant::params::STEP_S;
+use hils_plant::{Params, WHEELSETS};
+use hils_rig_core::can::{
+    BrakeCommand, ClassicFrame, Command, CommandFrame, StatusFrame, WheelSpeedFrame,
+};
+use hils_rig_core::hw::{RigIo, TelemetryEvent};
+use hils_rig_core::pulse::PulseRegisters;
+use hils_rig_core::rig::{Rig, RigConfig};
+use hils_rig_core::sensor::{ADC_MAX_COUNTS, ADC_SEQUENCE_LEN, OVERSAMPLING, SensorKind};
+use hils_rig_core::{CHANNELS, KMH_PER_MPS, STEP_RATE_HZ};
+
+use super::monitor::Pairing;
+use super::transport::{ProbeEvent, Received, Transport, TransportError};
+
+/// Board time of one tick, s.
+pub const TICK_S: f64 = 1.0 / STEP_RATE_HZ as f64;
+
+/// Faults the simulated bus can show, at board times (s).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SimFaults {
+    /// The board goes silent (power or cable lost).
+    pub board_lost_at_s: Option<f64>,
+    /// The host's CAN controller goes bus-off.
+    pub bus_off_at_s: Option<f64>,
+    /// The status frame's alive counter stops counting (a hung sender task).
+    pub status_alive_frozen_at_s: Option<f64>,
+}
+
+/// The rig's measurement hardware as the board's step sees it.
+struct SimIo {
+    /// Cylinder pressures the transducers see, Pa.
+    pressure_pa: [f32; CHANNELS],
+    noise: u32,
+    frames: Vec<ClassicFrame>,
+    telemetry: Vec<TelemetryEvent>,
+}
+
+impl SimIo {
+    /// ADC counts of a pressure through the transducer's nominal characteristic.
+    fn counts(p_pa: f32, noise: i32) -> u16 {
+        let cal = SensorKind::PressureTransducer.default_calibration();
+        let c = cal.offset_counts + p_pa / cal.gain + noise as f32;
+        c.round().clamp(0.0, ADC_MAX_COUNTS as f32) as u16
+    }
+
+    /// The next -2..=2 of a deterministic noise sequence (a 32-bit LCG).
+    fn next_noise(&mut self) -> i32 {
+        self.noise = self
+            .noise
+            .wrapping_mul(1_664_525)
+            .wrapping_add(1_013_904_223);
+        ((self.noise >> 16) % 5) as i32 - 2
+    }
+}
+
+impl RigIo for SimIo {
+    type Frame = ClassicFrame;
+
+    fn adc_sequence(&mut self) -> Option<[u16; ADC_SEQUENCE_LEN]> {
+        let mut seq = [0u16; ADC_SEQUENCE_LEN];
+        // Ranks: ch1..ch4, four times (`sensor::split_sequence`).
+        for (rank, slot) in seq.iter_mut().enumerate() {
+            let n = self.next_noise();
+            *slot = Self::counts(self.pressure_pa[rank % CHANNELS], n);
+        }
+        debug_assert_eq!(ADC_SEQUENCE_LEN, CHANNELS * OVERSAMPLING);
+        Some(seq)
+    }
+
+    fn set_pulse(&mut self, _: usize, _: &PulseRegisters) {}
+
+    fn queue_frame(&mut self, frame: ClassicFrame) -> bool {
+        self.frames.push(frame);
+        true
+    }
+
+    fn queue_telemetry(&mut self, event: &TelemetryEvent) -> bool {
+        self.telemetry.push(*event);
+        true
+    }
+}
+
+/// The brake controller under test: the simulated brake unit on the bus.
+pub struct SimController {
+    params: Params,
+    unit: Option<BrakeUnit<f32>>,
+    demand: BrakeDemand,
+    /// Wheel circumferential speeds of the last wheel-speed frame, m/s (None: not available).
+    speeds_mps: Option<[f32; WHEELSETS]>,
+    /// Pairs the two wheel-speed frames of a cycle.
+    wheel_pairing: Pairing,
+    pressure_pa: [f32; WHEELSETS],
+}
+
+impl SimController {
+    fn new() -> Self {
+        Self {
+            params: Params::default(),
+            unit: None,
+            demand: BrakeDemand::Release,
+            speeds_mps: None,
+            wheel_pairing: Pairing::default(),
+            pressure_pa: [0.0; WHEELSETS],
+        }
+    }
+
+    /// A frame on the bus: wheel speeds are its sensor input, brake commands its demand.
+    fn on_frame(&mut self, frame: &ClassicFrame) {
+        if let Ok(half) = WheelSpeedFrame::decode(frame) {
+            let Some(w) = self.wheel_pairing.take(half) else {
+                return;
+            };
+            let s = w.speeds_kmh;
+            self.speeds_mps = if s.iter().all(Option::is_some) {
+                Some(s.map(|v| v.unwrap_or(0.0) / KMH_PER_MPS))
+            } else {
+                None
+            };
+        } else if let Ok(c) = CommandFrame::decode(frame) {
+            if let Command::Brake(b) = c.command {
+                self.demand = match b {
+                    BrakeCommand::Release => BrakeDemand::Release,
+                    BrakeCommand::Emergency => BrakeDemand::Emergency,
+                    BrakeCommand::Service { deceleration_mps2 } => {
+                        BrakeDemand::Service { deceleration_mps2 }
+                    }
+                };
+                if let Some(u) = &mut self.unit {
+                    u.set_demand(self.demand);
+                }
+            }
+        }
+    }
+
+    /// One plant step of the controller: its cylinder pressures, Pa.
+    fn step(&mut self) -> [f32; WHEELSETS] {
+        match self.speeds_mps {
+            None => {
+                self.unit = None;
+                self.pressure_pa = [0.0; WHEELSETS];
+            }
+            Some(speeds) => {
+                if self.unit.is_none() {
+                    // The reference configuration cannot fail to build (tested in brake-unit).
+                    self.unit = BrakeUnit::new(&self.params, &UnitConfig::new(STEP_S)).ok();
+                    if let Some(u) = &mut self.unit {
+                        u.set_demand(self.demand);
+                    }
+                }
+                if let Some(u) = &mut self.unit {
+                    self.pressure_pa = u.step(&speeds).cylinder_pressure;
+                }
+            }
+        }
+        self.pressure_pa
+    }
+}
+
+/// The simulated board on its in-process bus: a [`Transport`].
+pub struct SimBoard {
+    rig: Rig,
+    io: SimIo,
+    controller: SimController,
+    tick: u64,
+    to_board: VecDeque<ClassicFrame>,
+    to_host: VecDeque<Received>,
+    probe: Vec<ProbeEvent>,
+    faults: SimFaults,
+    realtime: Option<Instant>,
+    /// Counter the frozen status frames keep.
+    frozen_counter: Option<u8>,
+}
+
+impl SimBoard {
+    pub fn new(faults: SimFaults, realtime: bool) -> Self {
+        let mut rig = Rig::new(RigConfig::nucleo_g474re());
+        for s in &mut rig.sensors {
+            s.set_kind(SensorKind::PressureTransducer);
+        }
+        Self {
+            rig,
+            io: SimIo {
+                pressure_pa: [0.0; CHANNELS],
+                noise: 0x2545_F491,
+                frames: Vec::new(),
+                telemetry: Vec::new(),
+            },
+            controller: SimController::new(),
+            tick: 0,
+            to_board: VecDeque::new(),
+            to_host: VecDeque::new(),
+            probe: Vec::new(),
+            faults,
+            realtime: realtime.then(Instant::now),
+            frozen_counter: None,
+        }
+    }
+
+    /// The board's logic (for tests that compare what the host saw with the board's state).
+    pub fn rig(&self) -> &Rig {
+        &self.rig
+    }
+
+    fn reached(&self, at: Option<f64>) -> bool {
+        at.is_some_and(|t| self.now_s() >= t)
+    }
+
+    /// One tick of the board and the controller.
+    fn tick(&mut self) {
+        self.tick += 1;
+        while let Some(f) = self.to_board.pop_front() {
+            self.controller.on_frame(&f);
+            // Rejections are in the status frame (`CommandResult`), as on the board.
+            let _ = self.rig.command_frame(&f);
+        }
+        // The board's builder task (thread mode): a requested run is built and handed over
+        // between two steps; a build error is in the status frame as on the board.
+        let _ = self.rig.build_pending();
+        self.io.pressure_pa = self.controller.step();
+        let started = Instant::now();
+        self.rig.step(&mut self.io);
+        let cpu_hz = self.rig.config().cpu_hz as f64;
+        let period = (cpu_hz / STEP_RATE_HZ as f64) as u64;
+        let mut cycles = (started.elapsed().as_secs_f64() * cpu_hz).min(u32::MAX as f64) as u64;
+        if self.realtime.is_none() {
+            // Not paced: board time is not wall time, a host preemption is no overrun.
+            cycles = cycles.min(period - 1);
+        }
+        let entry = (self.tick * period) as u32;
+        self.rig
+            .record_timing(entry, entry.wrapping_add(cycles as u32), cycles >= period);
+        let t_s = self.now_s();
+        let lost = self.reached(self.faults.board_lost_at_s);
+        for f in std::mem::take(&mut self.io.frames) {
+            self.controller.on_frame(&f);
+            if !lost {
+                let frame = self.freeze(f);
+                self.to_host.push_back(Received { frame, t_s });
+            }
+        }
+        for event in std::mem::take(&mut self.io.telemetry) {
+            self.probe.push(ProbeEvent { t_s, event });
+        }
+        if let Some(start) = self.realtime {
+            let ahead = t_s - start.elapsed().as_secs_f64();
+            if ahead > 0.002 {
+                std::thread::sleep(Duration::from_secs_f64(ahead));
+            }
+        }
+    }
+
+    /// A status frame with its alive counter frozen (from `status_alive_frozen_at_s`).
+    fn freeze(&mut self, frame: ClassicFrame) -> ClassicFrame {
+        if !self.reached(self.faults.status_alive_frozen_at_s) {
+            return frame;
+        }
+        match StatusFrame::decode(&frame) {
+            Ok(mut s) => {
+                s.counter = *self.frozen_counter.get_or_insert(s.counter);
+                s.encode().unwrap_or(frame)
+            }
+            Err(_) => frame,
+        }
+    }
+}
+
+impl Transport for SimBoard {
+    fn send(&mut self, frame: &ClassicFrame) -> Result<(), TransportError> {
+        if self.reached(self.faults.bus_off_at_s) {
+            return Err(TransportError::BusOff);
+        }
+        self.to_board.push_back(*frame);
+        Ok(())
+    }
+
+    fn receive(&mut self, timeout_s: f64) -> Result<Option<Received>, TransportError> {
+        let deadline = self.now_s() + timeout_s;
+        loop {
+            if self.reached(self.faults.bus_off_at_s) {
+                return Err(TransportError::BusOff);
+            }
+            if let Some(r) = self.to_host.pop_front() {
+                return Ok(Some(r));
+            }
+            if self.now_s() >= deadline {
+                return Ok(None);
+            }
+            self.tick();
+        }
+    }
+
+    fn now_s(&self) -> f64 {
+        self.tick as f64 * TICK_S
+    }
+
+    fn take_probe(&mut self) -> Vec<ProbeEvent> {
+        std::mem::take(&mut self.probe)
+    }
+
+    fn describe(&self) -> String {
+        "sim (in-process board, simulated brake unit as the controller under test)".into()
+    }
+}

@@ -1,0 +1,181 @@
+//! `hils rig watch`: a live text view of the board from its frames (wheel speeds, state,
+//! faults, step timing, bus errors), redrawn at the status rate (every `RIG_STATUS`, 10 ms)
+//! on a terminal; when the output is not a terminal, one block per `--every-s` of board
+//! time (a log or a captured text).
+
+use std::fmt::Write as _;
+use std::io::{IsTerminal, Write};
+
+use hils_rig_core::rig::Faults;
+
+use super::commands::state_name;
+use super::monitor::{BoardView, Seen};
+
+/// The fault flags of `RIG_STATUS` (low 16 bits of [`Faults`]) by name.
+const FAULT_NAMES: [(u32, &str); 12] = [
+    (Faults::OVERRUN, "overrun"),
+    (Faults::CAN_ERROR_PASSIVE, "can-error-passive"),
+    (Faults::CAN_BUS_OFF, "can-bus-off"),
+    (Faults::PLANT_INPUT, "plant-input"),
+    (Faults::PLANT_NUMERIC, "plant-numeric"),
+    (Faults::SPEED_SATURATED, "speed-saturated"),
+    (Faults::COMMAND_REJECTED, "command-rejected"),
+    (Faults::TELEMETRY_DROPPED, "telemetry-dropped"),
+    (Faults::FAULT_INJECTED, "fault-injected"),
+    (Faults::ADC_STALE, "adc-stale"),
+    (Faults::CAN_TX_DROPPED, "can-tx-dropped"),
+    (Faults::MISSED_TICKS, "missed-ticks"),
+];
+
+/// The names of the fault bits set (sensor channels as `sensorN`).
+pub fn fault_names(faults: u16) -> Vec<String> {
+    let f = faults as u32;
+    let mut names: Vec<String> = (0..4)
+        .filter(|j| f & (1 << j) != 0)
+        .map(|j| format!("sensor{}", j + 1))
+        .collect();
+    names.extend(
+        FAULT_NAMES
+            .iter()
+            .filter(|(bit, _)| f & bit != 0)
+            .map(|(_, n)| n.to_string()),
+    );
+    names
+}
+
+/// The view's text at board time `t_s`.
+pub fn render(board: &BoardView, source: &str, t_s: f64) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "hils rig watch  {source}  t = {t_s:.2} s");
+    match board.status() {
+        Some(st) => {
+            let _ = writeln!(
+                s,
+                "state {:<9} mode {:<9} last command {}",
+                state_name(st.state),
+                format!("{:?}", st.mode).to_lowercase(),
+                format!("{:?}", st.command_result).to_lowercase()
+            );
+            let _ = writeln!(
+                s,
+                "vehicle {:7.2} km/h   deceleration {:6.3} m/s2",
+                st.vehicle_speed_kmh, st.deceleration_mps2
+            );
+            let names = fault_names(st.faults);
+            let _ = writeln!(
+                s,
+                "faults 0x{:04x} {}",
+                st.faults,
+                if names.is_empty() {
+                    "none".to_string()
+                } else {
+                    names.join(" ")
+                }
+            );
+        }
+        None => s.push_str("no status frame yet\n"),
+    }
+    s.push_str("wheel km/h");
+    match board.wheel_speed {
+        Some((_, w)) => {
+            for (j, v) in w.speeds_kmh.iter().enumerate() {
+                let _ = match v {
+                    Some(v) => write!(s, "   {}: {v:7.2}", j + 1),
+                    None => write!(s, "   {}:     n/a", j + 1),
+                };
+            }
+        }
+        None => s.push_str("   no wheel-speed frame yet"),
+    }
+    s.push('\n');
+    match board.diag {
+        Some((_, d)) => {
+            let sensors: Vec<String> = d
+                .sensor_faults
+                .iter()
+                .enumerate()
+                .map(|(j, f)| match f {
+                    Some(f) => format!("{}:{f:?}", j + 1).to_lowercase(),
+                    None => format!("{}:ok", j + 1),
+                })
+                .collect();
+            let _ = writeln!(
+                s,
+                "step max {:6.2} us  mean {:6.2} us  overruns {}  sensors {}",
+                d.step_max_us,
+                d.step_mean_us,
+                d.overruns,
+                sensors.join(" ")
+            );
+            let _ = write!(s, "bus: board bus-off count {}", d.bus_off_count);
+        }
+        None => s.push_str("bus: no diagnostic frame yet"),
+    }
+    let c = &board.counts;
+    let _ = writeln!(
+        s,
+        "  frames wheel {} status {} diag {}  lost wheel {} status {}  bad {}  other {}",
+        c.wheel_speed,
+        c.status,
+        c.diag,
+        board.wheel_alive.lost,
+        board.status_alive.lost,
+        c.bad,
+        c.other
+    );
+    s
+}
+
+/// Draws the view as frames come.
+pub struct Watcher<W: Write> {
+    out: W,
+    tty: bool,
+    every_s: f64,
+    next_s: Option<f64>,
+    source: String,
+}
+
+impl Watcher<std::io::Stdout> {
+    /// On standard output (redrawn in place on a terminal).
+    pub fn stdout(source: &str, every_s: f64) -> Self {
+        let out = std::io::stdout();
+        let tty = out.is_terminal();
+        Self::new(out, tty, source, every_s)
+    }
+}
+
+impl<W: Write> Watcher<W> {
+    pub fn new(out: W, tty: bool, source: &str, every_s: f64) -> Self {
+        Self {
+            out,
+            tty,
+            every_s,
+            next_s: None,
+            source: source.into(),
+        }
+    }
+
+    /// Called for every frame: draws on status frames (all of them on a terminal).
+    pub fn frame(&mut self, board: &BoardView, seen: &Seen) {
+        let Seen::Status(_) = seen else { return };
+        let t = board.status.map_or(0.0, |(t, _)| t);
+        if !self.tty {
+            if self.next_s.is_some_and(|n| t < n) {
+                return;
+            }
+            self.next_s = Some(t + self.every_s);
+        }
+        self.draw(board, t);
+    }
+
+    /// Draws now.
+    pub fn draw(&mut self, board: &BoardView, t_s: f64) {
+        let text = render(board, &self.source, t_s);
+        let _ = if self.tty {
+            write!(self.out, "\x1b[H\x1b[2J{text}")
+        } else {
+            writeln!(self.out, "{text}")
+        };
+        let _ = self.out.flush();
+    }
+}
