@@ -111,7 +111,7 @@ fn rejections_are_reported_with_the_board_rule() {
         o.reason
             .as_deref()
             .unwrap()
-            .contains(&format!("outside 0-{WHEEL_SPEED_MAX_KMH} km/h")),
+            .contains(&format!("outside 0-{WHEEL_SPEED_MAX_KMH:.2} km/h")),
         "{o}"
     );
     assert_eq!(s.link.rig().state(), RigState::Idle);
