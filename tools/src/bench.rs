@@ -24,10 +24,10 @@ pub struct BenchArgs {
     #[arg(long)]
     pub json: bool,
     /// Plant steps per timed repetition.
-    #[arg(long, default_value_t = 300_000)]
+    #[arg(long, default_value_t = 300_000, value_parser = crate::cli::steps)]
     pub steps: usize,
     /// Repetitions (the best is reported).
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = 5, value_parser = crate::cli::repeat)]
     pub repeat: usize,
 }
 

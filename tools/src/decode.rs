@@ -43,7 +43,7 @@ pub struct DecodeArgs {
     #[arg(short, long)]
     pub out: PathBuf,
     /// Decode only this run of the log (1 = the first).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::run_index)]
     pub run: Option<usize>,
 }
 

@@ -64,7 +64,7 @@ pub struct DiagnoseArgs {
     pub report: Option<PathBuf>,
     /// Replay step, s (default 1 ms; the plant's semi-implicit contact keeps it accurate,
     /// see docs/diagnosis.md).
-    #[arg(long, default_value_t = replay::REPLAY_STEP_S)]
+    #[arg(long, default_value_t = replay::REPLAY_STEP_S, value_parser = crate::cli::step_s)]
     pub step_s: f64,
     /// Run logs (spec/measured-data.md, section 1).
     #[arg(required = true)]
