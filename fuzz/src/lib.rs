@@ -55,7 +55,7 @@ pub fn check_run_log(r: &RunLog) {
             assert!(x.is_nan() || x.is_finite(), "{name}: {x}");
             if let Some(range) = hils::measured::plausible_range(name) {
                 assert!(
-                    x.is_nan() || range.contains(*x),
+                    x.is_nan() || range.contains(x),
                     "{name}: {x} outside {range:?}"
                 );
             }
@@ -66,17 +66,18 @@ pub fn check_run_log(r: &RunLog) {
     for (j, w) in r.omega_radps.iter().enumerate() {
         check(&format!("omega{}_radps", j + 1), w);
     }
-    for (name, per) in [
-        ("p_cyl", &r.p_cyl_pa),
-        ("f_clamp", &r.f_clamp_n),
-        ("f_brake", &r.f_brake_n),
-        ("t_disc", &r.t_disc_c),
-        ("q", &r.q_n),
-        ("wsp", &r.wsp),
+    use hils_sil::record::run_log as rl;
+    for (c, per) in [
+        (rl::P_CYL, &r.p_cyl_pa),
+        (rl::F_CLAMP, &r.f_clamp_n),
+        (rl::F_BRAKE, &r.f_brake_n),
+        (rl::T_DISC, &r.t_disc_c),
+        (rl::Q, &r.q_n),
+        (rl::WSP, &r.wsp),
     ] {
-        for (j, c) in per.iter().enumerate() {
-            if let Some(v) = c {
-                check(&format!("{name}{}", j + 1), v);
+        for (j, col) in per.iter().enumerate() {
+            if let Some(v) = col {
+                check(&c.name(j).to_string(), v);
             }
         }
     }

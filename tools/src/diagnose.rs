@@ -250,6 +250,7 @@ impl Diagnoser {
             if hils_plant::Plant::<f64>::with_step(baseline, rail, 10.0, dt).is_err() {
                 dt = replay::replay_step(baseline, rail);
             }
+            replay::check_budget(log, dt)?;
             runs.push(Prepared::new(log, baseline, dt));
         }
         Ok(Self {
