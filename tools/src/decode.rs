@@ -317,9 +317,52 @@ impl Run {
         }
     }
 
-    /// Writes the run as a run-log CSV.
+    /// Every value the CSV will hold within its column's plausible range (the reader's
+    /// table, `measured::limits`) and the run's span within `MAX_SPAN_S`: a corrupt
+    /// record is an error naming its step and column, never a file the reader refuses.
+    fn check_plausible(&self, channels: &[Channel]) -> Result<()> {
+        for r in &self.records {
+            for &c in channels {
+                for j in 0..c.width() {
+                    let name = c.name(j).to_string();
+                    let Some(range) = crate::measured::plausible_range(&name) else {
+                        continue;
+                    };
+                    let text = self.cell(r, c, j);
+                    match text.parse::<f64>() {
+                        Ok(x) if !range.contains(&x) => bail!(
+                            "run of line {}, record of step {}: `{name}` = {x} is outside the \
+                             plausible range [{}, {}] (a corrupt record?)",
+                            self.line,
+                            r.step,
+                            range.start(),
+                            range.end()
+                        ),
+                        _ => {}
+                    }
+                }
+            }
+        }
+        if let (Some(a), Some(b)) = (self.records.first(), self.records.last()) {
+            let span = self.time_s(b) - self.time_s(a);
+            if span > crate::measured::MAX_SPAN_S {
+                bail!(
+                    "run of line {}: the records span {span} s (steps {} to {}); at most {} s",
+                    self.line,
+                    a.step,
+                    b.step,
+                    crate::measured::MAX_SPAN_S
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes the run as a run-log CSV (an error, before anything is written, when a
+    /// value is implausible).
     pub fn write_csv<W: Write>(&self, out: W, source: &str) -> Result<()> {
         let channels = self.channels();
+        self.check_plausible(&channels)?;
         let rows = self.records.iter().map(|r| {
             channels
                 .iter()
@@ -400,9 +443,11 @@ pub fn main(args: DecodeArgs) -> Result<()> {
         if run.records.is_empty() {
             bail!("run {k} (line {}): no telemetry records", run.line);
         }
-        let file = std::fs::File::create(&path)
-            .with_context(|| format!("cannot create {}", path.display()))?;
-        run.write_csv(file, &source)?;
+        // Written whole once it is complete: a run refused half-way leaves no file.
+        let mut csv = Vec::new();
+        run.write_csv(&mut csv, &source)
+            .with_context(|| format!("{}", args.input.display()))?;
+        std::fs::write(&path, csv).with_context(|| format!("cannot create {}", path.display()))?;
         let last = run.records.last().map(|r| run.time_s(r)).unwrap_or(0.0);
         println!(
             "run {k}: {} records, 0 to {last:.3} s, {} missing, end: {} -> {}",

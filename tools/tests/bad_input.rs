@@ -81,3 +81,99 @@ fn replay_budget_is_bounded() {
     let short = parse_run_log(Path::new("ok.csv"), &log_spanning(300.0)).unwrap();
     assert!(hils::diagnose::replay::check_budget(&short, 1e-3).is_ok());
 }
+
+/// Eq (2) written out (independent of the plant's code).
+fn eq2(v: f64, t: f64) -> f64 {
+    0.98 * 0.38 * (0.184 * (-0.1 * v).exp() + 1.0) * (0.105 * (-0.014 * t).exp() + 1.0)
+}
+
+/// Item 6: degenerate friction data is an error; a fit's correlations are within [-1, 1]
+/// (or undefined, with a warning) and no interval has zero width.
+#[test]
+fn fit_friction_on_degenerate_data() {
+    use hils::fit_friction::fit_points;
+    // One disc temperature only: an error naming the problem.
+    let v: Vec<f64> = (0..20).map(|i| 1.0 + i as f64).collect();
+    let t = vec![50.0; 20];
+    let mu: Vec<f64> = v.iter().map(|&v| eq2(v, 50.0)).collect();
+    let e = fit_points(&v, &t, &mu, 0.98).unwrap_err().to_string();
+    assert!(
+        e.contains("degenerate") && e.contains("disc temperatures"),
+        "{e}"
+    );
+    // Near-degenerate and exact sets: whatever the fit, its statistics are meaningful.
+    let mut seed = 12345u64;
+    let mut rnd = || {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for case in 0..12 {
+        let n = 6 + case;
+        let (v_span, t_span, noise) =
+            [(0.01, 0.01, 0.0), (30.0, 300.0, 0.0), (2.0, 5.0, 1e-3)][case % 3];
+        let v: Vec<f64> = (0..n)
+            .map(|i| 5.0 + v_span * (i % 3) as f64 + 1e-3 * rnd())
+            .collect();
+        let t: Vec<f64> = (0..n)
+            .map(|i| 20.0 + t_span * (i / 2 % 3) as f64 + 1e-3 * rnd())
+            .collect();
+        let mu: Vec<f64> = v
+            .iter()
+            .zip(&t)
+            .map(|(&v, &t)| eq2(v, t) + noise * (rnd() - 0.5))
+            .collect();
+        let Ok(fit) = fit_points(&v, &t, &mu, 0.98) else {
+            continue;
+        };
+        for (a, b, r) in &fit.correlated {
+            assert!(
+                r.is_nan() || r.abs() <= 1.0,
+                "case {case}: {a}-{b} correlation {r}"
+            );
+        }
+        for (name, [lo, hi]) in &fit.ci95 {
+            let undefined = lo.is_nan() && hi.is_nan();
+            assert!(
+                undefined || hi > lo,
+                "case {case}: {name} interval [{lo}, {hi}]"
+            );
+            if undefined {
+                assert!(
+                    fit.warnings.iter().any(|w| w.contains("undefined")),
+                    "{:?}",
+                    fit.warnings
+                );
+            }
+        }
+    }
+}
+
+/// Fuzz finding (decode target): a telemetry record with an implausible value (v_ref 1549
+/// m/s from a corrupt line) became a CSV the reader refuses. Now `hils decode` refuses the
+/// record, naming its step and column, and writes no file.
+#[test]
+fn decode_refuses_implausible_records_and_writes_nothing() {
+    let dir = temp_dir("decode");
+    let input = dir.join("capture.log");
+    let case = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../fuzz/seeds/decode/regression-implausible-v-ref.log");
+    std::fs::copy(&case, &input).unwrap();
+    let csv = dir.join("run.csv");
+    let out = Command::new(env!("CARGO_BIN_EXE_hils"))
+        .arg("decode")
+        .arg(&input)
+        .arg("--out")
+        .arg(&csv)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("step 100") && err.contains("`v_ref_mps` = 1549"),
+        "{err}"
+    );
+    assert!(!csv.exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
