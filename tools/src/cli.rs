@@ -87,8 +87,12 @@ pub const TIMEOUT_S: FlagRange = count("target-cost", "--timeout-s", 1.0, 86_400
 /// `decode --run` (1 = the first run).
 pub const RUN: FlagRange = count("decode", "--run", 1.0, 1e6);
 
+/// `bench --write-log-mb`.
+pub const LOG_MB: FlagRange = range("bench", "--write-log-mb", 0.001, 10_000.0);
+
 /// Every numeric flag of `hils` (the property test feeds each its bad values).
-pub const FLAGS: [FlagRange; 7] = [
+pub const FLAGS: [FlagRange; 8] = [
+    LOG_MB,
     SPEED_KMH,
     SAMPLE_RATE_HZ,
     STEP_S,
@@ -147,4 +151,8 @@ pub fn timeout_s(s: &str) -> Result<u64, String> {
 /// Value parser of `decode --run`.
 pub fn run_index(s: &str) -> Result<usize, String> {
     RUN.parse(s).map(|x| x as usize)
+}
+/// Value parser of `bench --write-log-mb`.
+pub fn log_mb(s: &str) -> Result<f64, String> {
+    LOG_MB.parse(s)
 }

@@ -170,6 +170,17 @@ fn state_text(code: u8) -> &'static str {
     }
 }
 
+/// A time cell from nanoseconds: the exact decimal seconds (no rounding: records 100 ns
+/// apart stay apart; a fuzz finding against the former 6 decimals).
+fn time_cell(ns: u64) -> String {
+    let (s, frac) = (ns / 1_000_000_000, ns % 1_000_000_000);
+    if frac == 0 {
+        return s.to_string();
+    }
+    let digits = format!("{frac:09}");
+    format!("{s}.{}", digits.trim_end_matches('0'))
+}
+
 /// A float cell: the f32's shortest exact text, empty for NaN (not measured).
 fn cell(x: f32) -> String {
     if x.is_nan() {
@@ -293,7 +304,7 @@ impl Run {
             )
         };
         match c {
-            T => format!("{:.6}", self.time_s(r)),
+            T => time_cell(r.step as u64 * self.header.step_ns as u64),
             V_REF => cell(r.v_ref),
             OMEGA => cell(r.omega[j]),
             P_CYL => cell(r.p_cyl[j]),

@@ -177,3 +177,20 @@ fn decode_refuses_implausible_records_and_writes_nothing() {
     assert!(!csv.exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Fuzz finding (decode target): with a 1 ns step the records (100 ns apart) were written
+/// with 6 decimals, all at t = 0, and the reader refused the CSV. Times are now exact.
+#[test]
+fn decode_writes_exact_times() {
+    let case = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../fuzz/seeds/decode/regression-100ns-records.log");
+    let text = std::fs::read_to_string(case).unwrap();
+    let runs = hils::decode::parse_runs(text.lines()).unwrap();
+    let mut csv = Vec::new();
+    runs[0].write_csv(&mut csv, "test").unwrap();
+    let log = hils::measured::parse_bytes(Path::new("d.csv"), &csv).unwrap();
+    let hils::measured::Measured::Run(log) = log else {
+        panic!("not a run log")
+    };
+    assert_eq!(log.t_s, vec![0.0, 1e-7, 2e-7, 3e-7]);
+}

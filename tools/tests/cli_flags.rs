@@ -14,6 +14,9 @@ fn argv(f: &FlagRange, value: &str) -> Vec<String> {
         "diagnose" => v.extend(["--baseline".into(), "b.toml".into()]),
         _ => {}
     }
+    if f.flag == "--write-log-mb" {
+        v.extend(["--reader".into(), "/nonexistent/never-written.csv".into()]);
+    }
     if f.command == "decode" || f.command == "diagnose" {
         v.push("input.csv".into());
     }
