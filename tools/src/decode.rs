@@ -110,6 +110,11 @@ pub fn parse_runs<'a>(lines: impl IntoIterator<Item = &'a str>) -> Result<Vec<Ru
                 if header.divider == 0 || header.step_ns == 0 {
                     bail!("line {n}: run header with a zero divider or step");
                 }
+                // The speed goes into the CSV's metadata: finite and plausible (fuzz finding).
+                let v0 = header.initial_speed_kmh;
+                if !(0.0..=500.0).contains(&v0) {
+                    bail!("line {n}: run header with initial speed {v0} km/h (not in [0, 500])");
+                }
                 runs.push(Run {
                     header,
                     line: n,

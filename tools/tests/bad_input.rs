@@ -194,3 +194,19 @@ fn decode_writes_exact_times() {
     };
     assert_eq!(log.t_s, vec![0.0, 1e-7, 2e-7, 3e-7]);
 }
+
+/// Fuzz finding (decode target): a run header with an infinite initial speed went into the
+/// CSV's metadata, which the reader refuses. The header is refused, naming its line.
+#[test]
+fn decode_refuses_a_non_finite_initial_speed() {
+    let case = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../fuzz/seeds/decode/regression-inf-initial-speed.log");
+    let text = std::fs::read_to_string(case).unwrap();
+    let e = hils::decode::parse_runs(text.lines())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("line 1") && e.contains("initial speed inf"),
+        "{e}"
+    );
+}
