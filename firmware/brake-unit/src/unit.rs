@@ -217,6 +217,9 @@ pub struct UnitOutputs<F> {
 }
 
 impl<F: Real> BrakeUnit<F> {
+    /// Builds the unit (construction: kept out of line, so it stays in flash and out of
+    /// the board's CCM step code, which inlines only the step).
+    #[inline(never)]
     pub fn new(params: &Params, config: &UnitConfig) -> Result<Self, UnitError> {
         let dt = config.step_s;
         // Plant step and control cycle: positive, finite and at most 1 s (NaN fails too).
