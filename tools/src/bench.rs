@@ -27,11 +27,17 @@ pub struct BenchArgs {
     #[arg(long)]
     pub json: bool,
     /// Plant steps per timed repetition.
-    #[arg(long, default_value_t = 300_000)]
+    #[arg(long, default_value_t = 300_000, value_parser = crate::cli::steps)]
     pub steps: usize,
     /// Repetitions (the best is reported).
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = 5, value_parser = crate::cli::repeat)]
     pub repeat: usize,
+    /// Instead of the plant: time and peak memory of reading this measured file.
+    #[arg(long)]
+    pub reader: Option<std::path::PathBuf>,
+    /// With --reader: first write a synthetic run log of about this many MB to the file.
+    #[arg(long, requires = "reader", value_parser = crate::cli::log_mb)]
+    pub write_log_mb: Option<f64>,
 }
 
 /// Figures printed by `hils bench --json`.
@@ -172,6 +178,12 @@ pub fn measure(params: &ParamFile, steps: usize, repeat: usize) -> Result<BenchF
 }
 
 pub fn main(args: BenchArgs) -> Result<()> {
+    if let Some(path) = &args.reader {
+        if let Some(mb) = args.write_log_mb {
+            write_log(path, mb)?;
+        }
+        return bench_reader(path, args.json);
+    }
     let params = ParamFile::default();
     let f = measure(&params, args.steps.max(1), args.repeat.max(1))?;
     if args.json {
@@ -199,6 +211,131 @@ pub fn main(args: BenchArgs) -> Result<()> {
             f.steps_per_run, f.runs_per_s, f.threads
         );
         println!("  target: >= 1,000x real time (10 M steps/s) for f32 on one core");
+    }
+    Ok(())
+}
+
+/// Writes a synthetic braking run log of about `mb` MB (the spec's columns, values
+/// formatted like `hils decode`'s f32 cells), streaming (small memory).
+pub fn write_log(path: &std::path::Path, mb: f64) -> Result<()> {
+    use std::io::Write;
+    let file = std::fs::File::create(path)?;
+    let mut w = std::io::BufWriter::new(file);
+    writeln!(w, "# source: hils bench --write-log-mb {mb}\n# rail: dry")?;
+    let mut header = vec!["t_s".to_string(), "v_ref_mps".to_string()];
+    for stem in ["omega", "p_cyl", "f_clamp", "f_brake", "t_disc", "wsp"] {
+        for j in 1..=4 {
+            let unit = match stem {
+                "omega" => "_radps",
+                "p_cyl" => "_pa",
+                "f_clamp" | "f_brake" => "_n",
+                "t_disc" => "_c",
+                _ => "",
+            };
+            header.push(format!("{stem}{j}{unit}"));
+        }
+    }
+    header.extend(["a_x_mps2".to_string(), "cmd".to_string()]);
+    writeln!(w, "{}", header.join(","))?;
+    let target = (mb * 1e6) as u64;
+    let (mut written, mut k) = (0u64, 0u64);
+    let mut line = String::new();
+    while written < target {
+        use std::fmt::Write as _;
+        line.clear();
+        let t = k as f64 * 1e-4;
+        let v = (41.7 - 1.39 * (t % 30.0)) as f32;
+        write!(line, "{t},{v}")?;
+        for j in 0..4 {
+            let slip = 0.01 * ((k + j) % 17) as f32;
+            write!(line, ",{}", (v - slip) / 0.43)?;
+        }
+        for x in [
+            250_000.0f32,
+            20_000.0,
+            7_600.0,
+            20.0 + (t % 30.0) as f32 * 3.3,
+        ] {
+            for j in 0..4 {
+                write!(line, ",{}", x * (1.0 + 0.001 * ((k + j) % 7) as f32))?;
+            }
+        }
+        for j in 0..4 {
+            write!(line, ",{}", ((k / 500 + j) % 2))?;
+        }
+        writeln!(line, ",{},EB", -1.39f32 + 0.001 * (k % 11) as f32)?;
+        w.write_all(line.as_bytes())?;
+        written += line.len() as u64;
+        k += 1;
+    }
+    w.flush()?;
+    Ok(())
+}
+
+/// The process's peak resident memory, bytes (Linux `VmHWM`; 0 where unknown).
+fn peak_rss_bytes() -> u64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
+        })
+        .map_or(0, |kb| kb * 1024)
+}
+
+/// Figures of `hils bench --reader FILE`.
+#[derive(Debug, Serialize, Clone, PartialEq)]
+pub struct ReaderFigures {
+    pub file_bytes: u64,
+    pub rows: usize,
+    pub read_s: f64,
+    pub mb_per_s: f64,
+    /// Peak resident memory of the process before reading, bytes.
+    pub peak_rss_before_bytes: u64,
+    /// Peak resident memory of the process after reading (the whole log held), bytes.
+    pub peak_rss_bytes: u64,
+    /// peak_rss_bytes / file_bytes.
+    pub peak_rss_per_file_byte: f64,
+}
+
+/// Times reading a measured file and prints the peak memory against its size.
+pub fn bench_reader(path: &std::path::Path, json: bool) -> Result<()> {
+    let file_bytes = std::fs::metadata(path)?.len();
+    let before = peak_rss_bytes();
+    let started = Instant::now();
+    let m = crate::measured::read(path)?;
+    let read_s = started.elapsed().as_secs_f64();
+    let rows = match &m {
+        crate::measured::Measured::Run(r) => r.len(),
+        crate::measured::Measured::Friction(f) => f.mu.len(),
+    };
+    let peak = peak_rss_bytes();
+    black_box(&m);
+    let f = ReaderFigures {
+        file_bytes,
+        rows,
+        read_s,
+        mb_per_s: file_bytes as f64 / 1e6 / read_s,
+        peak_rss_before_bytes: before,
+        peak_rss_bytes: peak,
+        peak_rss_per_file_byte: peak as f64 / file_bytes.max(1) as f64,
+    };
+    if json {
+        println!("{}", serde_json::to_string(&f)?);
+    } else {
+        println!(
+            "reader: {} ({:.1} MB, {} rows) in {:.2} s ({:.0} MB/s); peak RSS {:.1} MB \
+             ({:.2}x the file; {:.1} MB before reading)",
+            path.display(),
+            file_bytes as f64 / 1e6,
+            rows,
+            read_s,
+            f.mb_per_s,
+            peak as f64 / 1e6,
+            f.peak_rss_per_file_byte,
+            before as f64 / 1e6
+        );
     }
     Ok(())
 }

@@ -48,7 +48,7 @@ pub struct DecodeArgs {
     #[arg(short, long)]
     pub out: PathBuf,
     /// Decode only this run of the log (1 = the first).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::run_index)]
     pub run: Option<usize>,
 }
 
@@ -126,6 +126,11 @@ pub fn parse_runs<'a>(lines: impl IntoIterator<Item = &'a str>) -> Result<Vec<Ru
                 if header.divider == 0 || header.step_ns == 0 {
                     bail!("line {n}: run header with a zero divider or step");
                 }
+                // The speed goes into the CSV's metadata: finite and plausible (fuzz finding).
+                let v0 = header.initial_speed_kmh;
+                if !(0.0..=500.0).contains(&v0) {
+                    bail!("line {n}: run header with initial speed {v0} km/h (not in [0, 500])");
+                }
                 runs.push(Run {
                     header,
                     line: n,
@@ -198,6 +203,7 @@ fn state_text(code: u8) -> &'static str {
         None => "unknown",
     }
 }
+
 
 /// A float cell: the f32's shortest exact text, empty for NaN (not measured).
 fn cell(x: f32) -> String {
@@ -347,9 +353,52 @@ impl Run {
         }
     }
 
-    /// Writes the run as a run-log CSV.
+    /// Every value the CSV will hold within its column's plausible range (the reader's
+    /// table, `measured::limits`) and the run's span within `MAX_SPAN_S`: a corrupt
+    /// record is an error naming its step and column, never a file the reader refuses.
+    fn check_plausible(&self, channels: &[Channel]) -> Result<()> {
+        for r in &self.records {
+            for &c in channels {
+                for j in 0..c.width() {
+                    let name = c.name(j).to_string();
+                    let Some(range) = crate::measured::plausible_range(&name) else {
+                        continue;
+                    };
+                    let text = self.cell(r, c, j);
+                    match text.parse::<f64>() {
+                        Ok(x) if !range.contains(&x) => bail!(
+                            "run of line {}, record of step {}: `{name}` = {x} is outside the \
+                             plausible range [{}, {}] (a corrupt record?)",
+                            self.line,
+                            r.step,
+                            range.start(),
+                            range.end()
+                        ),
+                        _ => {}
+                    }
+                }
+            }
+        }
+        if let (Some(a), Some(b)) = (self.records.first(), self.records.last()) {
+            let span = self.time_s(b) - self.time_s(a);
+            if span > crate::measured::MAX_SPAN_S {
+                bail!(
+                    "run of line {}: the records span {span} s (steps {} to {}); at most {} s",
+                    self.line,
+                    a.step,
+                    b.step,
+                    crate::measured::MAX_SPAN_S
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes the run as a run-log CSV (an error, before anything is written, when a
+    /// value is implausible).
     pub fn write_csv<W: Write>(&self, out: W, source: &str) -> Result<()> {
         let channels = self.channels();
+        self.check_plausible(&channels)?;
         let rows = self.records.iter().map(|r| {
             channels
                 .iter()
@@ -430,9 +479,11 @@ pub fn main(args: DecodeArgs) -> Result<()> {
         if run.records.is_empty() {
             bail!("run {k} (line {}): no telemetry records", run.line);
         }
-        let file = std::fs::File::create(&path)
-            .with_context(|| format!("cannot create {}", path.display()))?;
-        run.write_csv(file, &source)?;
+        // Written whole once it is complete: a run refused half-way leaves no file.
+        let mut csv = Vec::new();
+        run.write_csv(&mut csv, &source)
+            .with_context(|| format!("{}", args.input.display()))?;
+        std::fs::write(&path, csv).with_context(|| format!("cannot create {}", path.display()))?;
         let last = run.records.last().map(|r| run.time_s(r)).unwrap_or(0.0);
         println!(
             "run {k}: {} records, 0 to {last:.3} s, {} missing, {} corrupt, end: {} -> {}",

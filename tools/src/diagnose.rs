@@ -77,7 +77,7 @@ pub struct DiagnoseArgs {
     pub report: Option<PathBuf>,
     /// Replay step, s (default 1 ms; the plant's semi-implicit contact keeps it accurate,
     /// see docs/diagnosis.md).
-    #[arg(long, default_value_t = replay::REPLAY_STEP_S)]
+    #[arg(long, default_value_t = replay::REPLAY_STEP_S, value_parser = crate::cli::step_s)]
     pub step_s: f64,
     /// Run logs (spec/measured-data.md, section 1).
     #[arg(required = true)]
@@ -275,6 +275,7 @@ impl Diagnoser {
             if hils_plant::Plant::<f64>::with_step(baseline, rail, 10.0, dt).is_err() {
                 dt = replay::replay_step(baseline, rail);
             }
+            replay::check_budget(log, dt)?;
             runs.push(Prepared::new(log, baseline, dt));
         }
         Ok(Self {

@@ -105,6 +105,69 @@ fn with(x: &[f64], c: f64) -> FrictionParams {
     }
 }
 
+/// Fewest distinct friction speeds and disc temperatures that can determine Eq (2)'s
+/// two factors (a level, an amplitude and a decay each).
+pub const MIN_DISTINCT: usize = 3;
+
+/// Degenerate data (too few distinct speeds or temperatures to determine Eq (2)) is an
+/// error, not a fit with meaningless intervals.
+fn check_spread(v: &[f64], t: &[f64]) -> Result<()> {
+    for (what, x) in [("friction speeds", v), ("disc temperatures", t)] {
+        let mut d: Vec<f64> = x.to_vec();
+        d.sort_by(f64::total_cmp);
+        d.dedup();
+        if d.len() < MIN_DISTINCT {
+            bail!(
+                "degenerate data: {} distinct {what} ({:?}); Eq (2) needs at least {MIN_DISTINCT} \
+                 to separate its level, amplitude and decay",
+                d.len(),
+                d
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Largest condition number of the column-scaled Jacobian for which (J^T J)^-1 is
+/// computed to a few digits in f64 (its condition is the square: 1e12 of 1e16).
+const MAX_CONDITION: f64 = 1e6;
+
+/// The 95 % half-widths and correlations of a fit, or NaN (undefined, with a warning)
+/// when they mean nothing: a numerically singular Jacobian (its inverse gives
+/// correlations outside [-1, 1]) or zero residuals (exact data: zero-width intervals).
+fn covariance_or_undefined(fit: &lsq::Fit, warnings: &mut Vec<String>) -> (Vec<f64>, Vec<f64>) {
+    let n = fit.x.len();
+    let undefined = (vec![f64::NAN; n], vec![f64::NAN; n * n]);
+    // Columns scaled to unit length: the condition of the parameters' correlation
+    // structure, independent of their units.
+    let condition = fit.jacobian.as_ref().map_or(f64::INFINITY, |j| {
+        let mut j = j.clone();
+        for mut c in j.column_iter_mut() {
+            let norm = c.norm();
+            if norm > 0.0 {
+                c /= norm;
+            }
+        }
+        let s = j.svd(false, false).singular_values;
+        s.max() / s.min()
+    });
+    if !(condition <= MAX_CONDITION) {
+        warnings.push(format!(
+            "confidence intervals and correlations undefined: the information matrix is \
+             numerically singular (condition {condition:.2e} > {MAX_CONDITION:.0e}); \
+             the points do not determine all five parameters"
+        ));
+        return undefined;
+    }
+    if !(fit.ssr > 0.0) {
+        warnings.push(
+            "confidence intervals undefined: the residuals are zero (exact data)".to_string(),
+        );
+        return (vec![f64::NAN; n], fit.correlation.clone());
+    }
+    (fit.ci95_half.clone(), fit.correlation.clone())
+}
+
 /// Fits Eq (2) to points (v_d m/s, T_d degC, mu) with c fixed.
 pub fn fit_points(v: &[f64], t: &[f64], mu: &[f64], c: f64) -> Result<FrictionFit> {
     let started = std::time::Instant::now();
@@ -112,6 +175,7 @@ pub fn fit_points(v: &[f64], t: &[f64], mu: &[f64], c: f64) -> Result<FrictionFi
     if n < 6 {
         bail!("{n} friction points: at least 6 are needed to fit 5 parameters");
     }
+    check_spread(v, t)?;
     let model = |x: &[f64]| -> Option<Vec<f64>> {
         let f = DiscPadFriction::<f64>::new(&with(x, c));
         Some((0..n).map(|i| f.mu_d(v[i], t[i], 0.0) - mu[i]).collect())
@@ -144,18 +208,16 @@ pub fn fit_points(v: &[f64], t: &[f64], mu: &[f64], c: f64) -> Result<FrictionFi
         bail!("the fit failed from every start")
     };
     let x = &best.x;
+    let mut warnings = Vec::new();
+    let (half, correlation) = covariance_or_undefined(&best, &mut warnings);
     let mut ci95 = std::collections::BTreeMap::new();
     for (i, name) in NAMES.iter().enumerate() {
-        ci95.insert(
-            name.to_string(),
-            [x[i] - best.ci95_half[i], x[i] + best.ci95_half[i]],
-        );
+        ci95.insert(name.to_string(), [x[i] - half[i], x[i] + half[i]]);
     }
-    let mut warnings = Vec::new();
     let mut correlated = Vec::new();
     for a in 0..5 {
         for b in a + 1..5 {
-            let r = best.correlation[a * 5 + b];
+            let r = correlation[a * 5 + b];
             if r.abs() > 0.95 || r.is_nan() {
                 correlated.push((NAMES[a].to_string(), NAMES[b].to_string(), r));
             }
@@ -172,7 +234,7 @@ pub fn fit_points(v: &[f64], t: &[f64], mu: &[f64], c: f64) -> Result<FrictionFi
                 .join(", ")
         ));
     }
-    if best.ci95_half.iter().any(|h| !h.is_finite()) {
+    if half.iter().any(|h| !h.is_finite()) {
         warnings
             .push("some confidence intervals are undefined (singular information matrix)".into());
     }

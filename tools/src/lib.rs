@@ -8,6 +8,7 @@
 #![allow(missing_docs)]
 
 pub mod bench;
+pub mod cli;
 pub mod decode;
 pub mod diagnose;
 pub mod fit_friction;

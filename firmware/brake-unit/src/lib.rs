@@ -15,6 +15,7 @@ pub mod unit;
 pub mod wsp;
 
 pub use unit::{
-    BrakeDemand, BrakeUnit, BrakeUnitParams, UnitConfig, UnitError, UnitOutputs, eb_pressure,
+    BrakeDemand, BrakeUnit, BrakeUnitParams, MAX_PERIOD_S, UnitConfig, UnitError, UnitOutputs,
+    eb_pressure,
 };
 pub use wsp::{Valve, WspTuning};

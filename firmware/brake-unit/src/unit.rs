@@ -198,6 +198,9 @@ impl BrakeUnitParams {
     }
 }
 
+/// Longest plant step or control cycle the unit accepts, s.
+pub const MAX_PERIOD_S: f64 = 1.0;
+
 /// Capacity of the dead-time delay line, in control cycles.
 pub const DELAY_CAPACITY: usize = 1024;
 
@@ -248,7 +251,7 @@ pub enum UnitError {
         /// The longest the delay line holds at this control cycle, s.
         max_s: f64,
     },
-    /// The control period or plant step is not positive and finite.
+    /// The control period or plant step is not in (0, [`MAX_PERIOD_S`]].
     BadPeriod,
 }
 
@@ -260,7 +263,9 @@ impl core::fmt::Display for UnitError {
                 f,
                 "brake_unit.dead_time = {dead_time_s} s exceeds the delay line ({max_s} s)"
             ),
-            UnitError::BadPeriod => f.write_str("control period and step must be positive"),
+            UnitError::BadPeriod => {
+                f.write_str("control period and plant step must be in (0, 1] s")
+            }
         }
     }
 }
@@ -373,13 +378,22 @@ pub struct UnitOutputs<F> {
 }
 
 impl<F: Real> BrakeUnit<F> {
+    /// Builds the unit (construction: kept out of line, so it stays in flash and out of
+    /// the board's CCM step code, which inlines only the step).
+    #[inline(never)]
     pub fn new(params: &Params, config: &UnitConfig) -> Result<Self, UnitError> {
         let dt = config.step_s;
-        if !(dt > 0.0 && dt.is_finite() && config.control_period_s > 0.0) {
+        // Plant step and control cycle: positive, finite and at most 1 s (NaN fails too).
+        let period_ok = |s: f64| s > 0.0 && s <= MAX_PERIOD_S;
+        if !(period_ok(dt) && period_ok(config.control_period_s)) {
             return Err(UnitError::BadPeriod);
         }
+        // Every value the unit is built from: the plant's (supply pressure, caliper, mass
+        // of the EB pressure), `[brake_unit]` and the WSP tuning.
+        params.validate().map_err(UnitError::Params)?;
         let u = &config.params;
         u.validate().map_err(UnitError::Params)?;
+        config.wsp.validate().map_err(UnitError::Params)?;
         let steps_per_cycle = ((config.control_period_s / dt) + 0.5).max(1.0) as u32;
         let cycle = steps_per_cycle as f64 * dt;
         let delay = (u.dead_time_s / cycle + 0.5) as usize;

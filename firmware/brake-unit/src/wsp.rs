@@ -113,6 +113,26 @@ impl Default for WspTuning {
     }
 }
 
+impl WspTuning {
+    /// Checks every value against its physical range (NaN and inf are out of range); the
+    /// error names the field (`wsp.<field>`).
+    pub fn validate(&self) -> Result<(), hils_plant::ParamError> {
+        use hils_plant::params::check;
+        check("wsp.deficit_min", self.deficit_min, 0.0, 10.0)?;
+        check("wsp.deficit_ratio", self.deficit_ratio, 0.0, 1.0)?;
+        check("wsp.reapply_ratio", self.reapply_ratio, 0.0, 1.0)?;
+        check("wsp.decel_threshold", self.decel_threshold, 0.0, 50.0)?;
+        check("wsp.recover_accel", self.recover_accel, -50.0, 50.0)?;
+        check("wsp.caught_up_accel", self.caught_up_accel, -50.0, 50.0)?;
+        check("wsp.lock_ratio", self.lock_ratio, 0.0, 1.0)?;
+        check("wsp.vent_max", self.vent_max, 0.0, 60.0)?;
+        check("wsp.hold_max", self.hold_max, 0.0, 60.0)?;
+        check("wsp.min_speed", self.min_speed, 0.0, 20.0)?;
+        check("wsp.ref_max_decel", self.ref_max_decel, 0.0, 50.0)?;
+        check("wsp.accel_filter", self.accel_filter, 0.0, 10.0)
+    }
+}
+
 /// Precomputed tuning in the unit's float type, for a control period `dt`.
 #[derive(Clone, Copy, Debug)]
 pub struct WspConstants<F> {

@@ -604,7 +604,11 @@ impl<F: Real> Plant<F> {
         for j in 0..WHEELSETS {
             let target = self.clamp_force_input(j, inputs[j], &mut flags);
             let pad = &mut self.s.pad_force[j];
-            *pad += (target - *pad) * self.k.actuator_lag_rate;
+            // First-order lag, written from the target so that rate 1 (no lag) gives the
+            // target exactly, and kept between the old value and the target: rounding may
+            // not overshoot the (clamped) target.
+            let lagged = target - (target - *pad) * (F::ONE - self.k.actuator_lag_rate);
+            *pad = lagged.clamp_to(pad.min(target), pad.max(target));
             clamp[j] = *pad;
         }
 

@@ -70,9 +70,15 @@ impl PulseTimer {
         self.clock_hz as f32 / 500.0
     }
 
+    /// Largest usable ARR + 1: a PWM period needs at least 2 counts, whatever the
+    /// configuration says (a `max_period` below 2 is a configuration error, not a panic).
+    fn usable_max_period(&self) -> u32 {
+        self.max_period.max(2)
+    }
+
     /// The silent setting: output low, 0.1 ms period.
     pub fn silent(&self) -> PulseRegisters {
-        let period = (self.clock_hz / 10_000).clamp(2, self.max_period);
+        let period = (self.clock_hz / 10_000).clamp(2, self.usable_max_period());
         PulseRegisters {
             psc: 0,
             arr: period - 1,
@@ -82,14 +88,14 @@ impl PulseTimer {
 
     /// Registers for a frequency (Hz); silent below [`MIN_FREQUENCY_HZ`] or for NaN.
     pub fn registers(&self, frequency_hz: f32) -> PulseRegisters {
-        if !(frequency_hz >= MIN_FREQUENCY_HZ) {
+        if !(frequency_hz >= MIN_FREQUENCY_HZ) || self.clock_hz == 0 {
             return self.silent();
         }
         let f = frequency_hz.min(self.max_frequency_hz());
         // Counts of one period at the undivided clock (f >= 0.5 Hz: at most 2 f_clk, which
         // fits a u64 and, for f_clk <= 2.1 GHz, a u32).
         let counts = (self.clock_hz as f32 / f + 0.5) as u64;
-        let max_period = self.max_period.max(2) as u64;
+        let max_period = self.usable_max_period() as u64;
         let prescale = counts.div_ceil(max_period).clamp(1, 1 << 16);
         let period = ((counts + prescale / 2) / prescale).clamp(2, max_period);
         PulseRegisters {
@@ -186,6 +192,23 @@ mod tests {
     }
 
     proptest! {
+        /// Any timer configuration (a `max_period` below 2 or a stopped clock included) and
+        /// any frequency: no panic, the registers fit the counter, a clock of 0 is silent.
+        #[test]
+        fn any_configuration_any_frequency(
+            clock_hz in proptest::num::u32::ANY,
+            max_period in prop_oneof![0u32..4, proptest::num::u32::ANY],
+            f in proptest::num::f32::ANY,
+        ) {
+            let timer = PulseTimer { clock_hz, max_period };
+            let r = timer.registers(f);
+            prop_assert!(r.arr >= 1 && r.arr < max_period.max(2));
+            prop_assert!(r.ccr <= r.arr);
+            if clock_hz == 0 || !(f >= MIN_FREQUENCY_HZ) {
+                prop_assert!(r.is_silent());
+            }
+        }
+
         #[test]
         fn any_speed_any_teeth(omega in proptest::num::f32::ANY, teeth in 1u16..=1000) {
             let f = wheel_frequency_hz(omega, teeth);

@@ -1145,3 +1145,33 @@ pub fn replay_step(params: &Params, rail: Rail) -> f64 {
     }
     1e-4
 }
+
+/// Most plant steps one replay may take: its traces hold `TRACE + WHEELSETS` f64 and a
+/// map entry per step (about 210 bytes), so 1 M steps are about 210 MB per replay (1000 s
+/// at 1 ms). Longer is refused before anything is allocated (issue 12).
+pub const MAX_REPLAY_STEPS: f64 = 1.0e6;
+
+/// What a log asks of a replay at step `dt_s`: an error naming the file, its last row
+/// and its time column when the steps exceed [`MAX_REPLAY_STEPS`].
+pub fn check_budget(log: &RunLog, dt_s: f64) -> Result<(), crate::measured::MeasuredError> {
+    let span_s = match (log.t_s.first(), log.t_s.last()) {
+        (Some(a), Some(b)) => b - a,
+        _ => 0.0,
+    };
+    let steps = span_s / dt_s;
+    if steps <= MAX_REPLAY_STEPS {
+        return Ok(());
+    }
+    let bytes = steps * ((TRACE + WHEELSETS) * 8 + 8) as f64;
+    Err(crate::measured::MeasuredError {
+        file: log.path.clone(),
+        line: 0,
+        row: log.len(),
+        column: hils_sil::record::run_log::T.name(0).to_string(),
+        message: format!(
+            "the log spans {span_s} s: a replay at {dt_s} s steps would take {steps:.0} steps \
+             (about {:.0} MB); at most {MAX_REPLAY_STEPS:.0} steps per replay",
+            bytes / 1e6
+        ),
+    })
+}

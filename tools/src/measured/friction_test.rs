@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use hils_sil::record::friction_test::{F_CLAMP, F_FRICTION, MU, T, T_DISC, V_FRICTION};
 
-use super::table::{MeasuredError, Metadata, Table, check_non_negative, check_time, require_all};
+use super::table::{MeasuredError, Metadata, Table};
 
 /// A brake-dynamometer friction test (spec section 2): points of (friction speed, disc
 /// temperature rise, friction coefficient).
@@ -31,43 +31,29 @@ pub struct FrictionTest {
 /// force are brake-released samples: mu is undefined there, they are skipped (counted).
 pub const RELEASED_SHARE: f64 = 0.05;
 
-pub(crate) fn from_table(table: Table) -> Result<FrictionTest, MeasuredError> {
-    let required = |c: hils_sil::record::Channel| table.required(c.name(0), "friction test");
+/// A friction test from its table (every cell already checked against its column's
+/// limits; the time, when present, measured and increasing).
+pub(crate) fn from_table(mut table: Table) -> Result<FrictionTest, MeasuredError> {
+    let required = |t: &Table, c: hils_sil::record::Channel| t.required(c.name(0), "friction test");
     table.require_rows()?;
     let mut used = vec![false; table.header.len()];
-    let i_v = required(V_FRICTION)?;
-    let i_t = required(T_DISC)?;
+    let i_v = required(&table, V_FRICTION)?;
+    let i_t = required(&table, T_DISC)?;
     used[i_v] = true;
     used[i_t] = true;
-    let v = table.numeric(i_v)?;
-    check_non_negative(&table, i_v, &v, 0.3, "friction speed")?;
-    let temp = table.numeric(i_t)?;
-    let time = match table.index(T.name(0)) {
-        Some(i) => {
-            used[i] = true;
-            let t = table.numeric(i)?;
-            require_all(&table, i, &t)?;
-            check_time(&table, i, &t)?;
-            Some(t)
-        }
-        None => None,
-    };
+    let v = table.numeric(i_v);
+    let temp = table.numeric(i_t);
+    let time = table.index(T.name(0)).map(|i| {
+        used[i] = true;
+        table.numeric(i)
+    });
     enum MuSource {
         Direct(Vec<f64>),
         Forces(Vec<f64>, Vec<f64>),
     }
     let source = if let Some(i) = table.index(MU.name(0)) {
         used[i] = true;
-        let mu = table.numeric(i)?;
-        if let Some(r) = mu.iter().position(|&m| m < 0.0 || m > 2.0) {
-            return Err(table.err(
-                table.rows[r].0,
-                r + 1,
-                "mu",
-                format!("friction coefficient {} outside [0, 2]", mu[r]),
-            ));
-        }
-        MuSource::Direct(mu)
+        MuSource::Direct(table.numeric(i))
     } else {
         let i_c = table.index(F_CLAMP.name(0));
         let i_f = table.index(F_FRICTION.name(0));
@@ -75,10 +61,7 @@ pub(crate) fn from_table(table: Table) -> Result<FrictionTest, MeasuredError> {
             (Some(i_c), Some(i_f)) => {
                 used[i_c] = true;
                 used[i_f] = true;
-                let c = table.numeric(i_c)?;
-                check_non_negative(&table, i_c, &c, 50.0, "clamp force")?;
-                let f = table.numeric(i_f)?;
-                MuSource::Forces(c, f)
+                MuSource::Forces(table.numeric(i_c), table.numeric(i_f))
             }
             _ => {
                 return Err(table.err(
@@ -112,7 +95,7 @@ pub(crate) fn from_table(table: Table) -> Result<FrictionTest, MeasuredError> {
             .fold(0.0f64, |m, &x| m.max(x)),
         MuSource::Direct(_) => 0.0,
     };
-    for r in 0..table.rows.len() {
+    for r in 0..table.rows() {
         let mu = match &source {
             MuSource::Direct(mu) => mu[r],
             MuSource::Forces(c, f) => {
@@ -124,10 +107,10 @@ pub(crate) fn from_table(table: Table) -> Result<FrictionTest, MeasuredError> {
                 } else {
                     let mu = f[r] / c[r];
                     if !(0.0..=2.0).contains(&mu) {
-                        return Err(table.err(
-                            table.rows[r].0,
-                            r + 1,
-                            "f_friction_n",
+                        let i_f = table.index(F_FRICTION.name(0)).unwrap_or(0);
+                        return Err(table.row_err(
+                            r,
+                            i_f,
                             format!(
                                 "friction coefficient f_friction / f_clamp = {mu:.4} outside [0, 2]"
                             ),

@@ -9,29 +9,35 @@
 //!
 //! # Error behaviour (the spec's "Bad input")
 //!
-//! * A missing required column, a non-numeric cell in a numeric column, a time that does not
-//!   increase, a NaN/inf cell, or a physically impossible value (negative pressure, force,
-//!   speed or load beyond noise) is an error that names the file, the line, the data row and
-//!   the column ([`MeasuredError`]).
+//! The reader streams ([`table`]): row by row into typed columns, each cell checked as it
+//! is read. A missing required column, a non-numeric cell in a numeric column, a NaN/inf
+//! cell, a time that does not increase or spans more than [`MAX_SPAN_S`], or a value
+//! outside its column's plausible range ([`limits`]: absolute physical bounds, one table
+//! shared with `docs/measured-data-limits.md`) is an error that names the file, the line,
+//! the data row and the column ([`MeasuredError`]). A UTF-8 byte-order mark before the
+//! first line is not part of the text.
+//!
 //! * An empty cell means "not measured at this sample": it is kept as missing (`NaN` in the
 //!   channel), never invented; every column's count of missing cells is in
 //!   [`RunLog::missing`], and every tool that skips or repairs something says how many and
 //!   why ([`RunLog::notes`], [`FrictionTest::notes`]).
-//! * Small negative readings within the noise band (see [`negative_tolerance`]) are kept as
+//! * Small negative readings within a column's noise band (its lower limit) are kept as
 //!   measured (a zero-centred sensor reads slightly negative at rest).
 
 pub mod friction_test;
+pub mod limits;
 pub mod run_log;
 pub mod table;
 
+use std::io::BufReader;
 use std::path::Path;
 
 pub use friction_test::{FrictionTest, RELEASED_SHARE};
+pub use limits::{Limit, MAX_SPAN_S, plausible_range};
 pub use run_log::{PerWheelset, RunLog};
-pub use table::{MeasuredError, Metadata, negative_tolerance, noise_sigma};
+pub use table::{MeasuredError, Metadata, TextColumn, noise_sigma};
 
-use hils_sil::record::{friction_test as ft, run_log as rl};
-use table::{file_error, parse_table};
+use table::{Kind, Table, file_error, read_table};
 
 /// Either kind of measured file.
 #[derive(Clone, Debug)]
@@ -41,28 +47,27 @@ pub enum Measured {
 }
 
 /// Reads a measured file of either kind (decided by its columns: `v_friction_mps` makes a
-/// friction test, `v_ref_mps` a run log).
+/// friction test, `v_ref_mps` a run log), streaming: the file is never held whole.
 pub fn read(path: &Path) -> Result<Measured, MeasuredError> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| file_error(path, format!("cannot read: {e}")))?;
-    parse(path, &text)
+    let file =
+        std::fs::File::open(path).map_err(|e| file_error(path, format!("cannot read: {e}")))?;
+    from_table(read_table(path, BufReader::with_capacity(1 << 16, file))?)
 }
 
 /// Parses the text of a measured file of either kind (`path` names it in messages).
 pub fn parse(path: &Path, text: &str) -> Result<Measured, MeasuredError> {
-    let table = parse_table(path, text)?;
-    if table.has(ft::V_FRICTION.name(0)) {
-        friction_test::from_table(table).map(Measured::Friction)
-    } else if table.has(rl::V_REF.name(0)) || table.has(rl::OMEGA.name(0)) {
-        run_log::from_table(table).map(Measured::Run)
-    } else {
-        Err(table.err(
-            table.header_line,
-            0,
-            "",
-            "neither a run log (needs `t_s`, `v_ref_mps`, `omega1_radps`..) nor a friction test \
-             (needs `v_friction_mps`, `t_disc_c`, `mu` or `f_clamp_n` + `f_friction_n`)",
-        ))
+    parse_bytes(path, text.as_bytes())
+}
+
+/// Parses the bytes of a measured file of either kind (`path` names it in messages).
+pub fn parse_bytes(path: &Path, bytes: &[u8]) -> Result<Measured, MeasuredError> {
+    from_table(read_table(path, bytes)?)
+}
+
+fn from_table(table: Table) -> Result<Measured, MeasuredError> {
+    match table.kind {
+        Kind::Friction => friction_test::from_table(table).map(Measured::Friction),
+        Kind::Run => run_log::from_table(table).map(Measured::Run),
     }
 }
 
@@ -168,5 +173,101 @@ t_s,v_ref_mps,omega1_radps,omega2_radps,omega3_radps,omega4_radps,p_cyl1_pa,p_cy
         assert_eq!(f.mu, vec![0.4]);
         assert_eq!(f.skipped, 2);
         assert_eq!(f.notes.len(), 2);
+    }
+
+    /// Issue 12 item 3: a UTF-8 byte-order mark before `#` metadata is not part of the
+    /// text: the metadata stays metadata and errors name the right line.
+    #[test]
+    fn bom_before_metadata_is_dropped() {
+        let text = format!("\u{feff}{GOOD}");
+        let r = parse_run_log(p(), &text).unwrap();
+        assert_eq!(r.metadata.get("source"), Some("test"));
+        assert_eq!(r.len(), 2);
+        let bad = text.replace("1000,1000,,1000", "1000,abc,,1000");
+        let e = parse_run_log(p(), &bad).unwrap_err();
+        assert_eq!((e.line, e.row, e.column.as_str()), (6, 2, "p_cyl2_pa"));
+        // A BOM anywhere else is a cell's text: an error, not silently dropped.
+        let bad = GOOD.replace("0.01,33.2", "\u{feff}0.01,33.2");
+        let e = parse_run_log(p(), &bad).unwrap_err();
+        assert_eq!((e.line, e.row, e.column.as_str()), (6, 2, "t_s"));
+    }
+
+    /// Issue 12 item 4: every value is checked against its column's absolute limits; an
+    /// outlier in another row does not widen them, and there are upper bounds.
+    #[test]
+    fn outliers_do_not_hide_impossible_values() {
+        let outlier = GOOD.replace("1000,1000,,1000", "1e12,1000,,1000");
+        let e = parse_run_log(p(), &outlier).unwrap_err();
+        assert_eq!((e.line, e.row, e.column.as_str()), (6, 2, "p_cyl1_pa"));
+        assert!(e.message.contains("plausible range"), "{e}");
+        // -1e9 Pa after a large (but plausible) pressure in an earlier row.
+        let big_then_negative = GOOD
+            .replace("0,0,0,0,a", "1.9e6,0,0,0,a")
+            .replace("1000,1000,,1000", "-1e9,1000,,1000");
+        let e = parse_run_log(p(), &big_then_negative).unwrap_err();
+        assert_eq!((e.row, e.column.as_str()), (2, "p_cyl1_pa"));
+        let fast = GOOD.replace("0.01,33.2", "0.01,1e300");
+        let e = parse_run_log(p(), &fast).unwrap_err();
+        assert_eq!((e.line, e.row, e.column.as_str()), (6, 2, "v_ref_mps"));
+        // Within the noise band at rest: kept as measured.
+        let noise = GOOD.replace("1000,1000,,1000", "-3000,1000,,1000");
+        assert_eq!(
+            parse_run_log(p(), &noise).unwrap().p_cyl_pa[0]
+                .as_ref()
+                .unwrap()[1],
+            -3000.0
+        );
+    }
+
+    /// Issue 12 item 1 (reader side): a log spanning more than `MAX_SPAN_S` (milliseconds
+    /// logged as seconds) is an error naming the time column and the row.
+    #[test]
+    fn time_span_is_bounded() {
+        let mut text = String::from(
+            "t_s,v_ref_mps,omega1_radps,omega2_radps,omega3_radps,omega4_radps,f_clamp1_n,f_clamp2_n,f_clamp3_n,f_clamp4_n\n",
+        );
+        for i in 0..10 {
+            text += &format!("{},30,70,70,70,70,0,0,0,0\n", i as f64 * 30_000.0 / 9.0);
+        }
+        let e = parse_run_log(p(), &text).unwrap_err();
+        assert_eq!((e.line, e.row, e.column.as_str()), (4, 3, "t_s"));
+        assert!(e.message.contains("spans"), "{e}");
+    }
+
+    /// The streaming file reader and the in-memory parser agree; the `cmd` column is
+    /// interned, not a `String` per row.
+    #[test]
+    fn file_and_text_read_the_same() {
+        let dir = std::env::temp_dir().join(format!("hils-reader-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("x.csv");
+        let text = GOOD
+            .replace(",extra", ",cmd")
+            .replace(",a\n", ",EB\n")
+            .replace(",b\n", ",EB\n");
+        std::fs::write(&path, &text).unwrap();
+        let a = read_run_log(&path).unwrap();
+        let b = parse_run_log(&path, &text).unwrap();
+        assert_eq!(a.t_s, b.t_s);
+        assert_eq!(a.omega_radps, b.omega_radps);
+        let cmd = a.cmd.unwrap();
+        assert_eq!((cmd.len(), cmd.values.len()), (2, 1));
+        assert_eq!(cmd[1], "EB");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// The doc's limits table is the reader's table.
+    #[test]
+    fn limits_doc_is_the_readers_table() {
+        let doc = include_str!("../../../docs/measured-data-limits.md");
+        let (_, rest) = doc
+            .split_once("<!-- limits:begin -->")
+            .expect("begin marker");
+        let (table, _) = rest.split_once("<!-- limits:end -->").expect("end marker");
+        assert_eq!(
+            table.trim(),
+            limits::markdown().trim(),
+            "regenerate with `hils limits`"
+        );
     }
 }

@@ -9,7 +9,7 @@ use hils_sil::record::run_log::{
     A_X, CMD, F_BRAKE, F_CLAMP, OMEGA, P_CYL, Q, T, T_DISC, V_REF, WSP,
 };
 
-use super::table::{MeasuredError, Metadata, Table, check_non_negative, check_time, require_all};
+use super::table::{MeasuredError, Metadata, Table, TextColumn};
 
 /// One of the four wheelsets' values of a per-wheelset quantity; `None` when the column is
 /// absent. Values are `NaN` where a cell was empty (not measured at that sample).
@@ -33,7 +33,8 @@ pub struct RunLog {
     pub q_n: PerWheelset,
     pub wsp: PerWheelset,
     pub a_x_mps2: Option<Vec<f64>>,
-    pub cmd: Option<Vec<String>>,
+    /// The `cmd` column's texts (interned: one copy of each distinct text).
+    pub cmd: Option<TextColumn>,
     /// Columns the project does not use (kept by name, ignored).
     pub unknown_columns: Vec<String>,
     /// Empty cells per column (not measured at that sample).
@@ -74,87 +75,51 @@ impl RunLog {
 /// The spec section the run-log errors name.
 const KIND: &str = "run log";
 
-/// A per-wheelset channel's reading rule: the smallest noise band of its negative-value
-/// check (`floor`, with what the quantity is called), or none when it may be negative.
-struct Reading {
-    channel: Channel,
-    non_negative: Option<(f64, &'static str)>,
-}
-
 /// The optional per-wheelset channels, in the order of the schema.
-const OPTIONAL: [Reading; 6] = [
-    Reading {
-        channel: P_CYL,
-        non_negative: Some((5.0e3, "pressure")),
-    },
-    Reading {
-        channel: F_CLAMP,
-        non_negative: Some((200.0, "clamp force")),
-    },
-    Reading {
-        channel: F_BRAKE,
-        non_negative: None,
-    },
-    Reading {
-        channel: T_DISC,
-        non_negative: None,
-    },
-    Reading {
-        channel: Q,
-        non_negative: Some((1000.0, "axle load")),
-    },
-    Reading {
-        channel: WSP,
-        non_negative: None,
-    },
-];
+const OPTIONAL: [Channel; 6] = [P_CYL, F_CLAMP, F_BRAKE, T_DISC, Q, WSP];
 
 /// The columns taken so far and their empty-cell counts.
-struct Taken<'a> {
-    table: &'a Table,
+struct Taken {
+    table: Table,
     used: Vec<bool>,
     missing: BTreeMap<String, usize>,
 }
 
-impl<'a> Taken<'a> {
-    fn new(table: &'a Table) -> Self {
+impl Taken {
+    fn new(table: Table) -> Self {
         Self {
-            table,
             used: vec![false; table.header.len()],
+            table,
             missing: BTreeMap::new(),
         }
     }
 
-    /// A numeric column, marked used, its empty cells counted.
-    fn take(&mut self, idx: usize) -> Result<Vec<f64>, MeasuredError> {
+    /// A numeric column, moved out of the table, marked used, its empty cells counted.
+    fn take(&mut self, idx: usize) -> Vec<f64> {
         self.used[idx] = true;
-        let v = self.table.numeric(idx)?;
+        let v = self.table.numeric(idx);
         let n = v.iter().filter(|x| x.is_nan()).count();
         if n > 0 {
             self.missing.insert(self.table.header[idx].clone(), n);
         }
-        Ok(v)
+        v
     }
 
     /// A required column of the run log.
-    fn required(&mut self, c: Channel, j: usize) -> Result<(usize, Vec<f64>), MeasuredError> {
+    fn required(&mut self, c: Channel, j: usize) -> Result<Vec<f64>, MeasuredError> {
         let i = self.table.required(c.name(j), KIND)?;
-        Ok((i, self.take(i)?))
+        Ok(self.take(i))
     }
 
     /// The four columns of an optional per-wheelset channel (those present).
-    fn per_wheelset(&mut self, r: &Reading) -> Result<PerWheelset, MeasuredError> {
+    fn per_wheelset(&mut self, c: Channel) -> PerWheelset {
         let mut out: PerWheelset = Default::default();
         for (j, slot) in out.iter_mut().enumerate() {
-            if let Some(i) = self.table.index(r.channel.name(j)) {
-                let v = self.take(i)?;
-                if let Some((floor, what)) = r.non_negative {
-                    check_non_negative(self.table, i, &v, floor, what)?;
-                }
-                *slot = Some(v);
+            if let Some(i) = self.table.index(c.name(j)) {
+                *slot = Some(self.take(i));
             }
         }
-        Ok(out)
+        out
     }
 
     /// The columns nobody took, by name.
@@ -194,12 +159,7 @@ fn check_inputs(
                 .position(|&x| !(x.is_nan() || x == 0.0 || x == 1.0))
             {
                 let idx = table.index(WSP.name(j)).unwrap_or(0);
-                return Err(table.err(
-                    table.rows[r].0,
-                    r + 1,
-                    &table.header[idx],
-                    format!("`{}` is not 0 or 1", w[r]),
-                ));
+                return Err(table.row_err(r, idx, format!("`{}` is not 0 or 1", w[r])));
             }
         }
     }
@@ -223,47 +183,36 @@ fn rail_of(table: &Table) -> Result<Option<Rail>, MeasuredError> {
     }
 }
 
-/// A run log from its table.
+/// A run log from its table (every cell already checked against its column's limits).
 pub(crate) fn from_table(table: Table) -> Result<RunLog, MeasuredError> {
     table.require_rows()?;
-    let mut taken = Taken::new(&table);
-    let (i_t, t_s) = taken.required(T, 0)?;
-    require_all(&table, i_t, &t_s)?;
-    check_time(&table, i_t, &t_s)?;
-    let (i_v, v_ref_mps) = taken.required(V_REF, 0)?;
-    check_non_negative(&table, i_v, &v_ref_mps, 0.3, "speed")?;
-    let mut omega: [Vec<f64>; WHEELSETS] = Default::default();
-    for (j, slot) in omega.iter_mut().enumerate() {
-        let (i, v) = taken.required(OMEGA, j)?;
-        check_non_negative(&table, i, &v, 0.7, "wheel speed")?;
-        *slot = v;
-    }
-    let [p_cyl, f_clamp, f_brake, t_disc, q, wsp_reading] = &OPTIONAL;
-    let p_cyl_pa = taken.per_wheelset(p_cyl)?;
-    let f_clamp_n = taken.per_wheelset(f_clamp)?;
-    let f_brake_n = taken.per_wheelset(f_brake)?;
-    let t_disc_c = taken.per_wheelset(t_disc)?;
-    let q_n = taken.per_wheelset(q)?;
-    let wsp = taken.per_wheelset(wsp_reading)?;
-    check_inputs(&table, &p_cyl_pa, &f_clamp_n, &wsp)?;
-    let a_x_mps2 = match table.index(A_X.name(0)) {
-        Some(i) => Some(taken.take(i)?),
-        None => None,
-    };
-    let cmd = table.index(CMD.name(0)).map(|i| {
-        taken.used[i] = true;
-        table
-            .rows
-            .iter()
-            .map(|(_, c)| c[i].trim().to_string())
-            .collect()
-    });
-    let unknown_columns = taken.unknown();
-    let missing = taken.missing;
     let rail = rail_of(&table)?;
     let path = table.path.clone();
     table.metadata.number("initial_speed_kmh", &path)?;
     table.metadata.number("eb_command_s", &path)?;
+    let mut taken = Taken::new(table);
+    let t_s = taken.required(T, 0)?;
+    let v_ref_mps = taken.required(V_REF, 0)?;
+    let mut omega: [Vec<f64>; WHEELSETS] = Default::default();
+    for (j, slot) in omega.iter_mut().enumerate() {
+        *slot = taken.required(OMEGA, j)?;
+    }
+    let [p_cyl_pa, f_clamp_n, f_brake_n, t_disc_c, q_n, wsp] =
+        OPTIONAL.map(|c| taken.per_wheelset(c));
+    check_inputs(&taken.table, &p_cyl_pa, &f_clamp_n, &wsp)?;
+    let a_x_mps2 = match taken.table.index(A_X.name(0)) {
+        Some(i) => Some(taken.take(i)),
+        None => None,
+    };
+    let cmd = match taken.table.index(CMD.name(0)) {
+        Some(i) => {
+            taken.used[i] = true;
+            taken.table.text(i)
+        }
+        None => None,
+    };
+    let unknown_columns = taken.unknown();
+    let missing = taken.missing;
     let notes = missing
         .iter()
         .map(|(col, n)| {
@@ -274,7 +223,7 @@ pub(crate) fn from_table(table: Table) -> Result<RunLog, MeasuredError> {
         .collect();
     Ok(RunLog {
         path,
-        metadata: table.metadata,
+        metadata: taken.table.metadata,
         rail,
         t_s,
         v_ref_mps,

@@ -3,9 +3,13 @@
 //! formats share.
 
 use std::fmt;
+use std::io::{BufRead, Read};
 use std::path::{Path, PathBuf};
 
 use hils_sil::record::ColumnName;
+use hils_sil::record::{friction_test as ft, run_log as rl};
+
+use super::limits::{self, Limit};
 
 /// A reading error that names the file, the line, the data row and the column.
 #[derive(Clone, Debug, PartialEq)]
@@ -90,28 +94,76 @@ pub fn noise_sigma(t: &[f64], x: &[f64]) -> f64 {
     d[d.len() / 2] / 0.6745
 }
 
-/// Lower bound below which a reading of a non-negative quantity is physically impossible
-/// (not noise): the largest of 2 % of the column's largest magnitude, six times the
-/// column's noise (robust estimate) and `floor`.
-pub fn negative_tolerance(values: &[f64], floor: f64) -> f64 {
-    let max = values
-        .iter()
-        .filter(|x| x.is_finite())
-        .fold(0.0f64, |m, x| m.max(x.abs()));
-    let index: Vec<f64> = (0..values.len()).map(|i| i as f64).collect();
-    (0.02 * max)
-        .max(6.0 * noise_sigma(&index, values))
-        .max(floor)
+/// A text column, interned: each distinct text once, a code per row (no `String` per
+/// cell). `column[i]` is row i's text.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TextColumn {
+    /// The distinct texts, in order of first appearance.
+    pub values: Vec<String>,
+    /// Per row: the index of its text in `values`.
+    pub codes: Vec<u32>,
 }
 
-/// The raw table: metadata, header and text cells, with line numbers.
+impl TextColumn {
+    pub fn len(&self) -> usize {
+        self.codes.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.codes.is_empty()
+    }
+    fn push(&mut self, text: &str) {
+        let code = match self.values.iter().position(|v| v == text) {
+            Some(c) => c,
+            None => {
+                self.values.push(text.to_string());
+                self.values.len() - 1
+            }
+        };
+        self.codes.push(code as u32);
+    }
+    /// The rows' texts in order.
+    pub fn iter(&self) -> impl Iterator<Item = &str> {
+        self.codes.iter().map(|&c| self.values[c as usize].as_str())
+    }
+}
+
+impl std::ops::Index<usize> for TextColumn {
+    type Output = String;
+    fn index(&self, row: usize) -> &String {
+        &self.values[self.codes[row] as usize]
+    }
+}
+
+/// Most distinct texts a text column may hold (a command column has a handful).
+const MAX_DISTINCT_TEXTS: usize = 1024;
+
+/// How a column is read.
+pub(crate) enum Cells {
+    /// A known numeric column, checked against its [`Limit`] (empty cell = NaN).
+    Numeric(Vec<f64>, Limit),
+    /// A known text column.
+    Text(TextColumn),
+    /// A column the project does not use (kept by name, not read).
+    Ignored,
+}
+
+/// The kind of a measured file, from its header.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum Kind {
+    Run,
+    Friction,
+}
+
+/// The table read: metadata, header and typed columns, with the line of every row.
 pub(crate) struct Table {
     pub(crate) path: PathBuf,
     pub(crate) metadata: Metadata,
     pub(crate) header: Vec<String>,
     pub(crate) header_line: usize,
-    /// (line, cells)
-    pub(crate) rows: Vec<(usize, Vec<String>)>,
+    pub(crate) kind: Kind,
+    pub(crate) columns: Vec<Cells>,
+    /// 1-based file line of each data row.
+    pub(crate) lines: Vec<u32>,
 }
 
 impl Table {
@@ -131,6 +183,20 @@ impl Table {
         }
     }
 
+    /// An error about data row `r` (0-based) of column `idx`.
+    pub(crate) fn row_err(
+        &self,
+        r: usize,
+        idx: usize,
+        message: impl Into<String>,
+    ) -> MeasuredError {
+        self.err(self.lines[r] as usize, r + 1, &self.header[idx], message)
+    }
+
+    pub(crate) fn rows(&self) -> usize {
+        self.lines.len()
+    }
+
     pub(crate) fn column(&self, name: &str) -> Option<usize> {
         self.header.iter().position(|h| h == name)
     }
@@ -138,11 +204,6 @@ impl Table {
     /// The index of a schema column.
     pub(crate) fn index(&self, name: ColumnName) -> Option<usize> {
         self.column(&name.to_string())
-    }
-
-    /// Whether the table has a schema column.
-    pub(crate) fn has(&self, name: ColumnName) -> bool {
-        self.index(name).is_some()
     }
 
     /// A required column of a file kind (`kind` names the spec section), or the error.
@@ -159,58 +220,71 @@ impl Table {
 
     /// Fails on a file without data rows.
     pub(crate) fn require_rows(&self) -> Result<(), MeasuredError> {
-        if self.rows.is_empty() {
+        if self.lines.is_empty() {
             return Err(self.err(self.header_line, 0, "", "no data rows"));
         }
         Ok(())
     }
 
-    /// A numeric column: empty cells -> NaN; other non-numbers and NaN/inf -> error.
-    pub(crate) fn numeric(&self, idx: usize) -> Result<Vec<f64>, MeasuredError> {
-        let name = &self.header[idx];
-        let mut out = Vec::with_capacity(self.rows.len());
-        for (r, (line, cells)) in self.rows.iter().enumerate() {
-            let cell = cells[idx].trim();
-            if cell.is_empty() {
-                out.push(f64::NAN);
-                continue;
-            }
-            match cell.parse::<f64>() {
-                Ok(x) if x.is_finite() => out.push(x),
-                Ok(x) => {
-                    return Err(self.err(
-                        *line,
-                        r + 1,
-                        name,
-                        format!("`{cell}` is not finite ({x})"),
-                    ));
-                }
-                Err(_) => {
-                    return Err(self.err(*line, r + 1, name, format!("`{cell}` is not a number")));
-                }
+    /// Takes a numeric column out of the table (moved, not copied).
+    pub(crate) fn numeric(&mut self, idx: usize) -> Vec<f64> {
+        match std::mem::replace(&mut self.columns[idx], Cells::Ignored) {
+            Cells::Numeric(v, _) => v,
+            other => {
+                self.columns[idx] = other;
+                Vec::new()
             }
         }
-        Ok(out)
+    }
+
+    /// Takes a text column out of the table.
+    pub(crate) fn text(&mut self, idx: usize) -> Option<TextColumn> {
+        match std::mem::replace(&mut self.columns[idx], Cells::Ignored) {
+            Cells::Text(t) => Some(t),
+            other => {
+                self.columns[idx] = other;
+                None
+            }
+        }
     }
 }
 
-pub(crate) fn parse_table(path: &Path, text: &str) -> Result<Table, MeasuredError> {
-    let err = |line: usize, message: String| MeasuredError {
-        file: path.to_path_buf(),
-        line,
-        row: 0,
-        column: String::new(),
-        message,
-    };
+/// The byte-order mark some editors write before the first line.
+const BOM: &str = "\u{feff}";
+
+/// Reads the metadata lines before the header; returns them, the header line's text and
+/// its 1-based line number. Blank lines there are allowed; a BOM before the first line is
+/// dropped (it is not part of the text).
+fn read_preamble<R: BufRead>(
+    path: &Path,
+    input: &mut R,
+) -> Result<(Vec<(String, String)>, String, usize), MeasuredError> {
     let mut metadata = Vec::new();
-    let mut offset = 0usize;
+    let mut buf = Vec::new();
     let mut line_no = 0usize;
-    // Metadata lines before the header; blank lines there are allowed.
-    for line in text.split_inclusive('\n') {
-        let trimmed = line.trim();
+    loop {
+        buf.clear();
+        let n = input
+            .read_until(b'\n', &mut buf)
+            .map_err(|e| file_error(path, format!("cannot read: {e}")))?;
+        line_no += 1;
+        if n == 0 {
+            return Err(MeasuredError {
+                line: line_no,
+                ..file_error(path, "no header row")
+            });
+        }
+        let text = std::str::from_utf8(&buf).map_err(|e| MeasuredError {
+            line: line_no,
+            ..file_error(path, format!("not UTF-8 text: {e}"))
+        })?;
+        let text = if line_no == 1 {
+            text.strip_prefix(BOM).unwrap_or(text)
+        } else {
+            text
+        };
+        let trimmed = text.trim();
         if let Some(rest) = trimmed.strip_prefix('#') {
-            line_no += 1;
-            offset += line.len();
             let rest = rest.trim();
             if rest.is_empty() {
                 continue;
@@ -220,73 +294,203 @@ pub(crate) fn parse_table(path: &Path, text: &str) -> Result<Table, MeasuredErro
                 // A comment without a key: kept as a free note.
                 None => metadata.push(("comment".to_string(), rest.to_string())),
             }
-        } else if trimmed.is_empty() {
-            line_no += 1;
-            offset += line.len();
-        } else {
-            break;
+        } else if !trimmed.is_empty() {
+            return Ok((metadata, text.to_string(), line_no));
         }
     }
-    let first_line = line_no + 1;
+}
+
+/// Checks the header's names (none empty, none twice).
+fn check_header(path: &Path, header: &[String], line: usize) -> Result<(), MeasuredError> {
+    let err = |column: &str, message: String| MeasuredError {
+        line,
+        column: column.to_string(),
+        ..file_error(path, message)
+    };
+    for (i, h) in header.iter().enumerate() {
+        if h.is_empty() {
+            return Err(err("", format!("column {} has an empty name", i + 1)));
+        }
+        if header[..i].contains(h) {
+            return Err(err(h, "column appears twice".into()));
+        }
+    }
+    Ok(())
+}
+
+/// The file's kind from its header (`v_friction_mps`: friction test; `v_ref_mps` or
+/// `omega1_radps`: run log), or the error.
+fn kind_of(path: &Path, header: &[String], line: usize) -> Result<Kind, MeasuredError> {
+    let has = |c: ColumnName| header.iter().any(|h| *h == c.to_string());
+    if has(ft::V_FRICTION.name(0)) {
+        Ok(Kind::Friction)
+    } else if has(rl::V_REF.name(0)) || has(rl::OMEGA.name(0)) {
+        Ok(Kind::Run)
+    } else {
+        Err(MeasuredError {
+            line,
+            ..file_error(
+                path,
+                "neither a run log (needs `t_s`, `v_ref_mps`, `omega1_radps`..) nor a friction \
+                 test (needs `v_friction_mps`, `t_disc_c`, `mu` or `f_clamp_n` + `f_friction_n`)",
+            )
+        })
+    }
+}
+
+/// How each column of a file of `kind` is read.
+fn cells_of(kind: Kind, header: &[String]) -> Vec<Cells> {
+    let limits: &[Limit] = match kind {
+        Kind::Run => &limits::RUN_LOG,
+        Kind::Friction => &limits::FRICTION_TEST,
+    };
+    header
+        .iter()
+        .map(|h| {
+            if kind == Kind::Run && *h == rl::CMD.name(0).to_string() {
+                Cells::Text(TextColumn::default())
+            } else {
+                match limits::find(limits, h) {
+                    Some(l) => Cells::Numeric(Vec::new(), l),
+                    None => Cells::Ignored,
+                }
+            }
+        })
+        .collect()
+}
+
+/// Reads a measured file's table from a stream: metadata, header, then row by row into
+/// typed columns (no `String` per cell). Every numeric cell is checked as it is read: a
+/// number, finite, within its column's plausible range ([`limits`]); the time column has
+/// no empty cell, increases strictly and spans at most [`limits::MAX_SPAN_S`].
+pub(crate) fn read_table<R: BufRead>(path: &Path, mut input: R) -> Result<Table, MeasuredError> {
+    let (metadata, header_text, header_line) = read_preamble(path, &mut input)?;
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(true)
         .flexible(false)
         .trim(csv::Trim::All)
-        .from_reader(text[offset..].as_bytes());
+        .from_reader(std::io::Cursor::new(header_text.into_bytes()).chain(input));
     let header: Vec<String> = reader
         .headers()
-        .map_err(|e| err(first_line, format!("cannot read the header row: {e}")))?
+        .map_err(|e| MeasuredError {
+            line: header_line,
+            ..file_error(path, format!("cannot read the header row: {e}"))
+        })?
         .iter()
         .map(|h| h.trim().to_string())
         .collect();
-    if header.iter().all(|h| h.is_empty()) {
-        return Err(err(first_line, "no header row".into()));
-    }
-    for (i, h) in header.iter().enumerate() {
-        if h.is_empty() {
-            return Err(err(
-                first_line,
-                format!("column {} has an empty name", i + 1),
-            ));
-        }
-        if header[..i].contains(h) {
-            return Err(MeasuredError {
-                file: path.to_path_buf(),
-                line: first_line,
-                row: 0,
-                column: h.clone(),
-                message: "column appears twice".into(),
-            });
-        }
-    }
-    let mut rows = Vec::new();
-    for (r, rec) in reader.records().enumerate() {
-        let rec = rec.map_err(|e| {
-            let line = e
-                .position()
-                .map(|p| p.line() as usize + line_no)
-                .unwrap_or(0);
-            MeasuredError {
-                file: path.to_path_buf(),
-                line,
-                row: r + 1,
-                column: String::new(),
-                message: format!("malformed CSV row: {e}"),
-            }
-        })?;
-        let line = rec
-            .position()
-            .map(|p| p.line() as usize + line_no)
-            .unwrap_or(0);
-        rows.push((line, rec.iter().map(|s| s.to_string()).collect()));
-    }
-    Ok(Table {
+    check_header(path, &header, header_line)?;
+    let kind = kind_of(path, &header, header_line)?;
+    let mut table = Table {
         path: path.to_path_buf(),
         metadata: Metadata(metadata),
+        columns: cells_of(kind, &header),
         header,
-        header_line: first_line,
-        rows,
-    })
+        header_line,
+        kind,
+        lines: Vec::new(),
+    };
+    let time = table.column(&rl::T.name(0).to_string());
+    let mut record = csv::ByteRecord::new();
+    let mut t_first = None;
+    loop {
+        let r = table.lines.len();
+        let more = reader.read_byte_record(&mut record).map_err(|e| {
+            let line = e
+                .position()
+                .map_or(0, |p| p.line() as usize + header_line - 1);
+            table.err(line, r + 1, "", format!("malformed CSV row: {e}"))
+        })?;
+        if !more {
+            break;
+        }
+        let line = record
+            .position()
+            .map_or(0, |p| p.line() as usize + header_line - 1);
+        table.lines.push(line as u32);
+        for (idx, raw) in record.iter().enumerate() {
+            table.push_cell(r, idx, raw)?;
+        }
+        if let Some(i) = time {
+            table.check_time(r, i, &mut t_first)?;
+        }
+    }
+    Ok(table)
+}
+
+impl Table {
+    /// Reads one cell of data row `r` (0-based) into its column, checking it.
+    fn push_cell(&mut self, r: usize, idx: usize, raw: &[u8]) -> Result<(), MeasuredError> {
+        let cell = match std::str::from_utf8(raw) {
+            Ok(c) => c,
+            Err(_) => return Err(self.row_err(r, idx, "cell is not UTF-8 text")),
+        };
+        let (x, limit) = match &mut self.columns[idx] {
+            Cells::Ignored => return Ok(()),
+            Cells::Text(t) => {
+                if t.values.len() >= MAX_DISTINCT_TEXTS && !t.values.iter().any(|v| v == cell) {
+                    let msg = format!("more than {MAX_DISTINCT_TEXTS} distinct texts");
+                    return Err(self.row_err(r, idx, msg));
+                }
+                t.push(cell);
+                return Ok(());
+            }
+            Cells::Numeric(v, limit) => {
+                if cell.is_empty() {
+                    v.push(f64::NAN);
+                    return Ok(());
+                }
+                (cell.parse::<f64>(), *limit)
+            }
+        };
+        let x = match x {
+            Ok(x) if x.is_finite() => x,
+            Ok(x) => return Err(self.row_err(r, idx, format!("`{cell}` is not finite ({x})"))),
+            Err(_) => return Err(self.row_err(r, idx, format!("`{cell}` is not a number"))),
+        };
+        if !limit.contains(x) {
+            let msg = format!(
+                "{x} is outside the plausible range [{}, {}] ({}; docs/measured-data-limits.md)",
+                limit.min, limit.max, limit.basis
+            );
+            return Err(self.row_err(r, idx, msg));
+        }
+        if let Cells::Numeric(v, _) = &mut self.columns[idx] {
+            v.push(x);
+        }
+        Ok(())
+    }
+
+    /// The time of row `r`: measured, above the previous row's, within the span limit.
+    fn check_time(
+        &self,
+        r: usize,
+        idx: usize,
+        first: &mut Option<f64>,
+    ) -> Result<(), MeasuredError> {
+        let Cells::Numeric(t, _) = &self.columns[idx] else {
+            return Ok(());
+        };
+        let now = t[r];
+        if now.is_nan() {
+            return Err(self.row_err(r, idx, "empty cell in a required column"));
+        }
+        if r > 0 && !(now > t[r - 1]) {
+            let msg = format!("time does not increase ({now} after {})", t[r - 1]);
+            return Err(self.row_err(r, idx, msg));
+        }
+        let t0 = *first.get_or_insert(now);
+        if now - t0 > limits::MAX_SPAN_S {
+            let msg = format!(
+                "the log spans {} s from its first row; at most {} s is plausible \
+                 (milliseconds logged as seconds?)",
+                now - t0,
+                limits::MAX_SPAN_S
+            );
+            return Err(self.row_err(r, idx, msg));
+        }
+        Ok(())
+    }
 }
 
 /// An error about a whole file (no line, row or column).
@@ -298,54 +502,4 @@ pub(crate) fn file_error(path: &Path, message: impl Into<String>) -> MeasuredErr
         column: String::new(),
         message: message.into(),
     }
-}
-
-/// Every cell of a required column must be measured.
-pub(crate) fn require_all(table: &Table, idx: usize, values: &[f64]) -> Result<(), MeasuredError> {
-    if let Some(r) = values.iter().position(|x| x.is_nan()) {
-        return Err(table.err(
-            table.rows[r].0,
-            r + 1,
-            &table.header[idx],
-            "empty cell in a required column",
-        ));
-    }
-    Ok(())
-}
-
-/// Non-negative quantity: values below -tolerance are impossible.
-pub(crate) fn check_non_negative(
-    table: &Table,
-    idx: usize,
-    values: &[f64],
-    floor: f64,
-    what: &str,
-) -> Result<(), MeasuredError> {
-    let tol = negative_tolerance(values, floor);
-    if let Some(r) = values.iter().position(|&x| x < -tol) {
-        return Err(table.err(
-            table.rows[r].0,
-            r + 1,
-            &table.header[idx],
-            format!(
-                "negative {what} {} beyond noise (tolerance -{tol:.4})",
-                values[r]
-            ),
-        ));
-    }
-    Ok(())
-}
-
-pub(crate) fn check_time(table: &Table, idx: usize, t: &[f64]) -> Result<(), MeasuredError> {
-    for r in 1..t.len() {
-        if !(t[r] > t[r - 1]) {
-            return Err(table.err(
-                table.rows[r].0,
-                r + 1,
-                &table.header[idx],
-                format!("time does not increase ({} after {})", t[r], t[r - 1]),
-            ));
-        }
-    }
-    Ok(())
 }

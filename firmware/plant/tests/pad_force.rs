@@ -1,0 +1,55 @@
+//! The pad force (Eq 1's clamp force after the optional actuator lag) never leaves
+//! [0, clamp-force limit] and never overshoots its target, for any input sequence and lag:
+//! `pad + (target - pad) rate` rounds in f32 and, unguarded, can exceed the clamp limit by
+//! one ulp (issue 12, item 7).
+
+use hils_plant::brake::Caliper;
+use hils_plant::{BrakeInput, Params, Plant, Rail};
+
+/// Deterministic pseudo-random f32 in [lo, hi) (xorshift).
+fn next(state: &mut u64, lo: f32, hi: f32) -> f32 {
+    *state ^= *state << 13;
+    *state ^= *state >> 7;
+    *state ^= *state << 17;
+    lo + (hi - lo) * ((*state >> 40) as f32 / (1u64 << 24) as f32)
+}
+
+#[test]
+fn pad_force_stays_within_its_clamp_and_its_target() {
+    let mut seed = 0x9E37_79B9_7F4A_7C15u64;
+    for lag_s in [0.0, 1e-5, 1e-4, 3e-4, 0.05, 0.4] {
+        let mut p = Params::default();
+        p.brake.actuator_lag_s = lag_s;
+        let limit = Caliper::<f32>::new(&p.brake).clamp_force_limit;
+        let mut plant = Plant::<f32>::new(&p, Rail::Dry, 30.0).unwrap();
+        let mut last = [0.0f32; 4];
+        for step in 0..4000 {
+            // Targets at and beyond the limit, at zero and anywhere between.
+            let input = |s: &mut u64| match step % 4 {
+                0 => limit,
+                1 => next(s, 0.0, limit),
+                2 => next(s, 0.9 * limit, 2.0 * limit),
+                _ => next(s, -0.01 * limit, 0.01 * limit),
+            };
+            let targets = [0; 4].map(|_| input(&mut seed));
+            let o = plant.step(&targets.map(BrakeInput::ClampForce));
+            for j in 0..4 {
+                let pad = o.wheelsets[j].clamp_force;
+                let target = targets[j].clamp(0.0, limit);
+                assert!(
+                    (0.0..=limit).contains(&pad),
+                    "lag {lag_s} s, step {step}: pad force {pad} outside [0, {limit}]"
+                );
+                let (lo, hi) = (last[j].min(target), last[j].max(target));
+                assert!(
+                    (lo..=hi).contains(&pad),
+                    "lag {lag_s} s, step {step}: pad {pad} left [{lo}, {hi}]"
+                );
+                if lag_s == 0.0 {
+                    assert_eq!(pad, target, "no lag: the pad force is the input");
+                }
+                last[j] = pad;
+            }
+        }
+    }
+}

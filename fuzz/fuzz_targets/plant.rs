@@ -1,0 +1,69 @@
+//! The plant step with arbitrary brake inputs (any f32: NaN, inf, negative, huge) and
+//! parameter variants (friction model, rail, speed, actuator lag, mass, supply pressure):
+//! outputs finite and within their limits at every step.
+#![no_main]
+
+use hils_fuzz::Bytes;
+use hils_plant::brake::Caliper;
+use hils_plant::{BrakeInput, FrictionModel, Params, Plant, Rail};
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    let mut b = Bytes(data);
+    let mut p = Params::default();
+    let flags = b.u8();
+    p.friction.model = if flags & 1 == 0 {
+        FrictionModel::Variable
+    } else {
+        FrictionModel::Constant
+    };
+    let rail = if flags & 2 == 0 { Rail::Wet } else { Rail::Dry };
+    p.brake.actuator_lag_s = if flags & 4 == 0 {
+        0.0
+    } else {
+        b.within(0.0, 0.5)
+    };
+    p.vehicle.carbody_mass *= b.within(0.5, 2.0);
+    p.brake.supply_pressure *= b.within(0.5, 1.5);
+    let v0 = b.within(0.0, 100.0) as f32;
+    let Ok(mut plant) = Plant::<f32>::new(&p, rail, v0) else {
+        return;
+    };
+    let limit = Caliper::<f32>::new(&p.brake).clamp_force_limit;
+    while !b.is_empty() {
+        let kinds = b.u8();
+        let repeat = 1 + b.u8() as usize % 64;
+        let inputs: [BrakeInput<f32>; 4] = core::array::from_fn(|j| {
+            let x = b.f32();
+            if kinds >> j & 1 == 0 {
+                BrakeInput::ClampForce(x)
+            } else {
+                BrakeInput::CylinderPressure(x)
+            }
+        });
+        for _ in 0..repeat {
+            let o = plant.step(&inputs);
+            assert!(o.vehicle_speed.is_finite() && o.distance.is_finite());
+            assert!(o.carbody_accel.is_finite() && o.carbody_pitch.is_finite());
+            // Braking on a level track: no speed is gained (0.1 % for the suspension).
+            // (Not checked here: the vehicle reversing under brakes at a stop. The fuzzer
+            // found -0.01 m/s and growing from 0.39 m/s; input in fuzz/findings/, reported
+            // to the plant's owner; see the note.)
+            assert!(
+                o.vehicle_speed <= v0 * 1.001 + 0.01,
+                "vehicle speed {} from {v0}",
+                o.vehicle_speed
+            );
+            for w in &o.wheelsets {
+                assert!(w.values().iter().all(|x| x.is_finite()), "{w:?}");
+                assert!(
+                    (0.0..=limit).contains(&w.clamp_force),
+                    "clamp force {} outside [0, {limit}]",
+                    w.clamp_force
+                );
+                assert!((0.0..=2.0).contains(&w.mu_d), "mu_d {}", w.mu_d);
+                assert!(w.axle_load >= 0.0, "axle load {}", w.axle_load);
+            }
+        }
+    }
+});

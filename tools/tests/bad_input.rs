@@ -1,0 +1,212 @@
+//! Bad measured files at the command line (issue 12): each gives an error naming the file,
+//! row and column, exits like any error (code 1, not an abort), and writes nothing.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use hils::measured::parse_run_log;
+
+const HEADER: &str = "t_s,v_ref_mps,omega1_radps,omega2_radps,omega3_radps,omega4_radps,\
+f_clamp1_n,f_clamp2_n,f_clamp3_n,f_clamp4_n\n";
+
+/// A 10-row braking log whose times span `span_s`.
+fn log_spanning(span_s: f64) -> String {
+    let mut text = format!("# source: test\n# rail: dry\n{HEADER}");
+    for i in 0..10 {
+        let v = 30.0 - i as f64;
+        let omega = v / 0.43;
+        text += &format!(
+            "{},{v},{omega},{omega},{omega},{omega},20000,20000,20000,20000\n",
+            i as f64 * span_s / 9.0
+        );
+    }
+    text
+}
+
+fn temp_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("hils-bad-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Item 1: a 10-row log over 30 000 s (milliseconds logged as seconds) made `hils
+/// diagnose` abort on a 960 MB allocation; now the reader refuses it, naming the column.
+#[test]
+fn diagnose_refuses_a_30000_s_log_and_writes_nothing() {
+    let dir = temp_dir("span");
+    let log = dir.join("ms_as_s.csv");
+    std::fs::write(&log, log_spanning(30_000.0)).unwrap();
+    let baseline = std::env::var_os("HILS_SHARED_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared"))
+        .join("spec/reference-parameters.toml");
+    let json = dir.join("out.json");
+    let out = Command::new(env!("CARGO_BIN_EXE_hils"))
+        .arg("diagnose")
+        .arg("--baseline")
+        .arg(&baseline)
+        .arg("--json")
+        .arg(&json)
+        .arg(&log)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("ms_as_s.csv") && err.contains("`t_s`"),
+        "{err}"
+    );
+    assert!(err.contains("data row"), "{err}");
+    assert!(!json.exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Item 1, replay side: a plausible span (3000 s) at a fine step would still need 30 M
+/// steps per replay: refused before anything is allocated, naming file, row and column.
+#[test]
+fn replay_budget_is_bounded() {
+    let log = parse_run_log(Path::new("long.csv"), &log_spanning(3000.0)).unwrap();
+    let p = hils_plant::Params::default();
+    let e = hils::diagnose::diagnose(&p, "default", std::slice::from_ref(&log), 1e-4)
+        .err()
+        .expect("a 30 M-step replay accepted");
+    let msg = e.to_string();
+    assert!(
+        msg.contains("long.csv") && msg.contains("(data row 10)"),
+        "{msg}"
+    );
+    assert!(msg.contains("`t_s`") && msg.contains("steps"), "{msg}");
+    // The same log at 1 ms steps (3 M) is still too long; a 300 s log is not refused.
+    assert!(hils::diagnose::replay::check_budget(&log, 1e-3).is_err());
+    let short = parse_run_log(Path::new("ok.csv"), &log_spanning(300.0)).unwrap();
+    assert!(hils::diagnose::replay::check_budget(&short, 1e-3).is_ok());
+}
+
+/// Eq (2) written out (independent of the plant's code).
+fn eq2(v: f64, t: f64) -> f64 {
+    0.98 * 0.38 * (0.184 * (-0.1 * v).exp() + 1.0) * (0.105 * (-0.014 * t).exp() + 1.0)
+}
+
+/// Item 6: degenerate friction data is an error; a fit's correlations are within [-1, 1]
+/// (or undefined, with a warning) and no interval has zero width.
+#[test]
+fn fit_friction_on_degenerate_data() {
+    use hils::fit_friction::fit_points;
+    // One disc temperature only: an error naming the problem.
+    let v: Vec<f64> = (0..20).map(|i| 1.0 + i as f64).collect();
+    let t = vec![50.0; 20];
+    let mu: Vec<f64> = v.iter().map(|&v| eq2(v, 50.0)).collect();
+    let e = fit_points(&v, &t, &mu, 0.98).unwrap_err().to_string();
+    assert!(
+        e.contains("degenerate") && e.contains("disc temperatures"),
+        "{e}"
+    );
+    // Near-degenerate and exact sets: whatever the fit, its statistics are meaningful.
+    let mut seed = 12345u64;
+    let mut rnd = || {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for case in 0..12 {
+        let n = 6 + case;
+        let (v_span, t_span, noise) =
+            [(0.01, 0.01, 0.0), (30.0, 300.0, 0.0), (2.0, 5.0, 1e-3)][case % 3];
+        let v: Vec<f64> = (0..n)
+            .map(|i| 5.0 + v_span * (i % 3) as f64 + 1e-3 * rnd())
+            .collect();
+        let t: Vec<f64> = (0..n)
+            .map(|i| 20.0 + t_span * (i / 2 % 3) as f64 + 1e-3 * rnd())
+            .collect();
+        let mu: Vec<f64> = v
+            .iter()
+            .zip(&t)
+            .map(|(&v, &t)| eq2(v, t) + noise * (rnd() - 0.5))
+            .collect();
+        let Ok(fit) = fit_points(&v, &t, &mu, 0.98) else {
+            continue;
+        };
+        for (a, b, r) in &fit.correlated {
+            assert!(
+                r.is_nan() || r.abs() <= 1.0,
+                "case {case}: {a}-{b} correlation {r}"
+            );
+        }
+        for (name, [lo, hi]) in &fit.ci95 {
+            let undefined = lo.is_nan() && hi.is_nan();
+            assert!(
+                undefined || hi > lo,
+                "case {case}: {name} interval [{lo}, {hi}]"
+            );
+            if undefined {
+                assert!(
+                    fit.warnings.iter().any(|w| w.contains("undefined")),
+                    "{:?}",
+                    fit.warnings
+                );
+            }
+        }
+    }
+}
+
+/// Fuzz finding (decode target): a telemetry record with an implausible value (v_ref 1549
+/// m/s from a corrupt line) became a CSV the reader refuses. Now `hils decode` refuses the
+/// record, naming its step and column, and writes no file.
+#[test]
+fn decode_refuses_implausible_records_and_writes_nothing() {
+    let dir = temp_dir("decode");
+    let input = dir.join("capture.log");
+    let case = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../fuzz/seeds/decode/regression-implausible-v-ref.log");
+    std::fs::copy(&case, &input).unwrap();
+    let csv = dir.join("run.csv");
+    let out = Command::new(env!("CARGO_BIN_EXE_hils"))
+        .arg("decode")
+        .arg(&input)
+        .arg("--out")
+        .arg(&csv)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("step 100") && err.contains("`v_ref_mps` = 1549"),
+        "{err}"
+    );
+    assert!(!csv.exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Fuzz finding (decode target): with a 1 ns step the records (100 ns apart) were written
+/// with 6 decimals, all at t = 0, and the reader refused the CSV. Times are now exact.
+#[test]
+fn decode_writes_exact_times() {
+    let case = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../fuzz/seeds/decode/regression-100ns-records.log");
+    let text = std::fs::read_to_string(case).unwrap();
+    let runs = hils::decode::parse_runs(text.lines()).unwrap();
+    let mut csv = Vec::new();
+    runs[0].write_csv(&mut csv, "test").unwrap();
+    let log = hils::measured::parse_bytes(Path::new("d.csv"), &csv).unwrap();
+    let hils::measured::Measured::Run(log) = log else {
+        panic!("not a run log")
+    };
+    assert_eq!(log.t_s, vec![0.0, 1e-7, 2e-7, 3e-7]);
+}
+
+/// Fuzz finding (decode target): a run header with an infinite initial speed went into the
+/// CSV's metadata, which the reader refuses. The header is refused, naming its line.
+#[test]
+fn decode_refuses_a_non_finite_initial_speed() {
+    let case = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../fuzz/seeds/decode/regression-inf-initial-speed.log");
+    let text = std::fs::read_to_string(case).unwrap();
+    let e = hils::decode::parse_runs(text.lines())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("line 1") && e.contains("initial speed inf"),
+        "{e}"
+    );
+}

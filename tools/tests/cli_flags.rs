@@ -1,0 +1,109 @@
+//! Every numeric flag of `hils` refuses 0 (where it means nothing), negatives, NaN, inf,
+//! huge values and non-numbers with an error naming the flag, before anything runs or is
+//! written (issue 12 item 2). Property test over each flag of `hils::cli::FLAGS`.
+
+use clap::Parser;
+use hils::cli::{Cli, FLAGS, FlagRange};
+use proptest::prelude::*;
+
+/// A command line that sets `flag` to `value` (and whatever else the command needs).
+fn argv(f: &FlagRange, value: &str) -> Vec<String> {
+    let mut v = vec!["hils".to_string(), f.command.to_string()];
+    match f.command {
+        "simulate" | "decode" => v.extend(["--out".into(), "/nonexistent/never-written".into()]),
+        "diagnose" => v.extend(["--baseline".into(), "b.toml".into()]),
+        _ => {}
+    }
+    if f.flag == "--write-log-mb" {
+        v.extend(["--reader".into(), "/nonexistent/never-written.csv".into()]);
+    }
+    if f.command == "decode" || f.command == "diagnose" {
+        v.push("input.csv".into());
+    }
+    v.push(format!("{}={value}", f.flag));
+    v
+}
+
+fn rejected(f: &FlagRange, value: &str) -> Result<(), TestCaseError> {
+    match Cli::try_parse_from(argv(f, value)) {
+        Ok(cli) => Err(TestCaseError::fail(format!(
+            "{} {} {value} accepted: {cli:?}",
+            f.command, f.flag
+        ))),
+        Err(e) => {
+            let msg = e.to_string();
+            prop_assert!(
+                msg.contains(f.flag),
+                "error does not name {}: {msg}",
+                f.flag
+            );
+            Ok(())
+        }
+    }
+}
+
+/// Text of a bad value for a flag: out of range (below, above, negative, zero where the
+/// range excludes it), not finite, or not a number.
+fn bad_value(f: FlagRange) -> impl Strategy<Value = String> {
+    let below = (f.min > 0.0).then_some(f.min);
+    prop_oneof![
+        Just("NaN".to_string()),
+        Just("inf".to_string()),
+        Just("-inf".to_string()),
+        Just("1e300".to_string()),
+        Just("-1".to_string()),
+        Just("".to_string()),
+        Just("abc".to_string()),
+        Just("99999999999999999999999".to_string()),
+        (f.max * 1.0001 + 1.0..1e308).prop_map(|x| format!("{x}")),
+        (-1e308..-f64::MIN_POSITIVE).prop_map(|x| format!("{x}")),
+        (0.0..below.unwrap_or(0.0).max(f64::MIN_POSITIVE))
+            .prop_filter("below the minimum", move |x| below.is_some_and(|m| *x < m))
+            .prop_map(|x| format!("{x}")),
+    ]
+}
+
+proptest! {
+    #[test]
+    fn every_numeric_flag_refuses_bad_values(
+        (i, value) in (0..FLAGS.len()).prop_flat_map(|i| (Just(i), bad_value(FLAGS[i])))
+    ) {
+        rejected(&FLAGS[i], &value)?;
+    }
+}
+
+#[test]
+fn zero_is_refused_by_every_flag_and_good_values_pass() {
+    for f in FLAGS {
+        rejected(&f, "0").unwrap();
+        rejected(&f, "1e-300").unwrap();
+        let mid = if f.integer {
+            f.min.to_string()
+        } else {
+            ((f.min + f.max) / 2.0).to_string()
+        };
+        assert!(
+            Cli::try_parse_from(argv(&f, &mid)).is_ok(),
+            "{} {mid}",
+            f.flag
+        );
+    }
+    // Counts take whole numbers only.
+    rejected(&hils::cli::REPEAT, "2.5").unwrap();
+}
+
+/// The binary: a bad flag exits with clap's usage error (2), prints the flag, and creates
+/// nothing.
+#[test]
+fn simulate_with_zero_sample_rate_writes_nothing() {
+    let out = std::env::temp_dir().join(format!("hils-flag-{}", std::process::id()));
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_hils"))
+        .args(["simulate", "--no-plots", "--sample-rate-hz", "0", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(status.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&status.stderr);
+    assert!(err.contains("--sample-rate-hz"), "{err}");
+    assert!(!out.exists(), "output directory created");
+}
