@@ -17,7 +17,7 @@ use embedded_can::{Id, StandardId};
 use hils_rig_core::bus::{BusAction, BusMode, BusMonitor, BusStatus};
 use hils_rig_core::can::ID_COMMAND;
 use hils_rig_core::can_timing::{BitTimingLimits, NominalBitTiming, nominal_bit_timing};
-use hils_rig_core::can_tx::{QueuedFrame, TxSlots, is_stale};
+use hils_rig_core::can_tx::{QueuedFrame, TxSlots, frame_ticks, is_stale_behind};
 
 use crate::clock::HSE_HZ;
 use crate::step::{BUS_STATE, CAN_RX, CAN_TX, CAN_TX_DROPS, STEP_TICKS};
@@ -125,19 +125,17 @@ fn count_drops(n: u32) {
     }
 }
 
-/// Retires finished transmit buffers and cancels stale pending ones.
+/// Retires finished transmit buffers. Nothing is cancelled (FDCAN_TXBCR): the buffers run
+/// in FIFO mode, for which the Bosch M_CAN manual says cancellation is not intended; stale
+/// frames are dropped before they are written instead (`hils_rig_core::can_tx`).
 fn service_buffers(slots: &mut TxSlots<TX_BUFFERS>) {
     let regs = pac::FDCAN1;
     let out = slots.retire(regs.txbrp().read().0, regs.txbto().read().0);
     count_drops(out.dropped);
-    let cancel = slots.stale_mask(regs.txbrp().read().0, STEP_TICKS.load(Ordering::Relaxed));
-    if cancel != 0 {
-        regs.txbcr().write(|w| w.0 = cancel);
-    }
 }
 
 /// Sends the frames the step queued, oldest first; a frame past its life (while the bus
-/// is down, or behind others) is dropped and counted, in the queue or in the controller.
+/// is down, or behind others) is dropped and counted before it reaches the controller.
 #[embassy_executor::task]
 pub async fn can_tx_task(mut tx: CanTx<'static>) {
     let regs = pac::FDCAN1;
@@ -158,11 +156,14 @@ pub async fn can_tx_task(mut tx: CanTx<'static>) {
         // Wait for a free buffer, watching the frame's and the buffers' age.
         loop {
             service_buffers(&mut slots);
-            if is_stale(id, tick, STEP_TICKS.load(Ordering::Relaxed)) {
+            let ahead = regs.txbrp().read().0.count_ones();
+            let now = STEP_TICKS.load(Ordering::Relaxed);
+            if is_stale_behind(id, tick, now, ahead, frame_ticks(BITRATE)) {
                 count_drops(1);
                 break;
             }
-            if !regs.txfqs().read().tfqf() {
+            // Nothing is written while bus-off: it would wait there and go out late.
+            if !regs.psr().read().bo() && !regs.txfqs().read().tfqf() {
                 let slot = regs.txfqs().read().tfqpi() as usize;
                 // FIFO mode: returns at once with a buffer free, and never aborts another.
                 let _ = tx.write(&frame).await;

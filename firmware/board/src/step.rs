@@ -16,9 +16,9 @@ use hils_rig_core::can::Command;
 use hils_rig_core::can_tx::QueuedFrame;
 use hils_rig_core::hw::{RigIo, TelemetryEvent};
 use hils_rig_core::pulse::PulseRegisters;
-use hils_rig_core::rig::{CommandError, Rig};
 #[cfg(not(feature = "bringup"))]
-use hils_rig_core::rig::{Simulation, StartRequest};
+use hils_rig_core::rig::{Built, StartRequest};
+use hils_rig_core::rig::{CommandError, Rig};
 use hils_rig_core::sensor::ADC_SEQUENCE_LEN;
 
 use crate::ceiling::StepChannel;
@@ -44,7 +44,7 @@ pub static LOCAL_CMD: StepChannel<Command, 2> = StepChannel::new();
 pub static START_REQUESTS: StepChannel<StartRequest, 1> = StepChannel::new();
 /// Simulations the builder built (or why not), for the step to move into the rig.
 #[cfg(not(feature = "bringup"))]
-pub static BUILT: Handoff<Result<Simulation, CommandError>, 1> = Handoff::new();
+pub static BUILT: Handoff<Built, 1> = Handoff::new();
 /// Telemetry events from the step to the logging task.
 pub static TELEMETRY: StepChannel<TelemetryEvent, 16> = StepChannel::new();
 /// What the step has to say, for a task to log (the step never logs).
@@ -66,8 +66,14 @@ pub static TELEMETRY_DROPS: AtomicU32 = AtomicU32::new(0);
 pub enum StepEvent {
     CommandRejected(CommandError),
     LocalCommandRejected(CommandError),
-    /// A requested run could not start (build failed, or the builder was busy).
+    /// A requested run could not start (the build failed).
     StartFailed(CommandError),
+    /// A build came back for a start request no longer pending (stopped, or superseded
+    /// by a later `Start`): not installed; with the rig's count of such builds.
+    StaleBuild {
+        seq: u32,
+        count: u32,
+    },
 }
 
 /// The peripherals the step uses.
@@ -171,7 +177,12 @@ fn TIM3() {
 #[inline(never)]
 fn step_tick() {
     let entry = DWT::cycle_count();
-    pac::TIM3.sr().modify(|w| w.set_uif(false));
+    // TIMx_SR bits are rc_w0: a read-modify-write would also clear a flag set between the
+    // read and the write (e.g. CC4IF). Write ones everywhere but UIF (as ST's HAL
+    // `__HAL_TIM_CLEAR_FLAG` does: SR = ~flag).
+    let mut clear_uif = pac::timer::regs::SrGp16(u32::MAX);
+    clear_uif.set_uif(false);
+    pac::TIM3.sr().write_value(clear_uif);
     let tick = STEP_TICKS.load(Ordering::Relaxed).wrapping_add(1);
     STEP_TICKS.store(tick, Ordering::Relaxed);
     // SAFETY: this is the step interrupt, the only caller; the reference ends with the call.
@@ -202,26 +213,30 @@ fn step_tick() {
     rt.watchdog.feed();
 }
 
-/// Passes a start request to the builder and installs a built simulation (a move).
+/// Passes a start request to the builder and installs a built simulation (a move) if it
+/// was built for the pending request.
 #[cfg(not(feature = "bringup"))]
 #[inline(always)]
 fn hand_over_runs(rig: &mut Rig) {
     if let Some(req) = rig.take_start_request()
         && START_REQUESTS.try_send(req).is_err()
     {
-        // The builder still holds an earlier (cancelled) request: refuse this one.
-        let busy = Err(CommandError::NotNow(rig.state()));
-        if let Err(e) = rig.install(busy) {
-            let _ = STEP_EVENTS.try_send(StepEvent::StartFailed(e));
-        }
+        // The builder still holds an earlier (cancelled) request: offer this one again
+        // next tick; the earlier build, when it comes, is refused by its sequence number.
+        rig.retry_start_request(&req);
     }
     // SAFETY: this is the step interrupt, the only caller.
     if let Some(built) = unsafe { BUILT.step_take() } {
-        let failed = built.is_err();
-        if let Err(e) = rig.install(built)
-            && failed
-        {
-            let _ = STEP_EVENTS.try_send(StepEvent::StartFailed(e));
+        let failed = built.result.is_err();
+        match rig.install(built) {
+            Err(CommandError::StaleBuild { seq }) => {
+                let count = rig.stale_builds();
+                let _ = STEP_EVENTS.try_send(StepEvent::StaleBuild { seq, count });
+            }
+            Err(e) if failed => {
+                let _ = STEP_EVENTS.try_send(StepEvent::StartFailed(e));
+            }
+            _ => {}
         }
     }
 }

@@ -180,6 +180,11 @@ pub enum CommandError {
     SensorFaults,
     /// The plant or brake unit refused the parameters.
     Build(LoopError),
+    /// A build came back for a start request that is no longer pending (stopped, or
+    /// superseded by a later `Start`): not installed, counted ([`Rig::stale_builds`]).
+    StaleBuild {
+        seq: u32,
+    },
     Calibration(CalibrationError),
 }
 
@@ -196,6 +201,9 @@ enum Sim {
 /// outside it ([`StartRequest::build`], thread mode on the board).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StartRequest {
+    /// Which `Start` this is (counts the rig's start requests, wrapping): the build comes
+    /// back with it ([`Built::seq`]) and is installed only under the same request.
+    pub seq: u32,
     pub mode: RigMode,
     pub rail: Rail,
     pub friction: FrictionModel,
@@ -208,11 +216,27 @@ pub struct StartRequest {
 #[derive(Clone, Debug)]
 pub struct Simulation(Sim);
 
+/// What the builder hands back for a request: the request's sequence number and the
+/// simulation (or why it could not be built).
+#[derive(Clone, Debug)]
+pub struct Built {
+    /// [`StartRequest::seq`] of the request this was built for.
+    pub seq: u32,
+    pub result: Result<Simulation, CommandError>,
+}
+
 impl StartRequest {
     /// Builds the run's simulation (plant, and in self-test mode the simulated brake unit):
     /// ~35 000 instructions of mostly soft-float f64 and a large stack frame, so never in
     /// the step (issue 11).
-    pub fn build(&self) -> Result<Simulation, CommandError> {
+    pub fn build(&self) -> Built {
+        Built {
+            seq: self.seq,
+            result: self.build_simulation(),
+        }
+    }
+
+    fn build_simulation(&self) -> Result<Simulation, CommandError> {
         let mut params = Params::default();
         params.friction.model = self.friction;
         let v0 = self.initial_speed_kmh / KMH_PER_MPS;
@@ -279,6 +303,10 @@ pub struct Rig {
     start_request_new: bool,
     /// The state before `Starting` (back to it if the build fails).
     state_before_start: RigState,
+    /// Sequence number of the last start request.
+    start_seq: u32,
+    /// Builds that came back for a request no longer pending (not installed).
+    stale_builds: u32,
 }
 
 impl Rig {
@@ -316,6 +344,8 @@ impl Rig {
             start_request: None,
             start_request_new: false,
             state_before_start: RigState::Idle,
+            start_seq: 0,
+            stale_builds: 0,
         }
     }
 
@@ -473,7 +503,9 @@ impl Rig {
         }
         // The old run's simulation is no longer shown (plain data: nothing to drop).
         self.sim = Sim::None;
+        self.start_seq = self.start_seq.wrapping_add(1);
         self.start_request = Some(StartRequest {
+            seq: self.start_seq,
             mode,
             rail,
             friction,
@@ -495,19 +527,37 @@ impl Rig {
         }
     }
 
-    /// Installs a built simulation (a move, in the step) and starts the run; a failed
-    /// build goes back to the state before the request, with the command rejected. A
-    /// simulation that arrives when no start is pending (stopped meanwhile) is discarded.
-    pub fn install(&mut self, built: Result<Simulation, CommandError>) -> Result<(), CommandError> {
+    /// A request [`Rig::take_start_request`] gave out that the board could not pass to the
+    /// builder (still busy with an earlier one): offered again at the next call, if it is
+    /// still the pending request.
+    pub fn retry_start_request(&mut self, req: &StartRequest) {
+        if self.start_request.is_some_and(|r| r.seq == req.seq) {
+            self.start_request_new = true;
+        }
+    }
+
+    /// Builds that came back for a request no longer pending (stopped, or superseded by a
+    /// later `Start`), each refused by [`Rig::install`] with [`CommandError::StaleBuild`].
+    pub fn stale_builds(&self) -> u32 {
+        self.stale_builds
+    }
+
+    /// Installs a built simulation (a move, in the step) and starts the run, if it was
+    /// built for the pending request (same [`StartRequest::seq`]); a failed build goes back
+    /// to the state before the request, with the command rejected. A build for any other
+    /// request (stopped meanwhile, or an earlier `Start` superseded by a later one) is not
+    /// installed: counted in [`Rig::stale_builds`] and refused with `StaleBuild`.
+    pub fn install(&mut self, built: Built) -> Result<(), CommandError> {
         let Some(req) = self
             .start_request
-            .filter(|_| self.state == RigState::Starting)
+            .filter(|r| self.state == RigState::Starting && r.seq == built.seq)
         else {
-            return Err(CommandError::NotNow(self.state));
+            self.stale_builds = self.stale_builds.wrapping_add(1);
+            return Err(CommandError::StaleBuild { seq: built.seq });
         };
         self.start_request = None;
         self.start_request_new = false;
-        let sim = match built {
+        let sim = match built.result {
             Ok(Simulation(sim)) => sim,
             Err(e) => {
                 self.state = self.state_before_start;

@@ -12,7 +12,7 @@ use hils_rig_core::can::{
 };
 use hils_rig_core::hw::{RigIo, TelemetryEvent};
 use hils_rig_core::pulse::PulseRegisters;
-use hils_rig_core::rig::{CommandError, Faults, Rig, RigConfig};
+use hils_rig_core::rig::{Built, CommandError, Faults, Rig, RigConfig};
 use hils_rig_core::sensor::{ADC_SEQUENCE_LEN, SensorFault, SensorKind};
 use hils_rig_core::telemetry::{TelemetryRecord, WSP_KNOWN};
 use hils_sil::ClosedLoop;
@@ -554,9 +554,12 @@ fn start_is_built_outside_the_step_and_handed_over() {
 
     // A failed build goes back to the state before, with the command rejected.
     rig.command(start).unwrap();
-    rig.take_start_request().unwrap();
+    let req = rig.take_start_request().unwrap();
     assert_eq!(
-        rig.install(Err(CommandError::SpeedOutOfRange)),
+        rig.install(Built {
+            seq: req.seq,
+            result: Err(CommandError::SpeedOutOfRange)
+        }),
         Err(CommandError::SpeedOutOfRange)
     );
     assert_eq!(rig.state(), RigState::Stopped);
@@ -923,4 +926,65 @@ proptest::proptest! {
             }
         }
     }
+}
+
+/// Start, Stop while starting, a second Start before the builder is done: the first build
+/// must not run under the second request (it is refused and counted); the second runs.
+#[test]
+fn a_late_build_is_not_installed_under_a_later_start() {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut io = MockBoard::new();
+    let first = paper_start(FrictionModel::Variable);
+    let Command::Start {
+        mode,
+        rail,
+        friction,
+        emergency,
+        ..
+    } = first
+    else {
+        unreachable!()
+    };
+    let second = Command::Start {
+        mode,
+        rail,
+        friction,
+        emergency,
+        initial_speed_kmh: 80.0,
+    };
+    rig.command(first).unwrap();
+    let req1 = rig.take_start_request().unwrap();
+    rig.command(Command::Stop).unwrap();
+    rig.command(second).unwrap();
+    let req2 = rig.take_start_request().unwrap();
+    assert_ne!(req1.seq, req2.seq);
+    // The builder finishes the first request only now.
+    assert_eq!(
+        rig.install(req1.build()),
+        Err(CommandError::StaleBuild { seq: req1.seq })
+    );
+    assert_eq!(rig.state(), RigState::Starting);
+    assert_eq!(rig.stale_builds(), 1);
+    assert!(rig.outputs().is_none());
+    rig.install(req2.build()).unwrap();
+    rig.step(&mut io);
+    // The run is the second request's: 80 km/h, not 150.
+    let v_kmh = rig.outputs().unwrap().vehicle_speed * 3.6;
+    assert!((v_kmh - 80.0).abs() < 0.5, "v = {v_kmh} km/h");
+    assert_eq!(rig.stale_builds(), 1);
+}
+
+/// A request the board could not pass to a busy builder is offered again, once, and only
+/// while it is still the pending one.
+#[test]
+fn a_request_not_passed_on_is_offered_again() {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    rig.command(paper_start(FrictionModel::Variable)).unwrap();
+    let req = rig.take_start_request().unwrap();
+    assert_eq!(rig.take_start_request(), None);
+    rig.retry_start_request(&req);
+    assert_eq!(rig.take_start_request(), Some(req));
+    rig.command(Command::Stop).unwrap();
+    rig.retry_start_request(&req);
+    assert_eq!(rig.take_start_request(), None);
 }
