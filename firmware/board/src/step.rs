@@ -4,6 +4,8 @@
 
 use core::sync::atomic::{AtomicU8, AtomicU32, Ordering};
 
+#[cfg(not(feature = "bringup"))]
+use crate::sim_store::BoardSim;
 use cortex_m::peripheral::DWT;
 use cortex_m_rt::interrupt;
 use embassy_stm32::adc::RingBufferedAdc;
@@ -18,7 +20,7 @@ use hils_rig_core::hw::{RigIo, TelemetryEvent};
 use hils_rig_core::pulse::PulseRegisters;
 #[cfg(not(feature = "bringup"))]
 use hils_rig_core::rig::{Built, StartRequest};
-use hils_rig_core::rig::{CommandError, Rig};
+use hils_rig_core::rig::{CommandError, Rig, SimStore};
 use hils_rig_core::sensor::ADC_SEQUENCE_LEN;
 
 use crate::ceiling::StepChannel;
@@ -39,12 +41,13 @@ pub static CAN_RX: StepChannel<Frame, 8> = StepChannel::new();
 /// Local commands (user button, autostart), for the step.
 pub static LOCAL_CMD: StepChannel<Command, 2> = StepChannel::new();
 /// Runs the step requested, for the builder task (thread mode). Not in the bring-up image
-/// (it builds its one run in thread mode before timing it), which saves the slot's 6 KiB.
+/// (it builds its one run in thread mode before timing it).
 #[cfg(not(feature = "bringup"))]
 pub static START_REQUESTS: StepChannel<StartRequest, 1> = StepChannel::new();
-/// Simulations the builder built (or why not), for the step to move into the rig.
+/// The builder's word that it built a run in the rig's store (`crate::sim_store`), or why
+/// not: a few bytes, the simulation itself is not moved.
 #[cfg(not(feature = "bringup"))]
-pub static BUILT: Handoff<Built, 1> = Handoff::new();
+pub static BUILT: Handoff<Built<()>, 1> = Handoff::new();
 /// Telemetry events from the step to the logging task.
 pub static TELEMETRY: StepChannel<TelemetryEvent, 16> = StepChannel::new();
 /// What the step has to say, for a task to log (the step never logs).
@@ -147,9 +150,15 @@ impl Watchdog {
     }
 }
 
+/// The step's rig: its simulation in the static store the builder fills in place.
+#[cfg(not(feature = "bringup"))]
+pub type StepRig = Rig<BoardSim>;
+#[cfg(feature = "bringup")]
+pub type StepRig = Rig;
+
 /// Everything the step owns.
 pub struct RealTime {
-    pub rig: Rig,
+    pub rig: StepRig,
     pub io: BoardIo,
     pub watchdog: Watchdog,
     /// Drop counters as last passed to the rig.
@@ -163,7 +172,7 @@ pub static REAL_TIME: Handoff<RealTime, 1> = Handoff::new();
 /// the same code from the same memory).
 #[unsafe(link_section = ".ccm_text.rig_step")]
 #[inline(never)]
-pub fn rig_step<IO: RigIo>(rig: &mut Rig, io: &mut IO) {
+pub fn rig_step<S: SimStore, IO: RigIo>(rig: &mut Rig<S>, io: &mut IO) {
     rig.step(io);
 }
 
@@ -213,22 +222,23 @@ fn step_tick() {
     rt.watchdog.feed();
 }
 
-/// Passes a start request to the builder and installs a built simulation (a move) if it
-/// was built for the pending request.
+/// Passes a start request to the builder (lending it the rig's simulation store) and
+/// starts the run the builder built there, if it was built for the pending request: no
+/// simulation is moved in the step.
 #[cfg(not(feature = "bringup"))]
 #[inline(always)]
-fn hand_over_runs(rig: &mut Rig) {
+fn hand_over_runs(rig: &mut StepRig) {
     if let Some(req) = rig.take_start_request()
         && START_REQUESTS.try_send(req).is_err()
     {
-        // The builder still holds an earlier (cancelled) request: offer this one again
-        // next tick; the earlier build, when it comes, is refused by its sequence number.
+        // Not expected (the rig lends its store for one request at a time): offer it
+        // again next tick.
         rig.retry_start_request(&req);
     }
     // SAFETY: this is the step interrupt, the only caller.
     if let Some(built) = unsafe { BUILT.step_take() } {
         let failed = built.result.is_err();
-        match rig.install(built) {
+        match rig.install_in_place(built) {
             Err(CommandError::StaleBuild { seq }) => {
                 let count = rig.stale_builds();
                 let _ = STEP_EVENTS.try_send(StepEvent::StaleBuild { seq, count });
@@ -242,7 +252,7 @@ fn hand_over_runs(rig: &mut Rig) {
 }
 
 #[inline(always)]
-fn take_commands(rig: &mut Rig) {
+fn take_commands(rig: &mut StepRig) {
     while let Ok(frame) = CAN_RX.try_receive() {
         if let Err(e) = rig.command_frame(&frame) {
             let _ = STEP_EVENTS.try_send(StepEvent::CommandRejected(e));

@@ -211,18 +211,51 @@ pub struct StartRequest {
     pub initial_speed_kmh: f32,
 }
 
-/// The simulation of a run, built by [`StartRequest::build`] and handed to the step by
-/// [`Rig::install`] (a move: no construction in the step).
+/// The simulation of a run, built by [`StartRequest::build`] outside the step.
 #[derive(Clone, Debug)]
 pub struct Simulation(Sim);
 
+impl Simulation {
+    /// No run.
+    pub const fn none() -> Self {
+        Self(Sim::None)
+    }
+}
+
+/// The simulation in `store`, or none while it is lent (a function of the fields, so that
+/// the rig's other fields stay free to borrow).
+fn sim_in<S: SimStore>(store: &S, lent: bool) -> Option<&Sim> {
+    (!lent).then(|| &store.sim().0)
+}
+
+/// Where the rig keeps the simulation of its run: in the rig itself ([`Simulation`], for
+/// hosts: [`Rig::install`] moves a build in), or in storage outside it that the builder
+/// fills in place while the rig has lent it (the board: no 6 KiB move in the step,
+/// [`Rig::install_in_place`]). The rig touches its store only while it has not lent it:
+/// from [`Rig::take_start_request`] until the build for that request comes back
+/// (`install`/`install_in_place`/`retry_start_request`), the builder owns it.
+pub trait SimStore {
+    fn sim(&self) -> &Simulation;
+    fn sim_mut(&mut self) -> &mut Simulation;
+}
+
+impl SimStore for Simulation {
+    fn sim(&self) -> &Simulation {
+        self
+    }
+    fn sim_mut(&mut self) -> &mut Simulation {
+        self
+    }
+}
+
 /// What the builder hands back for a request: the request's sequence number and the
-/// simulation (or why it could not be built).
+/// simulation, `T = Simulation` (or `()` when it was built in the rig's store), or why it
+/// could not be built.
 #[derive(Clone, Debug)]
-pub struct Built {
+pub struct Built<T = Simulation> {
     /// [`StartRequest::seq`] of the request this was built for.
     pub seq: u32,
-    pub result: Result<Simulation, CommandError>,
+    pub result: Result<T, CommandError>,
 }
 
 impl StartRequest {
@@ -236,7 +269,27 @@ impl StartRequest {
         }
     }
 
-    fn build_simulation(&self) -> Result<Simulation, CommandError> {
+    /// Builds the run's simulation into `store` (the board's builder, in thread mode, into
+    /// the store the rig lent it) and says how it went, for [`Rig::install_in_place`].
+    pub fn build_into(&self, store: &mut Simulation) -> Built<()> {
+        let result = match self.build_simulation() {
+            Ok(sim) => {
+                *store = sim;
+                Ok(())
+            }
+            Err(e) => {
+                *store = Simulation::none();
+                Err(e)
+            }
+        };
+        Built {
+            seq: self.seq,
+            result,
+        }
+    }
+
+    /// The simulation of this request (plant, and in self-test mode the brake unit).
+    pub fn build_simulation(&self) -> Result<Simulation, CommandError> {
         let mut params = Params::default();
         params.friction.model = self.friction;
         let v0 = self.initial_speed_kmh / KMH_PER_MPS;
@@ -259,11 +312,14 @@ impl StartRequest {
     }
 }
 
-/// The rig: sensors, simulation, outputs, telemetry and state.
-pub struct Rig {
+/// The rig: sensors, simulation, outputs, telemetry and state. `S`: where it keeps the
+/// simulation ([`SimStore`]).
+pub struct Rig<S: SimStore = Simulation> {
     config: RigConfig,
     pub sensors: [SensorChannel; CHANNELS],
-    sim: Sim,
+    sim: S,
+    /// The store is lent to the builder (a request was handed out, no build came back).
+    sim_lent: bool,
     state: RigState,
     mode: RigMode,
     rail: Rail,
@@ -309,13 +365,49 @@ pub struct Rig {
     stale_builds: u32,
 }
 
-impl Rig {
+impl Rig<Simulation> {
+    /// A rig that keeps the simulation in itself.
     pub fn new(config: RigConfig) -> Self {
+        Self::with_store(config, Simulation::none())
+    }
+
+    /// Installs a built simulation (a move) and starts the run, if it was built for the
+    /// pending request: [`Rig::install_in_place`] after moving it into the rig.
+    pub fn install(&mut self, built: Built) -> Result<(), CommandError> {
+        let result = match built.result {
+            Ok(sim) if self.sim_lent => {
+                *self.sim.sim_mut() = sim;
+                Ok(())
+            }
+            Ok(_) => Ok(()),
+            Err(e) => Err(e),
+        };
+        self.install_in_place(Built {
+            seq: built.seq,
+            result,
+        })
+    }
+
+    /// Builds a requested run here and installs it: for hosts (tests, the scripted run,
+    /// the QEMU cost measurement), where the build does not count against a step. The
+    /// board builds in thread mode instead. `Ok` when nothing was requested.
+    pub fn build_pending(&mut self) -> Result<(), CommandError> {
+        match self.take_start_request() {
+            Some(req) => self.install(req.build()),
+            None => Ok(()),
+        }
+    }
+}
+
+impl<S: SimStore> Rig<S> {
+    /// A rig that keeps the simulation in `store`, empty (`Simulation::none()`) at first.
+    pub fn with_store(config: RigConfig, store: S) -> Self {
         let silent = config.pulse_timer.silent();
         Self {
             config,
             sensors: [SensorChannel::new(SensorKind::LoadCell); CHANNELS],
-            sim: Sim::None,
+            sim: store,
+            sim_lent: false,
             state: RigState::Idle,
             mode: RigMode::Rig,
             rail: Rail::Wet,
@@ -352,6 +444,15 @@ impl Rig {
     pub fn state(&self) -> RigState {
         self.state
     }
+
+    /// The simulation, unless the store is lent to the builder.
+    fn sim(&self) -> Option<&Sim> {
+        sim_in(&self.sim, self.sim_lent)
+    }
+
+    fn sim_mut(&mut self) -> Option<&mut Sim> {
+        (!self.sim_lent).then(|| &mut self.sim.sim_mut().0)
+    }
     pub fn mode(&self) -> RigMode {
         self.mode
     }
@@ -376,7 +477,7 @@ impl Rig {
 
     /// The plant outputs of the run (None without a run).
     pub fn outputs(&self) -> Option<&Outputs<f32>> {
-        match &self.sim {
+        match self.sim()? {
             Sim::None => None,
             Sim::Rig(p) => Some(p.outputs()),
             Sim::SelfTest(c) => Some(c.outputs()),
@@ -502,7 +603,9 @@ impl Rig {
             return Err(CommandError::SensorFaults);
         }
         // The old run's simulation is no longer shown (plain data: nothing to drop).
-        self.sim = Sim::None;
+        if let Some(sim) = self.sim_mut() {
+            *sim = Sim::None;
+        }
         self.start_seq = self.start_seq.wrapping_add(1);
         self.start_request = Some(StartRequest {
             seq: self.start_seq,
@@ -518,19 +621,25 @@ impl Rig {
         Ok(())
     }
 
-    /// The run requested since the last call, for the builder (once per request).
+    /// The run requested since the last call, for the builder (once per request); from
+    /// now until its build comes back the builder owns the rig's [`SimStore`]. None while
+    /// the store is still lent for an earlier request (its build, stale, comes back
+    /// first), or while the last run's final record is still due.
     pub fn take_start_request(&mut self) -> Option<StartRequest> {
-        if core::mem::take(&mut self.start_request_new) {
-            self.start_request
-        } else {
-            None
+        if self.sim_lent || self.end_event || !self.start_request_new {
+            return None;
         }
+        self.start_request_new = false;
+        self.sim_lent = self.start_request.is_some();
+        self.start_request
     }
 
     /// A request [`Rig::take_start_request`] gave out that the board could not pass to the
     /// builder (still busy with an earlier one): offered again at the next call, if it is
     /// still the pending request.
     pub fn retry_start_request(&mut self, req: &StartRequest) {
+        // The builder never got it: the store is the rig's again.
+        self.sim_lent = false;
         if self.start_request.is_some_and(|r| r.seq == req.seq) {
             self.start_request_new = true;
         }
@@ -542,30 +651,36 @@ impl Rig {
         self.stale_builds
     }
 
-    /// Installs a built simulation (a move, in the step) and starts the run, if it was
-    /// built for the pending request (same [`StartRequest::seq`]); a failed build goes back
-    /// to the state before the request, with the command rejected. A build for any other
-    /// request (stopped meanwhile, or an earlier `Start` superseded by a later one) is not
-    /// installed: counted in [`Rig::stale_builds`] and refused with `StaleBuild`.
-    pub fn install(&mut self, built: Built) -> Result<(), CommandError> {
+    /// The builder is done with the store (the step, at the tick the build comes back):
+    /// starts the run with the simulation it built there, if it was built for the pending
+    /// request (same [`StartRequest::seq`]); a failed build goes back to the state before
+    /// the request, with the command rejected. A build for any other request (stopped
+    /// meanwhile, or an earlier `Start` superseded by a later one) is not installed:
+    /// counted in [`Rig::stale_builds`] and refused with `StaleBuild`. Only the enum tag
+    /// is written here: no construction and no move in the step.
+    pub fn install_in_place(&mut self, built: Built<()>) -> Result<(), CommandError> {
+        if !self.sim_lent {
+            // Nothing was lent: not a build of ours.
+            self.stale_builds = self.stale_builds.wrapping_add(1);
+            return Err(CommandError::StaleBuild { seq: built.seq });
+        }
+        self.sim_lent = false;
         let Some(req) = self
             .start_request
             .filter(|r| self.state == RigState::Starting && r.seq == built.seq)
         else {
+            self.sim.sim_mut().0 = Sim::None;
             self.stale_builds = self.stale_builds.wrapping_add(1);
             return Err(CommandError::StaleBuild { seq: built.seq });
         };
         self.start_request = None;
         self.start_request_new = false;
-        let sim = match built.result {
-            Ok(Simulation(sim)) => sim,
-            Err(e) => {
-                self.state = self.state_before_start;
-                self.note_result(false);
-                return Err(e);
-            }
-        };
-        self.sim = sim;
+        if let Err(e) = built.result {
+            self.sim.sim_mut().0 = Sim::None;
+            self.state = self.state_before_start;
+            self.note_result(false);
+            return Err(e);
+        }
         self.mode = req.mode;
         self.rail = req.rail;
         self.friction = req.friction;
@@ -584,16 +699,6 @@ impl Rig {
         self.last_record_step = None;
         self.record_seq = 0;
         Ok(())
-    }
-
-    /// Builds a requested run here and installs it: for hosts (tests, the scripted run,
-    /// the QEMU cost measurement), where the build does not count against a step. The
-    /// board builds in thread mode instead. `Ok` when nothing was requested.
-    pub fn build_pending(&mut self) -> Result<(), CommandError> {
-        match self.take_start_request() {
-            Some(req) => self.install(req.build()),
-            None => Ok(()),
-        }
     }
 
     /// Carries out a command (also from the board's user button).
@@ -615,7 +720,7 @@ impl Rig {
                 s => Err(CommandError::NotNow(s)),
             },
             Command::Brake(b) => {
-                if let Sim::SelfTest(c) = &mut self.sim {
+                if let Some(Sim::SelfTest(c)) = self.sim_mut() {
                     c.set_demand(match b {
                         BrakeCommand::Release => BrakeDemand::Release,
                         BrakeCommand::Emergency => BrakeDemand::Emergency,
@@ -760,7 +865,10 @@ impl Rig {
     }
 
     fn step_sim(&mut self, readings: &[f32; CHANNELS]) -> Flags {
-        match &mut self.sim {
+        if self.sim_lent {
+            return Flags(0);
+        }
+        match &mut self.sim.sim_mut().0 {
             Sim::None => Flags(0),
             Sim::Rig(plant) => {
                 let mut inputs = [BrakeInput::ClampForce(0.0f32); WHEELSETS];
@@ -822,7 +930,7 @@ impl Rig {
         for (j, s) in self.sensors.iter().enumerate() {
             sensor_faults |= (SensorFault::code(s.fault()) as u16) << (4 * j);
         }
-        let (o, unit) = match &self.sim {
+        let (o, unit) = match self.sim()? {
             Sim::None => return None,
             Sim::Rig(p) => (p.outputs(), None),
             Sim::SelfTest(c) => (c.outputs(), Some(c.unit_outputs())),
@@ -898,9 +1006,9 @@ impl Rig {
         let live = matches!(self.state, RigState::Running | RigState::Finished);
         // Wheel circumferential speeds r omega (m/s) for CAN, spin speeds omega (rad/s)
         // for the pulse trains.
-        let (speeds, o) = match (&self.sim, live) {
-            (Sim::Rig(p), true) => (p.wheel_speeds(), Some(p.outputs())),
-            (Sim::SelfTest(c), true) => (c.plant.wheel_speeds(), Some(c.outputs())),
+        let (speeds, o) = match (sim_in(&self.sim, self.sim_lent), live) {
+            (Some(Sim::Rig(p)), true) => (p.wheel_speeds(), Some(p.outputs())),
+            (Some(Sim::SelfTest(c)), true) => (c.plant.wheel_speeds(), Some(c.outputs())),
             _ => ([0.0; WHEELSETS], None),
         };
         let (v, a) = o
