@@ -88,8 +88,24 @@ pub fn nbtp_readback() -> u32 {
     pac::FDCAN1.nbtp().read().0
 }
 
-/// Starts FDCAN1 on the bus; checks that the controller holds our timing.
+/// The bit timing is computed for an FDCAN kernel clock of `HSE_HZ`: the kernel clock
+/// embassy configured (`rcc::frequency`, from `clock::config`'s FDCANSEL) must be that,
+/// else every quantum is off. A mismatch panics: the safe state, a defmt error, a reset.
+pub fn check_kernel_clock() {
+    let kernel_hz = embassy_stm32::rcc::frequency::<embassy_stm32::peripherals::FDCAN1>().0;
+    if kernel_hz != HSE_HZ {
+        defmt::panic!(
+            "FDCAN1 kernel clock {=u32} Hz, but the bit timing is computed for {=u32} Hz",
+            kernel_hz,
+            HSE_HZ
+        );
+    }
+}
+
+/// Starts FDCAN1 on the bus; checks the kernel clock and that the controller holds our
+/// timing.
 pub fn start(cfg: CanConfigurator<'static>) -> (CanTx<'static>, CanRx<'static>, Properties) {
+    check_kernel_clock();
     let can = configure(cfg).start(OperatingMode::NormalOperationMode);
     let t = bit_timing();
     let tol = t.tolerance();
