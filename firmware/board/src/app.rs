@@ -113,6 +113,7 @@ pub async fn run(spawner: Spawner, p: Peripherals) {
     spawner.spawn(unwrap!(crate::telemetry::telemetry_task()));
     spawner.spawn(unwrap!(crate::telemetry::step_events_task()));
     spawner.spawn(unwrap!(sim_builder_task()));
+    spawner.spawn(unwrap!(adc_restart_task()));
     spawner.spawn(unwrap!(button_task(Input::new(p.PC13, Pull::Down))));
     spawner.spawn(unwrap!(led_task(Output::new(
         p.PA5,
@@ -155,6 +156,24 @@ async fn sim_builder_task() {
         // The slot is busy only while the step has not yet taken the last word (< 0.1 ms).
         while BUILT.publish_with(|| built.clone()).is_err() {
             Delay::after_micros(100).await;
+        }
+    }
+}
+
+/// Restarts the ADC ring when the step found its DMA stopped (the step only reports it
+/// as stale ticks: embassy's restart is set-up work that does not belong in the step).
+#[embassy_executor::task]
+async fn adc_restart_task() {
+    let mut restarts = 0u32;
+    loop {
+        Delay::after_millis(1).await;
+        if crate::step::ADC_STOPPED.swap(false, core::sync::atomic::Ordering::Relaxed) {
+            // SAFETY: thread mode; `start` is a few register writes.
+            let done = unsafe { REAL_TIME.with_step_masked(|rt| rt.io.adc.start()) };
+            if done.is_some() {
+                restarts += 1;
+                defmt::warn!("ADC ring stopped: restarted ({=u32} so far)", restarts);
+            }
         }
     }
 }

@@ -214,7 +214,8 @@ pub async fn can_rx_task(mut rx: CanRx<'static>) {
 }
 
 /// Polls the bus state every 10 ms: error passive, bus-off (and the interrupt's count),
-/// restart with backoff, and the clear asked by `ClearFaults`.
+/// restart with backoff, and the clear asked by `ClearFaults`; stamps thread mode's
+/// heartbeat for the watchdog.
 #[embassy_executor::task]
 pub async fn bus_task(props: Properties) {
     let mut monitor = BusMonitor::new();
@@ -222,6 +223,8 @@ pub async fn bus_task(props: Properties) {
     let mut drops_logged = 0;
     loop {
         ticker.next().await;
+        // Thread mode is alive: the step keeps feeding the watchdog.
+        crate::step::THREAD_HEARTBEAT.store(STEP_TICKS.load(Ordering::Relaxed), Ordering::Relaxed);
         let mode = match props.bus_error_mode() {
             can::enums::BusErrorMode::ErrorActive => BusMode::ErrorActive,
             can::enums::BusErrorMode::ErrorPassive => BusMode::ErrorPassive,

@@ -2,7 +2,7 @@
 //! from CCM SRAM, owning the rig and its peripherals (handed over once from `main`), talking
 //! to the tasks only through ceiling-locked queues and atomics, feeding the watchdog.
 
-use core::sync::atomic::{AtomicU8, AtomicU32, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU8, AtomicU32, Ordering};
 
 #[cfg(not(feature = "bringup"))]
 use crate::sim_store::BoardSim;
@@ -16,6 +16,7 @@ use embassy_stm32::peripherals::{ADC1, IWDG, TIM1, TIM4, TIM8, TIM20};
 use embassy_stm32::wdg::IndependentWatchdog;
 use hils_rig_core::can::Command;
 use hils_rig_core::can_tx::QueuedFrame;
+use hils_rig_core::heartbeat::thread_alive;
 use hils_rig_core::hw::{RigIo, TelemetryEvent};
 use hils_rig_core::pulse::PulseRegisters;
 #[cfg(not(feature = "bringup"))]
@@ -63,6 +64,11 @@ pub static RIG_STATE: AtomicU8 = AtomicU8::new(0);
 pub static CAN_TX_DROPS: AtomicU32 = AtomicU32::new(0);
 /// Telemetry events the RTT channel could not take.
 pub static TELEMETRY_DROPS: AtomicU32 = AtomicU32::new(0);
+/// Thread mode's heartbeat: the step tick at the bus task's last 10 ms poll. The step
+/// feeds the watchdog only while it is fresh (`hils_rig_core::heartbeat`).
+pub static THREAD_HEARTBEAT: AtomicU32 = AtomicU32::new(0);
+/// The step found the ADC's DMA stopped (it does not restart it: the ADC task does).
+pub static ADC_STOPPED: AtomicBool = AtomicBool::new(false);
 
 /// Something the step reports to the log.
 #[derive(Clone, Copy, Debug, defmt::Format)]
@@ -96,6 +102,13 @@ impl RigIo for BoardIo {
 
     #[unsafe(link_section = ".ccm_text.board_io")]
     fn adc_sequence(&mut self) -> Option<[u16; ADC_SEQUENCE_LEN]> {
+        // embassy's `read_latest` restarts a stopped ring (DMA and ADC set-up) itself: not
+        // in the step. A stopped ring (DMA1 channel 1 CCR.EN clear: a transfer error, or
+        // stopped) is a stale tick here, and the ADC task restarts it in thread mode.
+        if !pac::DMA1.ch(0).cr().read().en() {
+            ADC_STOPPED.store(true, Ordering::Relaxed);
+            return None;
+        }
         let n = self.adc.read_latest(&mut self.adc_buf);
         (n == ADC_SEQUENCE_LEN).then_some(self.adc_buf)
     }
@@ -126,7 +139,8 @@ impl RigIo for BoardIo {
     }
 }
 
-/// The independent watchdog, started by the first step and fed by every step.
+/// The independent watchdog, started by the first step and fed by every step while thread
+/// mode's heartbeat is fresh.
 pub struct Watchdog {
     iwdg: IndependentWatchdog<'static, IWDG>,
     started: bool,
@@ -219,7 +233,9 @@ fn step_tick() {
     let exit = DWT::cycle_count();
     let tick_pending = pac::TIM3.sr().read().uif();
     rt.rig.record_timing(entry, exit, tick_pending);
-    rt.watchdog.feed();
+    if thread_alive(tick, THREAD_HEARTBEAT.load(Ordering::Relaxed)) {
+        rt.watchdog.feed();
+    }
 }
 
 /// Passes a start request to the builder (lending it the rig's simulation store) and
