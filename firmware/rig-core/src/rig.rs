@@ -183,6 +183,7 @@ pub enum CommandError {
     /// A build came back for a start request that is no longer pending (stopped, or
     /// superseded by a later `Start`): not installed, counted ([`Rig::stale_builds`]).
     StaleBuild {
+        /// [`StartRequest::seq`] of the request it was built for.
         seq: u32,
     },
     Calibration(CalibrationError),
@@ -235,7 +236,9 @@ fn sim_in<S: SimStore>(store: &S, lent: bool) -> Option<&Sim> {
 /// from [`Rig::take_start_request`] until the build for that request comes back
 /// (`install`/`install_in_place`/`retry_start_request`), the builder owns it.
 pub trait SimStore {
+    /// The simulation in the store (the rig calls this only while it has not lent it).
     fn sim(&self) -> &Simulation;
+    /// As [`SimStore::sim`], to step or replace it.
     fn sim_mut(&mut self) -> &mut Simulation;
 }
 
@@ -255,6 +258,7 @@ impl SimStore for Simulation {
 pub struct Built<T = Simulation> {
     /// [`StartRequest::seq`] of the request this was built for.
     pub seq: u32,
+    /// The simulation (or `()`: built in the rig's store), or why the build failed.
     pub result: Result<T, CommandError>,
 }
 
