@@ -46,3 +46,41 @@ if [ -n "$objdump_tool" ] && [ -n "$nm_tool" ]; then
         exit 1
     fi
 fi
+
+# Stack frames of the step's own functions (prologue: pushes and `sub sp`), against a
+# budget: a value of the size of the simulation (~6 KiB) moved through the step would
+# show here as a frame of that size (review of issue 11).
+STEP_FRAME_BUDGET=1024
+if [ -n "$objdump_tool" ] && [ -n "$nm_tool" ]; then
+    # By address (objdump may label a function with another symbol at the same address,
+    # e.g. __sccm_text for the first function in CCM).
+    step_fns="$("$nm_tool" "$elf" | awk '$3 == "TIM3" || $3 ~ /4step9step_tick|4step8rig_step/ { if ($3 !~ /LongThunk/) printf "%s=%s ", $1, $3 }')"
+    "$objdump_tool" -d --no-show-raw-insn "$elf" | awk -v budget="$STEP_FRAME_BUDGET" -v fns="$step_fns" '
+        BEGIN { k = split(fns, f, " "); for (i = 1; i <= k; i++) { split(f[i], p, "="); want[p[1]] = p[2] } }
+        /^[0-9a-f]+ <[^$][^>]*>:$/ {
+            if (name != "") report()
+            name = ""; n = 0; frame = 0
+            if ($1 in want) { name = want[$1]; delete want[$1] }
+            next
+        }
+        name != "" && n < 16 {
+            n++
+            line = $0
+            if (line ~ /\tv?push(\.w)?\t\{/) {
+                regs = line; sub(/.*\{/, "", regs); sub(/\}.*/, "", regs)
+                k = split(regs, r, ",")
+                frame += (line ~ /vpush/ ? 8 : 4) * k
+            } else if (line ~ /\tsub(\.w)?\tsp, (sp, )?#[0-9]+/) {
+                imm = line; sub(/.*#/, "", imm); sub(/[^0-9].*/, "", imm)
+                frame += imm
+            }
+        }
+        function report() {
+            printf "  step frame: %s %d B (budget %d B)\n", name, frame, budget
+            if (frame > budget) over = 1
+        }
+        END {
+            if (name != "") report()
+            if (over) { print "  STEP FRAME OVER BUDGET"; exit 1 }
+        }'
+fi

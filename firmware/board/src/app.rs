@@ -22,6 +22,7 @@ use hils_rig_core::sensor::ADC_SEQUENCE_LEN;
 
 use crate::Irqs;
 use crate::pulse::PulseOut;
+use crate::sim_store::{BoardSim, lent_store};
 use crate::step::{
     BUILT, BoardIo, LOCAL_CMD, REAL_TIME, RIG_STATE, RealTime, START_REQUESTS, WATCHDOG_TIMEOUT_US,
     Watchdog, configure_step_timer,
@@ -89,7 +90,8 @@ pub async fn run(spawner: Spawner, p: Peripherals) {
     unwrap!(
         REAL_TIME
             .publish_with(|| RealTime {
-                rig: Rig::new(rig_config),
+                // SAFETY: the one handle on the store, for the step's rig.
+                rig: Rig::with_store(rig_config, unsafe { BoardSim::new() }),
                 io: BoardIo {
                     adc,
                     adc_buf: [0; ADC_SEQUENCE_LEN],
@@ -111,6 +113,7 @@ pub async fn run(spawner: Spawner, p: Peripherals) {
     spawner.spawn(unwrap!(crate::telemetry::telemetry_task()));
     spawner.spawn(unwrap!(crate::telemetry::step_events_task()));
     spawner.spawn(unwrap!(sim_builder_task()));
+    spawner.spawn(unwrap!(adc_restart_task()));
     spawner.spawn(unwrap!(button_task(Input::new(p.PC13, Pull::Down))));
     spawner.spawn(unwrap!(led_task(Output::new(
         p.PA5,
@@ -140,15 +143,37 @@ pub async fn run(spawner: Spawner, p: Peripherals) {
 }
 
 /// Builds the simulation of each run the step requests, in thread mode (~35 000
-/// instructions and a large stack frame that must not run in the step), and publishes it
-/// for the step to move in at its next tick.
+/// instructions and a large stack frame that must not run in the step), in place in the
+/// rig's store the step lent with the request, and tells the step (`BUILT`, a few bytes),
+/// which starts the run at its next tick if the request is still the pending one.
 #[embassy_executor::task]
 async fn sim_builder_task() {
     loop {
         let request = START_REQUESTS.receive().await;
-        // The slot is busy only while the step has not yet taken the last build (< 0.1 ms).
-        while BUILT.publish_with(|| request.build()).is_err() {
+        // SAFETY: the rig lent the store with this request and touches it again only
+        // after `BUILT` is published below; the reference ends with this statement.
+        let built = request.build_into(unsafe { lent_store() });
+        // The slot is busy only while the step has not yet taken the last word (< 0.1 ms).
+        while BUILT.publish_with(|| built.clone()).is_err() {
             Delay::after_micros(100).await;
+        }
+    }
+}
+
+/// Restarts the ADC ring when the step found its DMA stopped (the step only reports it
+/// as stale ticks: embassy's restart is set-up work that does not belong in the step).
+#[embassy_executor::task]
+async fn adc_restart_task() {
+    let mut restarts = 0u32;
+    loop {
+        Delay::after_millis(1).await;
+        if crate::step::ADC_STOPPED.swap(false, core::sync::atomic::Ordering::Relaxed) {
+            // SAFETY: thread mode; `start` is a few register writes.
+            let done = unsafe { REAL_TIME.with_step_masked(|rt| rt.io.adc.start()) };
+            if done.is_some() {
+                restarts += 1;
+                defmt::warn!("ADC ring stopped: restarted ({=u32} so far)", restarts);
+            }
         }
     }
 }

@@ -17,7 +17,7 @@ use embedded_can::{Id, StandardId};
 use hils_rig_core::bus::{BusAction, BusMode, BusMonitor, BusStatus};
 use hils_rig_core::can::ID_COMMAND;
 use hils_rig_core::can_timing::{BitTimingLimits, NominalBitTiming, nominal_bit_timing};
-use hils_rig_core::can_tx::{QueuedFrame, TxSlots, is_stale};
+use hils_rig_core::can_tx::{QueuedFrame, TxSlots, frame_ticks, is_stale_behind};
 
 use crate::clock::HSE_HZ;
 use crate::step::{BUS_STATE, CAN_RX, CAN_TX, CAN_TX_DROPS, STEP_TICKS};
@@ -88,8 +88,24 @@ pub fn nbtp_readback() -> u32 {
     pac::FDCAN1.nbtp().read().0
 }
 
-/// Starts FDCAN1 on the bus; checks that the controller holds our timing.
+/// The bit timing is computed for an FDCAN kernel clock of `HSE_HZ`: the kernel clock
+/// embassy configured (`rcc::frequency`, from `clock::config`'s FDCANSEL) must be that,
+/// else every quantum is off. A mismatch panics: the safe state, a defmt error, a reset.
+pub fn check_kernel_clock() {
+    let kernel_hz = embassy_stm32::rcc::frequency::<embassy_stm32::peripherals::FDCAN1>().0;
+    if kernel_hz != HSE_HZ {
+        defmt::panic!(
+            "FDCAN1 kernel clock {=u32} Hz, but the bit timing is computed for {=u32} Hz",
+            kernel_hz,
+            HSE_HZ
+        );
+    }
+}
+
+/// Starts FDCAN1 on the bus; checks the kernel clock and that the controller holds our
+/// timing.
 pub fn start(cfg: CanConfigurator<'static>) -> (CanTx<'static>, CanRx<'static>, Properties) {
+    check_kernel_clock();
     let can = configure(cfg).start(OperatingMode::NormalOperationMode);
     let t = bit_timing();
     let tol = t.tolerance();
@@ -125,19 +141,17 @@ fn count_drops(n: u32) {
     }
 }
 
-/// Retires finished transmit buffers and cancels stale pending ones.
+/// Retires finished transmit buffers. Nothing is cancelled (FDCAN_TXBCR): the buffers run
+/// in FIFO mode, for which the Bosch M_CAN manual says cancellation is not intended; stale
+/// frames are dropped before they are written instead (`hils_rig_core::can_tx`).
 fn service_buffers(slots: &mut TxSlots<TX_BUFFERS>) {
     let regs = pac::FDCAN1;
     let out = slots.retire(regs.txbrp().read().0, regs.txbto().read().0);
     count_drops(out.dropped);
-    let cancel = slots.stale_mask(regs.txbrp().read().0, STEP_TICKS.load(Ordering::Relaxed));
-    if cancel != 0 {
-        regs.txbcr().write(|w| w.0 = cancel);
-    }
 }
 
 /// Sends the frames the step queued, oldest first; a frame past its life (while the bus
-/// is down, or behind others) is dropped and counted, in the queue or in the controller.
+/// is down, or behind others) is dropped and counted before it reaches the controller.
 #[embassy_executor::task]
 pub async fn can_tx_task(mut tx: CanTx<'static>) {
     let regs = pac::FDCAN1;
@@ -158,11 +172,14 @@ pub async fn can_tx_task(mut tx: CanTx<'static>) {
         // Wait for a free buffer, watching the frame's and the buffers' age.
         loop {
             service_buffers(&mut slots);
-            if is_stale(id, tick, STEP_TICKS.load(Ordering::Relaxed)) {
+            let ahead = regs.txbrp().read().0.count_ones();
+            let now = STEP_TICKS.load(Ordering::Relaxed);
+            if is_stale_behind(id, tick, now, ahead, frame_ticks(BITRATE)) {
                 count_drops(1);
                 break;
             }
-            if !regs.txfqs().read().tfqf() {
+            // Nothing is written while bus-off: it would wait there and go out late.
+            if !regs.psr().read().bo() && !regs.txfqs().read().tfqf() {
                 let slot = regs.txfqs().read().tfqpi() as usize;
                 // FIFO mode: returns at once with a buffer free, and never aborts another.
                 let _ = tx.write(&frame).await;
@@ -197,7 +214,8 @@ pub async fn can_rx_task(mut rx: CanRx<'static>) {
 }
 
 /// Polls the bus state every 10 ms: error passive, bus-off (and the interrupt's count),
-/// restart with backoff, and the clear asked by `ClearFaults`.
+/// restart with backoff, and the clear asked by `ClearFaults`; stamps thread mode's
+/// heartbeat for the watchdog.
 #[embassy_executor::task]
 pub async fn bus_task(props: Properties) {
     let mut monitor = BusMonitor::new();
@@ -205,6 +223,8 @@ pub async fn bus_task(props: Properties) {
     let mut drops_logged = 0;
     loop {
         ticker.next().await;
+        // Thread mode is alive: the step keeps feeding the watchdog.
+        crate::step::THREAD_HEARTBEAT.store(STEP_TICKS.load(Ordering::Relaxed), Ordering::Relaxed);
         let mode = match props.bus_error_mode() {
             can::enums::BusErrorMode::ErrorActive => BusMode::ErrorActive,
             can::enums::BusErrorMode::ErrorPassive => BusMode::ErrorPassive,

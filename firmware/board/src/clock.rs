@@ -5,9 +5,17 @@
 //!   (96..344 MHz), / R 2 = 170 MHz (embassy-stm32 0.6 rcc/g4.rs `max` ranges, from the
 //!   STM32G474 datasheet). ST's own NUCLEO-G474RE clock setup (stm32duino variant, PR 2186
 //!   by ST) uses the same HSE / 6 x 85 / 2.
-//! * Boost (PWR_CR5.R1MODE = 0) is needed above 150 MHz; embassy's g4 init follows RM0440's
-//!   sequence (AHB / 2 during the switch, wait states, then the full clock) and sets 4 wait
-//!   states for HCLK <= 170 MHz in boost (RM0440 flash latency table; ST LL utils agree).
+//! * Boost (PWR_CR5.R1MODE = 0) is needed above 150 MHz. RM0440 (range 1 normal -> boost):
+//!   AHB / 2 before switching to the higher frequency, R1MODE = 0, wait states, switch to
+//!   the new clock, wait >= 1 us, then AHB / 1. embassy-stm32 0.6 `rcc/g4.rs` sets AHB / 2,
+//!   R1MODE and the 4 wait states (HCLK <= 170 MHz in boost: RM0440 flash latency table; ST
+//!   LL utils agree), waits 16 cycles, and then writes SW = PLL and HPRE = /1 in one
+//!   write: the core goes from HSI16 straight to 170 MHz HCLK, without the 1 us at 85 MHz
+//!   that the sequence puts in to soften the load step on the regulator. Not patched:
+//!   embassy's recorded clock frequencies (time driver, timers, FDCAN, ADC) come from the
+//!   same configuration, so a switch at AHB / 2 with our own HPRE write afterwards would
+//!   leave them wrong. Documented in docs/rig.md ("Clocks"); the bring-up self-test reads
+//!   the clock tree back.
 //! * FDCAN kernel clock = HSE, not PCLK1: 24 MHz is 8 x 3 MHz, so every standard rate from
 //!   125 kbit/s to 1 Mbit/s is a whole number of quanta that is a multiple of 8 with
 //!   prescaler 1 (192/96/48/24 quanta: 87.5 % exactly), and the CAN timing does not depend

@@ -7,11 +7,15 @@
 //!   (OC1M = force inactive) and the pins PA8/PB6/PC6/PB2 switched to GPIO outputs driven
 //!   low, so no timer state can drive them;
 //! * FDCAN1 off the bus: CCCR.INIT set (RM0440 FDCAN: message transfer stops, FDCAN_TX
-//!   recessive);
+//!   recessive), and PA12 (FDCAN1_TX) switched to a GPIO output driven high (recessive):
+//!   the FDCAN kernel clock is the HSE, so after a crystal failure the controller may not
+//!   act on INIT and could hold the bus dominant;
 //!
 //! then a record of the fault in RAM that survives the reset (`.uninit`, reported at the
 //! next start), a defmt line if the logger is free, ~50 ms for the host to read it (the
-//! watchdog is fed meanwhile) and a system reset. The independent watchdog (10 ms, fed by
+//! watchdog is fed every ms of the actual SYSCLK, HSI16 after a clock failure) and a
+//! system reset. An NMI is classified from its sources (RCC_CIFR.CSSF clock security,
+//! FLASH_ECCR.ECCD double ECC error, SYSCFG_CFGR2.SPF SRAM parity). The independent watchdog (10 ms, fed by
 //! the step) is the backstop for everything that does not reach these handlers: a stuck
 //! step, a lockup, interrupts masked too long.
 //!
@@ -38,6 +42,12 @@ pub enum FaultKind {
     HardFault = 2,
     ClockFailure = 3,
     UnexpectedInterrupt = 4,
+    /// NMI from a flash double ECC error (FLASH_ECCR.ECCD).
+    FlashEcc = 5,
+    /// NMI from an SRAM parity error (SYSCFG_CFGR2.SPF).
+    SramParity = 6,
+    /// NMI with none of its known sources flagged.
+    UnknownNmi = 7,
 }
 
 /// A fault, kept across the reset.
@@ -48,7 +58,8 @@ pub struct FaultRecord {
     pub pc_or_line: u32,
     /// HardFault: LR; unexpected interrupt: its number.
     pub lr_or_irq: u32,
-    /// HardFault: SCB CFSR; clock failure: RCC_CIFR.
+    /// HardFault: SCB CFSR; NMI: RCC_CIFR (the NMI's FLASH_ECCR is in `pc_or_line`, its
+    /// SYSCFG_CFGR2 in `lr_or_irq`).
     pub detail: u32,
 }
 
@@ -82,6 +93,9 @@ pub fn take_last_fault() -> Option<FaultRecord> {
         1 => FaultKind::Panic,
         2 => FaultKind::HardFault,
         3 => FaultKind::ClockFailure,
+        5 => FaultKind::FlashEcc,
+        6 => FaultKind::SramParity,
+        7 => FaultKind::UnknownNmi,
         _ => FaultKind::UnexpectedInterrupt,
     };
     Some(FaultRecord {
@@ -109,7 +123,15 @@ pub fn enter_safe_state() {
         port.moder().modify(|w| w.set_moder(pin, Moder::OUTPUT));
     }
     pac::FDCAN1.cccr().modify(|w| w.set_init(true));
+    // PA12 = FDCAN1_TX: high first, then output, so the pin never drives dominant.
+    pac::GPIOA.bsrr().write(|w| w.set_bs(CAN_TX_PIN, true));
+    pac::GPIOA
+        .moder()
+        .modify(|w| w.set_moder(CAN_TX_PIN, Moder::OUTPUT));
 }
+
+/// PA12, FDCAN1_TX (app.rs).
+const CAN_TX_PIN: usize = 12;
 
 fn record(kind: FaultKind, pc_or_line: u32, lr_or_irq: u32, detail: u32) {
     let s = Stored {
@@ -123,14 +145,30 @@ fn record(kind: FaultKind, pc_or_line: u32, lr_or_irq: u32, detail: u32) {
     unsafe { core::ptr::write_volatile(addr_of_mut!(LAST_FAULT) as *mut Stored, s) };
 }
 
-/// Waits ~50 ms for the host to read the log (feeding the watchdog), then resets.
+/// Core cycles per ms of the clock SYSCLK runs from now (RCC_CFGR.SWS): after a crystal
+/// failure the clock security system has switched it to HSI16.
+fn cycles_per_ms() -> u32 {
+    use pac::rcc::vals::Sw;
+    match pac::RCC.cfgr().read().sws() {
+        Sw::PLL1_R => crate::clock::SYSCLK_HZ / 1000,
+        Sw::HSE => crate::clock::HSE_HZ / 1000,
+        _ => HSI16_HZ / 1000,
+    }
+}
+
+/// HSI16, Hz.
+const HSI16_HZ: u32 = 16_000_000;
+
+/// Waits ~50 ms for the host to read the log (feeding the watchdog every ms of the actual
+/// SYSCLK: a delay counted at 170 MHz would last 10.6 ms at HSI16, past the 10 ms
+/// watchdog), then resets.
 fn wait_then_reset() -> ! {
+    let cycles = cycles_per_ms();
     for _ in 0..50 {
         pac::IWDG
             .kr()
             .write(|w| w.set_key(pac::iwdg::vals::Key::RESET));
-        // 1 ms at 170 MHz (longer if the clock fell back to HSI16).
-        cortex_m::asm::delay(170_000);
+        cortex_m::asm::delay(cycles);
     }
     cortex_m::peripheral::SCB::sys_reset()
 }
@@ -169,16 +207,39 @@ unsafe fn HardFault(ef: &ExceptionFrame) -> ! {
     wait_then_reset()
 }
 
+/// The NMI's cause from its sources on the G474 (RM0440: clock security system, flash
+/// double ECC error, SRAM parity error), the first flagged in that order.
+fn classify_nmi(cifr: u32, eccr: u32, cfgr2: u32) -> FaultKind {
+    if pac::rcc::regs::Cifr(cifr).cssf() {
+        FaultKind::ClockFailure
+    } else if pac::flash::regs::Eccr(eccr).eccd() {
+        FaultKind::FlashEcc
+    } else if pac::syscfg::regs::Cfgr2(cfgr2).spf() {
+        FaultKind::SramParity
+    } else {
+        FaultKind::UnknownNmi
+    }
+}
+
 #[exception]
 unsafe fn NonMaskableInt() {
     if begin() {
         let cifr = pac::RCC.cifr().read().0;
-        // Clear the clock security flag, else the NMI comes back at once.
+        let eccr = pac::FLASH.eccr().read().0;
+        let cfgr2 = pac::SYSCFG.cfgr2().read().0;
+        // Clear the flags (the handler does not return, but a flag left set would be
+        // raised again at once if it ever did).
         pac::RCC.cicr().write(|w| w.set_cssc(true));
-        record(FaultKind::ClockFailure, 0, 0, cifr);
+        pac::FLASH.eccr().modify(|w| w.set_eccd(true));
+        pac::SYSCFG.cfgr2().modify(|w| w.set_spf(true));
+        let kind = classify_nmi(cifr, eccr, cfgr2);
+        record(kind, eccr, cfgr2, cifr);
         defmt::error!(
-            "NMI (RCC_CIFR {=u32:#x}: crystal stopped?) - safe state, reset",
-            cifr
+            "NMI: {} (RCC_CIFR {=u32:#x}, FLASH_ECCR {=u32:#x}, SYSCFG_CFGR2 {=u32:#x}) - safe state, reset",
+            kind,
+            cifr,
+            eccr,
+            cfgr2
         );
     }
     wait_then_reset()

@@ -67,6 +67,25 @@ impl<T, const N: usize> Handoff<T, N> {
         Some(value)
     }
 
+    /// Thread mode: runs `f` on the value the step uses, with the step masked (the
+    /// [`crate::ceiling::StepCeiling`] lock: BASEPRI at the step's priority), for short
+    /// work the step must not do itself (restarting the ADC ring). `None` before the step
+    /// took its first value.
+    ///
+    /// # Safety
+    /// Only thread mode (or a context below the step's priority) calls this, and `f` is
+    /// short: the step waits for it.
+    pub unsafe fn with_step_masked<R>(&self, f: impl FnOnce(&mut T) -> R) -> Option<R> {
+        use embassy_sync::blocking_mutex::raw::RawMutex;
+        crate::ceiling::StepCeiling::INIT.lock(|| {
+            let i = self.states.active()?;
+            // SAFETY: the step, the `Active` slot's owner, cannot run while the ceiling
+            // masks it, and holds no reference between its ticks; thread mode cannot be
+            // preempted by another user of the slot.
+            Some(f(unsafe { (*self.slots[i].get()).assume_init_mut() }))
+        })
+    }
+
     /// The step: the value it uses, switching to a newly published one first (the slot it
     /// used before is retired for the builder to reuse).
     ///

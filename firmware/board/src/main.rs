@@ -29,6 +29,8 @@ mod clock;
 mod fault;
 mod handoff;
 mod pulse;
+#[cfg(not(feature = "bringup"))]
+mod sim_store;
 mod step;
 mod telemetry;
 

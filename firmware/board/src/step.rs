@@ -2,8 +2,10 @@
 //! from CCM SRAM, owning the rig and its peripherals (handed over once from `main`), talking
 //! to the tasks only through ceiling-locked queues and atomics, feeding the watchdog.
 
-use core::sync::atomic::{AtomicU8, AtomicU32, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU8, AtomicU32, Ordering};
 
+#[cfg(not(feature = "bringup"))]
+use crate::sim_store::BoardSim;
 use cortex_m::peripheral::DWT;
 use cortex_m_rt::interrupt;
 use embassy_stm32::adc::RingBufferedAdc;
@@ -14,11 +16,12 @@ use embassy_stm32::peripherals::{ADC1, IWDG, TIM1, TIM4, TIM8, TIM20};
 use embassy_stm32::wdg::IndependentWatchdog;
 use hils_rig_core::can::Command;
 use hils_rig_core::can_tx::QueuedFrame;
+use hils_rig_core::heartbeat::thread_alive;
 use hils_rig_core::hw::{RigIo, TelemetryEvent};
 use hils_rig_core::pulse::PulseRegisters;
-use hils_rig_core::rig::{CommandError, Rig};
 #[cfg(not(feature = "bringup"))]
-use hils_rig_core::rig::{Simulation, StartRequest};
+use hils_rig_core::rig::{Built, StartRequest};
+use hils_rig_core::rig::{CommandError, Rig, SimStore};
 use hils_rig_core::sensor::ADC_SEQUENCE_LEN;
 
 use crate::ceiling::StepChannel;
@@ -39,12 +42,13 @@ pub static CAN_RX: StepChannel<Frame, 8> = StepChannel::new();
 /// Local commands (user button, autostart), for the step.
 pub static LOCAL_CMD: StepChannel<Command, 2> = StepChannel::new();
 /// Runs the step requested, for the builder task (thread mode). Not in the bring-up image
-/// (it builds its one run in thread mode before timing it), which saves the slot's 6 KiB.
+/// (it builds its one run in thread mode before timing it).
 #[cfg(not(feature = "bringup"))]
 pub static START_REQUESTS: StepChannel<StartRequest, 1> = StepChannel::new();
-/// Simulations the builder built (or why not), for the step to move into the rig.
+/// The builder's word that it built a run in the rig's store (`crate::sim_store`), or why
+/// not: a few bytes, the simulation itself is not moved.
 #[cfg(not(feature = "bringup"))]
-pub static BUILT: Handoff<Result<Simulation, CommandError>, 1> = Handoff::new();
+pub static BUILT: Handoff<Built<()>, 1> = Handoff::new();
 /// Telemetry events from the step to the logging task.
 pub static TELEMETRY: StepChannel<TelemetryEvent, 16> = StepChannel::new();
 /// What the step has to say, for a task to log (the step never logs).
@@ -60,14 +64,25 @@ pub static RIG_STATE: AtomicU8 = AtomicU8::new(0);
 pub static CAN_TX_DROPS: AtomicU32 = AtomicU32::new(0);
 /// Telemetry events the RTT channel could not take.
 pub static TELEMETRY_DROPS: AtomicU32 = AtomicU32::new(0);
+/// Thread mode's heartbeat: the step tick at the bus task's last 10 ms poll. The step
+/// feeds the watchdog only while it is fresh (`hils_rig_core::heartbeat`).
+pub static THREAD_HEARTBEAT: AtomicU32 = AtomicU32::new(0);
+/// The step found the ADC's DMA stopped (it does not restart it: the ADC task does).
+pub static ADC_STOPPED: AtomicBool = AtomicBool::new(false);
 
 /// Something the step reports to the log.
 #[derive(Clone, Copy, Debug, defmt::Format)]
 pub enum StepEvent {
     CommandRejected(CommandError),
     LocalCommandRejected(CommandError),
-    /// A requested run could not start (build failed, or the builder was busy).
+    /// A requested run could not start (the build failed).
     StartFailed(CommandError),
+    /// A build came back for a start request no longer pending (stopped, or superseded
+    /// by a later `Start`): not installed; with the rig's count of such builds.
+    StaleBuild {
+        seq: u32,
+        count: u32,
+    },
 }
 
 /// The peripherals the step uses.
@@ -87,6 +102,13 @@ impl RigIo for BoardIo {
 
     #[unsafe(link_section = ".ccm_text.board_io")]
     fn adc_sequence(&mut self) -> Option<[u16; ADC_SEQUENCE_LEN]> {
+        // embassy's `read_latest` restarts a stopped ring (DMA and ADC set-up) itself: not
+        // in the step. A stopped ring (DMA1 channel 1 CCR.EN clear: a transfer error, or
+        // stopped) is a stale tick here, and the ADC task restarts it in thread mode.
+        if !pac::DMA1.ch(0).cr().read().en() {
+            ADC_STOPPED.store(true, Ordering::Relaxed);
+            return None;
+        }
         let n = self.adc.read_latest(&mut self.adc_buf);
         (n == ADC_SEQUENCE_LEN).then_some(self.adc_buf)
     }
@@ -117,7 +139,8 @@ impl RigIo for BoardIo {
     }
 }
 
-/// The independent watchdog, started by the first step and fed by every step.
+/// The independent watchdog, started by the first step and fed by every step while thread
+/// mode's heartbeat is fresh.
 pub struct Watchdog {
     iwdg: IndependentWatchdog<'static, IWDG>,
     started: bool,
@@ -141,9 +164,15 @@ impl Watchdog {
     }
 }
 
+/// The step's rig: its simulation in the static store the builder fills in place.
+#[cfg(not(feature = "bringup"))]
+pub type StepRig = Rig<BoardSim>;
+#[cfg(feature = "bringup")]
+pub type StepRig = Rig;
+
 /// Everything the step owns.
 pub struct RealTime {
-    pub rig: Rig,
+    pub rig: StepRig,
     pub io: BoardIo,
     pub watchdog: Watchdog,
     /// Drop counters as last passed to the rig.
@@ -157,7 +186,7 @@ pub static REAL_TIME: Handoff<RealTime, 1> = Handoff::new();
 /// the same code from the same memory).
 #[unsafe(link_section = ".ccm_text.rig_step")]
 #[inline(never)]
-pub fn rig_step<IO: RigIo>(rig: &mut Rig, io: &mut IO) {
+pub fn rig_step<S: SimStore, IO: RigIo>(rig: &mut Rig<S>, io: &mut IO) {
     rig.step(io);
 }
 
@@ -171,7 +200,12 @@ fn TIM3() {
 #[inline(never)]
 fn step_tick() {
     let entry = DWT::cycle_count();
-    pac::TIM3.sr().modify(|w| w.set_uif(false));
+    // TIMx_SR bits are rc_w0: a read-modify-write would also clear a flag set between the
+    // read and the write (e.g. CC4IF). Write ones everywhere but UIF (as ST's HAL
+    // `__HAL_TIM_CLEAR_FLAG` does: SR = ~flag).
+    let mut clear_uif = pac::timer::regs::SrGp16(u32::MAX);
+    clear_uif.set_uif(false);
+    pac::TIM3.sr().write_value(clear_uif);
     let tick = STEP_TICKS.load(Ordering::Relaxed).wrapping_add(1);
     STEP_TICKS.store(tick, Ordering::Relaxed);
     // SAFETY: this is the step interrupt, the only caller; the reference ends with the call.
@@ -199,35 +233,42 @@ fn step_tick() {
     let exit = DWT::cycle_count();
     let tick_pending = pac::TIM3.sr().read().uif();
     rt.rig.record_timing(entry, exit, tick_pending);
-    rt.watchdog.feed();
+    if thread_alive(tick, THREAD_HEARTBEAT.load(Ordering::Relaxed)) {
+        rt.watchdog.feed();
+    }
 }
 
-/// Passes a start request to the builder and installs a built simulation (a move).
+/// Passes a start request to the builder (lending it the rig's simulation store) and
+/// starts the run the builder built there, if it was built for the pending request: no
+/// simulation is moved in the step.
 #[cfg(not(feature = "bringup"))]
 #[inline(always)]
-fn hand_over_runs(rig: &mut Rig) {
+fn hand_over_runs(rig: &mut StepRig) {
     if let Some(req) = rig.take_start_request()
         && START_REQUESTS.try_send(req).is_err()
     {
-        // The builder still holds an earlier (cancelled) request: refuse this one.
-        let busy = Err(CommandError::NotNow(rig.state()));
-        if let Err(e) = rig.install(busy) {
-            let _ = STEP_EVENTS.try_send(StepEvent::StartFailed(e));
-        }
+        // Not expected (the rig lends its store for one request at a time): offer it
+        // again next tick.
+        rig.retry_start_request(&req);
     }
     // SAFETY: this is the step interrupt, the only caller.
     if let Some(built) = unsafe { BUILT.step_take() } {
-        let failed = built.is_err();
-        if let Err(e) = rig.install(built)
-            && failed
-        {
-            let _ = STEP_EVENTS.try_send(StepEvent::StartFailed(e));
+        let failed = built.result.is_err();
+        match rig.install_in_place(built) {
+            Err(CommandError::StaleBuild { seq }) => {
+                let count = rig.stale_builds();
+                let _ = STEP_EVENTS.try_send(StepEvent::StaleBuild { seq, count });
+            }
+            Err(e) if failed => {
+                let _ = STEP_EVENTS.try_send(StepEvent::StartFailed(e));
+            }
+            _ => {}
         }
     }
 }
 
 #[inline(always)]
-fn take_commands(rig: &mut Rig) {
+fn take_commands(rig: &mut StepRig) {
     while let Ok(frame) = CAN_RX.try_receive() {
         if let Err(e) = rig.command_frame(&frame) {
             let _ = STEP_EVENTS.try_send(StepEvent::CommandRejected(e));

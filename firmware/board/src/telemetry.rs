@@ -4,9 +4,9 @@
 //! fit the ring is dropped whole, silently. The count comes from the ring's cursors in the
 //! RTT control block, whose layout is SEGGER's (the probe parses the same block; defmt-rtt
 //! 1.3 lib.rs `Header`/`channel.rs` `Channel`, both `repr(C)`), around each record:
-//! `hils_rig_core::log_gate`. Drops are counted while a host is attached (probe-rs sets the
-//! channel's mode to blocking when it attaches: `defmt_rtt::in_blocking_mode`); with no
-//! host nothing is read and nothing is counted as lost.
+//! `hils_rig_core::log_gate`. Drops are counted in either channel mode (probe-rs sets
+//! blocking when it attaches unless told otherwise; a host may leave it non-blocking): with
+//! no host reading, the ring fills and every later record is counted as lost (it is).
 
 use core::ptr::addr_of;
 use core::sync::atomic::{AtomicU32, Ordering};
@@ -64,10 +64,9 @@ pub async fn telemetry_task() {
     loop {
         let event = TELEMETRY.receive().await;
         let ch = up_channel();
-        if !defmt_rtt::in_blocking_mode() {
-            event.log();
-            continue;
-        }
+        // In either RTT mode: in blocking mode a full ring would stall this task (and the
+        // logger's lock), in non-blocking mode defmt-rtt would cut the frame short. Both
+        // are avoided by writing only what fits, and every event left out is counted.
         let free = ring_free_bytes(
             ch.size,
             ch.read.load(Ordering::Acquire),

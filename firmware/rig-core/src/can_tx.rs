@@ -5,13 +5,17 @@
 //! transmit task moves them into the controller's three-deep transmit FIFO. While the bus
 //! is down (no acknowledge, error passive retrying, bus-off) frames pile up; without this
 //! rule the recovery would burst out wheel speeds up to the queue's depth old (issue 11:
-//! ~35 ms). Two places drop:
+//! ~35 ms). Frames are dropped in the software queue: [`is_stale_behind`] before a frame
+//! goes to the controller (past its life by the time the frames ahead of it in the FIFO
+//! have gone out), and none is written while the controller is bus-off.
 //!
-//! * the software queue: [`is_stale`] before a frame goes to the controller;
-//! * the controller's FIFO: [`TxSlots`] remembers which frame is in which buffer and asks for
-//!   the cancellation (FDCAN_TXBCR) of any still pending past its life; a cancellation that
-//!   finished without the frame having gone out (FDCAN_TXBCF set, FDCAN_TXBTO clear) counts
-//!   as a drop, as embassy-stm32's own `abort` reads them (fd/peripheral.rs).
+//! Frames already in the controller are not cancelled: the transmit buffers run in FIFO
+//! mode (so that no pending frame is aborted for a higher-priority one), and Bosch's M_CAN
+//! user's manual (Tx FIFO; Tx buffer cancellation) says cancellation is not intended for
+//! Tx FIFO operation. [`TxSlots`] still tracks which frame is in which buffer, and counts a
+//! request that ended without a transmission (FDCAN_TXBTO clear) as a drop, as
+//! embassy-stm32's own `abort` reads them (fd/peripheral.rs). So at most the three frames
+//! in the controller when the bus goes down can go out late when it comes back.
 //!
 //! A frame's life is its period ([`max_age_ticks`]): by then the step has made a newer one
 //! of the same id, which is the one the receiver wants.
@@ -46,6 +50,34 @@ pub fn is_stale(id: u16, queued_tick: u32, now_tick: u32) -> bool {
     now_tick.wrapping_sub(queued_tick) > max_age_ticks(id)
 }
 
+/// Bits on the bus of the longest classic frame (8 data bytes, standard id, worst-case bit
+/// stuffing, end of frame and intermission): 135.
+pub const MAX_FRAME_BITS: u32 = 135;
+
+/// Step ticks one longest frame occupies a bus of `bitrate` bit/s, rounded up (3 at
+/// 500 kbit/s).
+pub fn frame_ticks(bitrate: u32) -> u32 {
+    (MAX_FRAME_BITS * STEP_RATE_HZ).div_ceil(bitrate.max(1))
+}
+
+/// Whether a frame of `id` queued at `queued_tick` would be past its life when it gets
+/// on the bus behind `frames_ahead` frames pending in the controller's FIFO (each
+/// `frame_ticks` long): such a frame is dropped before it is written, since a frame in
+/// the FIFO cannot be taken back.
+pub fn is_stale_behind(
+    id: u16,
+    queued_tick: u32,
+    now_tick: u32,
+    frames_ahead: u32,
+    frame_ticks: u32,
+) -> bool {
+    is_stale(
+        id,
+        queued_tick,
+        now_tick.wrapping_add(frames_ahead.saturating_mul(frame_ticks)),
+    )
+}
+
 /// Frames leaving the controller's buffers, since the last call.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct TxOutcome {
@@ -57,7 +89,6 @@ pub struct TxOutcome {
 struct Slot {
     id: u16,
     tick: u32,
-    cancel_requested: bool,
 }
 
 /// What sits in each of the controller's `N` transmit buffers.
@@ -80,11 +111,7 @@ impl<const N: usize> TxSlots<N> {
     /// A frame of `id` made at `tick` was written into buffer `slot`.
     pub fn on_write(&mut self, slot: usize, id: u16, tick: u32) {
         if let Some(s) = self.slots.get_mut(slot) {
-            *s = Some(Slot {
-                id,
-                tick,
-                cancel_requested: false,
-            });
+            *s = Some(Slot { id, tick });
         }
     }
 
@@ -99,26 +126,9 @@ impl<const N: usize> TxSlots<N> {
         m
     }
 
-    /// Buffers to cancel now: pending (`pending` = FDCAN_TXBRP), past their life, not yet
-    /// asked. Marks them asked; the caller writes the mask to FDCAN_TXBCR.
-    pub fn stale_mask(&mut self, pending: u32, now_tick: u32) -> u32 {
-        let mut m = 0;
-        for (i, s) in self.slots.iter_mut().enumerate() {
-            if let Some(s) = s
-                && pending & (1 << i) != 0
-                && !s.cancel_requested
-                && is_stale(s.id, s.tick, now_tick)
-            {
-                s.cancel_requested = true;
-                m |= 1 << i;
-            }
-        }
-        m
-    }
-
     /// Frees the buffers whose request ended: not pending any more (`pending` =
     /// FDCAN_TXBRP). Sent if FDCAN_TXBTO says the transmission occurred, else dropped (a
-    /// cancellation, ours or the controller's).
+    /// request the controller ended without sending).
     pub fn retire(&mut self, pending: u32, tx_occurred: u32) -> TxOutcome {
         let mut out = TxOutcome::default();
         for (i, s) in self.slots.iter_mut().enumerate() {
@@ -151,14 +161,14 @@ mod tests {
     }
 
     #[test]
-    fn stale_pending_frames_are_cancelled_once_and_counted() {
+    fn ended_requests_are_counted_sent_or_dropped() {
         let mut s = TxSlots::<3>::new();
         s.on_write(0, ID_WHEEL_SPEED_12, 0);
         s.on_write(1, ID_STATUS, 0);
-        assert_eq!(s.stale_mask(0b011, 10), 0);
-        assert_eq!(s.stale_mask(0b011, 11), 0b001);
-        assert_eq!(s.stale_mask(0b011, 12), 0, "asked once");
-        // Buffer 0 cancelled (no transmission), buffer 1 went out.
+        assert_eq!(s.occupied(), 0b011);
+        // Both still pending: nothing retired.
+        assert_eq!(s.retire(0b011, 0), TxOutcome::default());
+        // Buffer 0 ended without transmission, buffer 1 went out.
         assert_eq!(
             s.retire(0b000, 0b010),
             TxOutcome {

@@ -19,6 +19,7 @@
 //! * [`can_tx`]: transmit freshness (stale frames dropped and counted, not sent late).
 //! * [`log_gate`]: counting the telemetry the RTT channel could not take.
 //! * [`handoff`]: the slot protocol that hands a value built in thread mode to the step.
+//! * [`heartbeat`]: whether thread mode is alive (the watchdog is fed only then).
 //! * [`bringup`]: pass/fail rules of the board's bring-up self-test.
 //! * [`telemetry`]: the decimated telemetry record, its defmt line and its parser.
 //! * [`rig`]: the real-time step and the run state machine (commands, faults, safe state).
@@ -36,6 +37,7 @@ pub mod can;
 pub mod can_timing;
 pub mod can_tx;
 pub mod handoff;
+pub mod heartbeat;
 pub mod hw;
 pub mod log_gate;
 pub mod pulse;

@@ -180,6 +180,12 @@ pub enum CommandError {
     SensorFaults,
     /// The plant or brake unit refused the parameters.
     Build(LoopError),
+    /// A build came back for a start request that is no longer pending (stopped, or
+    /// superseded by a later `Start`): not installed, counted ([`Rig::stale_builds`]).
+    StaleBuild {
+        /// [`StartRequest::seq`] of the request it was built for.
+        seq: u32,
+    },
     Calibration(CalibrationError),
 }
 
@@ -196,6 +202,9 @@ enum Sim {
 /// outside it ([`StartRequest::build`], thread mode on the board).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StartRequest {
+    /// Which `Start` this is (counts the rig's start requests, wrapping): the build comes
+    /// back with it ([`Built::seq`]) and is installed only under the same request.
+    pub seq: u32,
     pub mode: RigMode,
     pub rail: Rail,
     pub friction: FrictionModel,
@@ -203,16 +212,88 @@ pub struct StartRequest {
     pub initial_speed_kmh: f32,
 }
 
-/// The simulation of a run, built by [`StartRequest::build`] and handed to the step by
-/// [`Rig::install`] (a move: no construction in the step).
+/// The simulation of a run, built by [`StartRequest::build`] outside the step.
 #[derive(Clone, Debug)]
 pub struct Simulation(Sim);
+
+impl Simulation {
+    /// No run.
+    pub const fn none() -> Self {
+        Self(Sim::None)
+    }
+}
+
+/// The simulation in `store`, or none while it is lent (a function of the fields, so that
+/// the rig's other fields stay free to borrow).
+fn sim_in<S: SimStore>(store: &S, lent: bool) -> Option<&Sim> {
+    (!lent).then(|| &store.sim().0)
+}
+
+/// Where the rig keeps the simulation of its run: in the rig itself ([`Simulation`], for
+/// hosts: [`Rig::install`] moves a build in), or in storage outside it that the builder
+/// fills in place while the rig has lent it (the board: no 6 KiB move in the step,
+/// [`Rig::install_in_place`]). The rig touches its store only while it has not lent it:
+/// from [`Rig::take_start_request`] until the build for that request comes back
+/// (`install`/`install_in_place`/`retry_start_request`), the builder owns it.
+pub trait SimStore {
+    /// The simulation in the store (the rig calls this only while it has not lent it).
+    fn sim(&self) -> &Simulation;
+    /// As [`SimStore::sim`], to step or replace it.
+    fn sim_mut(&mut self) -> &mut Simulation;
+}
+
+impl SimStore for Simulation {
+    fn sim(&self) -> &Simulation {
+        self
+    }
+    fn sim_mut(&mut self) -> &mut Simulation {
+        self
+    }
+}
+
+/// What the builder hands back for a request: the request's sequence number and the
+/// simulation, `T = Simulation` (or `()` when it was built in the rig's store), or why it
+/// could not be built.
+#[derive(Clone, Debug)]
+pub struct Built<T = Simulation> {
+    /// [`StartRequest::seq`] of the request this was built for.
+    pub seq: u32,
+    /// The simulation (or `()`: built in the rig's store), or why the build failed.
+    pub result: Result<T, CommandError>,
+}
 
 impl StartRequest {
     /// Builds the run's simulation (plant, and in self-test mode the simulated brake unit):
     /// ~35 000 instructions of mostly soft-float f64 and a large stack frame, so never in
     /// the step (issue 11).
-    pub fn build(&self) -> Result<Simulation, CommandError> {
+    pub fn build(&self) -> Built {
+        Built {
+            seq: self.seq,
+            result: self.build_simulation(),
+        }
+    }
+
+    /// Builds the run's simulation into `store` (the board's builder, in thread mode, into
+    /// the store the rig lent it) and says how it went, for [`Rig::install_in_place`].
+    pub fn build_into(&self, store: &mut Simulation) -> Built<()> {
+        let result = match self.build_simulation() {
+            Ok(sim) => {
+                *store = sim;
+                Ok(())
+            }
+            Err(e) => {
+                *store = Simulation::none();
+                Err(e)
+            }
+        };
+        Built {
+            seq: self.seq,
+            result,
+        }
+    }
+
+    /// The simulation of this request (plant, and in self-test mode the brake unit).
+    pub fn build_simulation(&self) -> Result<Simulation, CommandError> {
         let mut params = Params::default();
         params.friction.model = self.friction;
         let v0 = self.initial_speed_kmh / KMH_PER_MPS;
@@ -235,11 +316,14 @@ impl StartRequest {
     }
 }
 
-/// The rig: sensors, simulation, outputs, telemetry and state.
-pub struct Rig {
+/// The rig: sensors, simulation, outputs, telemetry and state. `S`: where it keeps the
+/// simulation ([`SimStore`]).
+pub struct Rig<S: SimStore = Simulation> {
     config: RigConfig,
     pub sensors: [SensorChannel; CHANNELS],
-    sim: Sim,
+    sim: S,
+    /// The store is lent to the builder (a request was handed out, no build came back).
+    sim_lent: bool,
     state: RigState,
     mode: RigMode,
     rail: Rail,
@@ -279,15 +363,55 @@ pub struct Rig {
     start_request_new: bool,
     /// The state before `Starting` (back to it if the build fails).
     state_before_start: RigState,
+    /// Sequence number of the last start request.
+    start_seq: u32,
+    /// Builds that came back for a request no longer pending (not installed).
+    stale_builds: u32,
 }
 
-impl Rig {
+impl Rig<Simulation> {
+    /// A rig that keeps the simulation in itself.
     pub fn new(config: RigConfig) -> Self {
+        Self::with_store(config, Simulation::none())
+    }
+
+    /// Installs a built simulation (a move) and starts the run, if it was built for the
+    /// pending request: [`Rig::install_in_place`] after moving it into the rig.
+    pub fn install(&mut self, built: Built) -> Result<(), CommandError> {
+        let result = match built.result {
+            Ok(sim) if self.sim_lent => {
+                *self.sim.sim_mut() = sim;
+                Ok(())
+            }
+            Ok(_) => Ok(()),
+            Err(e) => Err(e),
+        };
+        self.install_in_place(Built {
+            seq: built.seq,
+            result,
+        })
+    }
+
+    /// Builds a requested run here and installs it: for hosts (tests, the scripted run,
+    /// the QEMU cost measurement), where the build does not count against a step. The
+    /// board builds in thread mode instead. `Ok` when nothing was requested.
+    pub fn build_pending(&mut self) -> Result<(), CommandError> {
+        match self.take_start_request() {
+            Some(req) => self.install(req.build()),
+            None => Ok(()),
+        }
+    }
+}
+
+impl<S: SimStore> Rig<S> {
+    /// A rig that keeps the simulation in `store`, empty (`Simulation::none()`) at first.
+    pub fn with_store(config: RigConfig, store: S) -> Self {
         let silent = config.pulse_timer.silent();
         Self {
             config,
             sensors: [SensorChannel::new(SensorKind::LoadCell); CHANNELS],
-            sim: Sim::None,
+            sim: store,
+            sim_lent: false,
             state: RigState::Idle,
             mode: RigMode::Rig,
             rail: Rail::Wet,
@@ -316,11 +440,22 @@ impl Rig {
             start_request: None,
             start_request_new: false,
             state_before_start: RigState::Idle,
+            start_seq: 0,
+            stale_builds: 0,
         }
     }
 
     pub fn state(&self) -> RigState {
         self.state
+    }
+
+    /// The simulation, unless the store is lent to the builder.
+    fn sim(&self) -> Option<&Sim> {
+        sim_in(&self.sim, self.sim_lent)
+    }
+
+    fn sim_mut(&mut self) -> Option<&mut Sim> {
+        (!self.sim_lent).then(|| &mut self.sim.sim_mut().0)
     }
     pub fn mode(&self) -> RigMode {
         self.mode
@@ -346,7 +481,7 @@ impl Rig {
 
     /// The plant outputs of the run (None without a run).
     pub fn outputs(&self) -> Option<&Outputs<f32>> {
-        match &self.sim {
+        match self.sim()? {
             Sim::None => None,
             Sim::Rig(p) => Some(p.outputs()),
             Sim::SelfTest(c) => Some(c.outputs()),
@@ -472,8 +607,12 @@ impl Rig {
             return Err(CommandError::SensorFaults);
         }
         // The old run's simulation is no longer shown (plain data: nothing to drop).
-        self.sim = Sim::None;
+        if let Some(sim) = self.sim_mut() {
+            *sim = Sim::None;
+        }
+        self.start_seq = self.start_seq.wrapping_add(1);
         self.start_request = Some(StartRequest {
+            seq: self.start_seq,
             mode,
             rail,
             friction,
@@ -486,36 +625,66 @@ impl Rig {
         Ok(())
     }
 
-    /// The run requested since the last call, for the builder (once per request).
+    /// The run requested since the last call, for the builder (once per request); from
+    /// now until its build comes back the builder owns the rig's [`SimStore`]. None while
+    /// the store is still lent for an earlier request (its build, stale, comes back
+    /// first), or while the last run's final record is still due.
     pub fn take_start_request(&mut self) -> Option<StartRequest> {
-        if core::mem::take(&mut self.start_request_new) {
-            self.start_request
-        } else {
-            None
+        if self.sim_lent || self.end_event || !self.start_request_new {
+            return None;
+        }
+        self.start_request_new = false;
+        self.sim_lent = self.start_request.is_some();
+        self.start_request
+    }
+
+    /// A request [`Rig::take_start_request`] gave out that the board could not pass to the
+    /// builder (still busy with an earlier one): offered again at the next call, if it is
+    /// still the pending request.
+    pub fn retry_start_request(&mut self, req: &StartRequest) {
+        // The builder never got it: the store is the rig's again.
+        self.sim_lent = false;
+        if self.start_request.is_some_and(|r| r.seq == req.seq) {
+            self.start_request_new = true;
         }
     }
 
-    /// Installs a built simulation (a move, in the step) and starts the run; a failed
-    /// build goes back to the state before the request, with the command rejected. A
-    /// simulation that arrives when no start is pending (stopped meanwhile) is discarded.
-    pub fn install(&mut self, built: Result<Simulation, CommandError>) -> Result<(), CommandError> {
+    /// Builds that came back for a request no longer pending (stopped, or superseded by a
+    /// later `Start`), each refused by [`Rig::install`] with [`CommandError::StaleBuild`].
+    pub fn stale_builds(&self) -> u32 {
+        self.stale_builds
+    }
+
+    /// The builder is done with the store (the step, at the tick the build comes back):
+    /// starts the run with the simulation it built there, if it was built for the pending
+    /// request (same [`StartRequest::seq`]); a failed build goes back to the state before
+    /// the request, with the command rejected. A build for any other request (stopped
+    /// meanwhile, or an earlier `Start` superseded by a later one) is not installed:
+    /// counted in [`Rig::stale_builds`] and refused with `StaleBuild`. Only the enum tag
+    /// is written here: no construction and no move in the step.
+    pub fn install_in_place(&mut self, built: Built<()>) -> Result<(), CommandError> {
+        if !self.sim_lent {
+            // Nothing was lent: not a build of ours.
+            self.stale_builds = self.stale_builds.wrapping_add(1);
+            return Err(CommandError::StaleBuild { seq: built.seq });
+        }
+        self.sim_lent = false;
         let Some(req) = self
             .start_request
-            .filter(|_| self.state == RigState::Starting)
+            .filter(|r| self.state == RigState::Starting && r.seq == built.seq)
         else {
-            return Err(CommandError::NotNow(self.state));
+            self.sim.sim_mut().0 = Sim::None;
+            self.stale_builds = self.stale_builds.wrapping_add(1);
+            return Err(CommandError::StaleBuild { seq: built.seq });
         };
         self.start_request = None;
         self.start_request_new = false;
-        let sim = match built {
-            Ok(Simulation(sim)) => sim,
-            Err(e) => {
-                self.state = self.state_before_start;
-                self.note_result(false);
-                return Err(e);
-            }
-        };
-        self.sim = sim;
+        if let Err(e) = built.result {
+            self.sim.sim_mut().0 = Sim::None;
+            self.state = self.state_before_start;
+            self.note_result(false);
+            return Err(e);
+        }
         self.mode = req.mode;
         self.rail = req.rail;
         self.friction = req.friction;
@@ -534,16 +703,6 @@ impl Rig {
         self.last_record_step = None;
         self.record_seq = 0;
         Ok(())
-    }
-
-    /// Builds a requested run here and installs it: for hosts (tests, the scripted run,
-    /// the QEMU cost measurement), where the build does not count against a step. The
-    /// board builds in thread mode instead. `Ok` when nothing was requested.
-    pub fn build_pending(&mut self) -> Result<(), CommandError> {
-        match self.take_start_request() {
-            Some(req) => self.install(req.build()),
-            None => Ok(()),
-        }
     }
 
     /// Carries out a command (also from the board's user button).
@@ -565,7 +724,7 @@ impl Rig {
                 s => Err(CommandError::NotNow(s)),
             },
             Command::Brake(b) => {
-                if let Sim::SelfTest(c) = &mut self.sim {
+                if let Some(Sim::SelfTest(c)) = self.sim_mut() {
                     c.set_demand(match b {
                         BrakeCommand::Release => BrakeDemand::Release,
                         BrakeCommand::Emergency => BrakeDemand::Emergency,
@@ -710,7 +869,10 @@ impl Rig {
     }
 
     fn step_sim(&mut self, readings: &[f32; CHANNELS]) -> Flags {
-        match &mut self.sim {
+        if self.sim_lent {
+            return Flags(0);
+        }
+        match &mut self.sim.sim_mut().0 {
             Sim::None => Flags(0),
             Sim::Rig(plant) => {
                 let mut inputs = [BrakeInput::ClampForce(0.0f32); WHEELSETS];
@@ -772,7 +934,7 @@ impl Rig {
         for (j, s) in self.sensors.iter().enumerate() {
             sensor_faults |= (SensorFault::code(s.fault()) as u16) << (4 * j);
         }
-        let (o, unit) = match &self.sim {
+        let (o, unit) = match self.sim()? {
             Sim::None => return None,
             Sim::Rig(p) => (p.outputs(), None),
             Sim::SelfTest(c) => (c.outputs(), Some(c.unit_outputs())),
@@ -848,9 +1010,9 @@ impl Rig {
         let live = matches!(self.state, RigState::Running | RigState::Finished);
         // Wheel circumferential speeds r omega (m/s) for CAN, spin speeds omega (rad/s)
         // for the pulse trains.
-        let (speeds, o) = match (&self.sim, live) {
-            (Sim::Rig(p), true) => (p.wheel_speeds(), Some(p.outputs())),
-            (Sim::SelfTest(c), true) => (c.plant.wheel_speeds(), Some(c.outputs())),
+        let (speeds, o) = match (sim_in(&self.sim, self.sim_lent), live) {
+            (Some(Sim::Rig(p)), true) => (p.wheel_speeds(), Some(p.outputs())),
+            (Some(Sim::SelfTest(c)), true) => (c.plant.wheel_speeds(), Some(c.outputs())),
             _ => ([0.0; WHEELSETS], None),
         };
         let (v, a) = o

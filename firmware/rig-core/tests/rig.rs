@@ -12,10 +12,12 @@ use hils_rig_core::can::{
 };
 use hils_rig_core::hw::{RigIo, TelemetryEvent};
 use hils_rig_core::pulse::PulseRegisters;
-use hils_rig_core::rig::{CommandError, Faults, Rig, RigConfig};
+use hils_rig_core::rig::{Built, CommandError, Faults, Rig, RigConfig, SimStore, Simulation};
 use hils_rig_core::sensor::{ADC_SEQUENCE_LEN, SensorFault, SensorKind};
 use hils_rig_core::telemetry::{TelemetryRecord, WSP_KNOWN};
 use hils_sil::ClosedLoop;
+use std::cell::Cell;
+use std::rc::Rc;
 
 type TestFrame = ClassicFrame;
 
@@ -554,9 +556,12 @@ fn start_is_built_outside_the_step_and_handed_over() {
 
     // A failed build goes back to the state before, with the command rejected.
     rig.command(start).unwrap();
-    rig.take_start_request().unwrap();
+    let req = rig.take_start_request().unwrap();
     assert_eq!(
-        rig.install(Err(CommandError::SpeedOutOfRange)),
+        rig.install(Built {
+            seq: req.seq,
+            result: Err(CommandError::SpeedOutOfRange)
+        }),
         Err(CommandError::SpeedOutOfRange)
     );
     assert_eq!(rig.state(), RigState::Stopped);
@@ -923,4 +928,139 @@ proptest::proptest! {
             }
         }
     }
+}
+
+/// Start, Stop while starting, a second Start before the builder is done: the first build
+/// must not run under the second request (it is refused and counted); the second runs.
+#[test]
+fn a_late_build_is_not_installed_under_a_later_start() {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut io = MockBoard::new();
+    let first = paper_start(FrictionModel::Variable);
+    let Command::Start {
+        mode,
+        rail,
+        friction,
+        emergency,
+        ..
+    } = first
+    else {
+        unreachable!()
+    };
+    let second = Command::Start {
+        mode,
+        rail,
+        friction,
+        emergency,
+        initial_speed_kmh: 80.0,
+    };
+    rig.command(first).unwrap();
+    let req1 = rig.take_start_request().unwrap();
+    rig.command(Command::Stop).unwrap();
+    rig.command(second).unwrap();
+    // The builder still has the first request (and the rig's simulation store).
+    assert_eq!(rig.take_start_request(), None);
+    for _ in 0..5 {
+        rig.step(&mut io);
+    }
+    assert!(rig.outputs().is_none());
+    // The builder finishes the first request only now.
+    assert_eq!(
+        rig.install(req1.build()),
+        Err(CommandError::StaleBuild { seq: req1.seq })
+    );
+    assert_eq!(rig.state(), RigState::Starting);
+    assert_eq!(rig.stale_builds(), 1);
+    assert!(rig.outputs().is_none());
+    let req2 = rig.take_start_request().unwrap();
+    assert_ne!(req1.seq, req2.seq);
+    rig.install(req2.build()).unwrap();
+    rig.step(&mut io);
+    // The run is the second request's: 80 km/h, not 150.
+    let v_kmh = rig.outputs().unwrap().vehicle_speed * 3.6;
+    assert!((v_kmh - 80.0).abs() < 0.5, "v = {v_kmh} km/h");
+    assert_eq!(rig.stale_builds(), 1);
+}
+
+/// A request the board could not pass to a busy builder is offered again, once, and only
+/// while it is still the pending one.
+#[test]
+fn a_request_not_passed_on_is_offered_again() {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    rig.command(paper_start(FrictionModel::Variable)).unwrap();
+    let req = rig.take_start_request().unwrap();
+    assert_eq!(rig.take_start_request(), None);
+    rig.retry_start_request(&req);
+    assert_eq!(rig.take_start_request(), Some(req));
+    rig.command(Command::Stop).unwrap();
+    rig.retry_start_request(&req);
+    assert_eq!(rig.take_start_request(), None);
+}
+
+/// A store outside the rig (as on the board) that counts the rig's accesses while the
+/// builder owns it.
+struct WatchedStore {
+    sim: Simulation,
+    lent: Rc<Cell<bool>>,
+    touched_while_lent: Rc<Cell<u32>>,
+}
+
+impl SimStore for WatchedStore {
+    fn sim(&self) -> &Simulation {
+        if self.lent.get() {
+            self.touched_while_lent
+                .set(self.touched_while_lent.get() + 1);
+        }
+        &self.sim
+    }
+    fn sim_mut(&mut self) -> &mut Simulation {
+        if self.lent.get() {
+            self.touched_while_lent
+                .set(self.touched_while_lent.get() + 1);
+        }
+        &mut self.sim
+    }
+}
+
+/// While the builder owns the store (request handed out, no build back), nothing the
+/// step does touches it: steps, Brake, Stop, a second Start.
+#[test]
+fn the_rig_leaves_a_lent_store_alone() {
+    let lent = Rc::new(Cell::new(false));
+    let touched = Rc::new(Cell::new(0));
+    let store = WatchedStore {
+        sim: Simulation::none(),
+        lent: lent.clone(),
+        touched_while_lent: touched.clone(),
+    };
+    let mut rig = Rig::with_store(RigConfig::nucleo_g474re(), store);
+    let mut io = MockBoard::new();
+    let start = paper_start(FrictionModel::Variable);
+    rig.command(start).unwrap();
+    let req = rig.take_start_request().unwrap();
+    lent.set(true);
+    for _ in 0..20 {
+        rig.step(&mut io);
+    }
+    rig.command(Command::Brake(BrakeCommand::Release)).unwrap();
+    rig.command(Command::Stop).unwrap();
+    rig.step(&mut io);
+    rig.command(start).unwrap();
+    assert_eq!(rig.take_start_request(), None, "the store is still lent");
+    for _ in 0..20 {
+        rig.step(&mut io);
+    }
+    assert!(rig.outputs().is_none());
+    assert_eq!(touched.get(), 0);
+    // The stale build comes back; the store is the rig's again, the next request goes out.
+    lent.set(false);
+    assert_eq!(
+        rig.install_in_place(Built {
+            seq: req.seq,
+            result: Ok(())
+        }),
+        Err(CommandError::StaleBuild { seq: req.seq })
+    );
+    let req2 = rig.take_start_request().unwrap();
+    assert_eq!(req2.seq, req.seq + 1);
 }
