@@ -98,8 +98,46 @@ pub const RUN: FlagRange = count("decode", "--run", 1.0, 1e6);
 /// `bench --write-log-mb`.
 pub const LOG_MB: FlagRange = range("bench", "--write-log-mb", 0.001, 10_000.0);
 
-/// Every numeric flag of `hils` (the property test feeds each its bad values).
-pub const FLAGS: [FlagRange; 8] = [
+/// `hils rig --lost-after-s`: two status periods (10 ms each) up to a minute.
+pub const RIG_LOST_AFTER_S: FlagRange = range("rig status", "--lost-after-s", 0.02, 60.0);
+/// `hils rig start --speed-kmh`: the board's start-speed signal, 1 km/h up to its top
+/// (163.82 km/h, 0.01 km/h per bit).
+pub const RIG_SPEED_KMH: FlagRange = range("rig start", "--speed-kmh", 1.0, 163.82);
+/// `hils rig brake service DECEL_MPS2`: 0.01 m/s^2 up to 5 m/s^2 (half of g: more than
+/// any wheel-rail adhesion gives).
+pub const RIG_SERVICE_DECEL_MPS2: FlagRange = range("rig brake service", "DECEL_MPS2", 0.01, 5.0);
+/// `hils rig calibrate CH gain GAIN`: N or Pa per ADC count, 0.01 (a 33 N load cell over
+/// the live-zero span of 3276 counts) up to 10,000 (a 33 MPa transducer).
+pub const RIG_GAIN: FlagRange = range("rig calibrate 1 gain", "GAIN", 0.01, 10_000.0);
+/// `hils rig calibrate CH offset COUNTS`: the zero-load reading, between the board's open
+/// (2 % of 4095) and short (98 %) thresholds: a zero outside them reads as a wiring fault.
+pub const RIG_OFFSET_COUNTS: FlagRange = range(
+    "rig calibrate 1 offset",
+    "COUNTS",
+    0.02 * 4095.0,
+    0.98 * 4095.0,
+);
+/// `hils rig configure divider STEPS`: telemetry every 1-10,000 plant steps (the board's
+/// range, `hils.dbc`).
+pub const RIG_DIVIDER: FlagRange = count("rig configure divider", "STEPS", 1.0, 10_000.0);
+/// `hils rig configure teeth TEETH`: teeth of the simulated speed-sensor wheel, 1-1000
+/// (the board's range, `hils.dbc`).
+pub const RIG_TEETH: FlagRange = count("rig configure teeth", "TEETH", 1.0, 1000.0);
+/// `hils rig watch|record|wait --for-s`: 1 ms up to a day.
+pub const RIG_FOR_S: FlagRange = range("rig wait", "--for-s", 0.001, 86_400.0);
+/// `hils rig watch --every-s`: one view per 10 ms (the status period) up to an hour.
+pub const RIG_EVERY_S: FlagRange = range("rig watch", "--every-s", 0.01, 3600.0);
+/// `hils rig run --max-run-s`: 1 s up to an hour of board time per run.
+pub const RIG_MAX_RUN_S: FlagRange = range("rig run", "--max-run-s", 1.0, 3600.0);
+/// `hils rig run --settle-s`: 0.1 s up to 10 min for the cylinders to vent between runs.
+pub const RIG_SETTLE_S: FlagRange = range("rig run", "--settle-s", 0.1, 600.0);
+/// `hils rig --sim-fault KIND=SECONDS`: board time of the fault, 1 ms up to a day.
+pub const RIG_SIM_FAULT_S: FlagRange = range("rig status", "--sim-fault", 0.001, 86_400.0);
+
+/// Every numeric flag of `hils` (the property test feeds each its bad values). A `flag`
+/// without `--` is a positional value (named as in `--help`); `command` is the command
+/// line up to it.
+pub const FLAGS: [FlagRange; 20] = [
     LOG_MB,
     SPEED_KMH,
     SAMPLE_RATE_HZ,
@@ -108,9 +146,26 @@ pub const FLAGS: [FlagRange; 8] = [
     REPEAT,
     TIMEOUT_S,
     RUN,
+    RIG_LOST_AFTER_S,
+    RIG_SPEED_KMH,
+    RIG_SERVICE_DECEL_MPS2,
+    RIG_GAIN,
+    RIG_OFFSET_COUNTS,
+    RIG_DIVIDER,
+    RIG_TEETH,
+    RIG_FOR_S,
+    RIG_EVERY_S,
+    RIG_MAX_RUN_S,
+    RIG_SETTLE_S,
+    RIG_SIM_FAULT_S,
 ];
 
 impl FlagRange {
+    /// Whether `x` is a value of this flag (finite, within the range, whole if a count).
+    pub fn contains(&self, x: f64) -> bool {
+        x >= self.min && x <= self.max && !(self.integer && x.fract() != 0.0)
+    }
+
     /// Parses a value of this flag: a finite number within the range (whole if a count).
     pub fn parse(&self, text: &str) -> Result<f64, String> {
         let x: f64 = text
@@ -122,7 +177,7 @@ impl FlagRange {
         } else {
             "a number"
         };
-        if !(x >= self.min && x <= self.max) || (self.integer && x.fract() != 0.0) {
+        if !self.contains(x) {
             return Err(format!(
                 "`{text}` is outside the accepted range: {kind} in [{}, {}]",
                 self.min, self.max
@@ -163,4 +218,65 @@ pub fn run_index(s: &str) -> Result<usize, String> {
 /// Value parser of `bench --write-log-mb`.
 pub fn log_mb(s: &str) -> Result<f64, String> {
     LOG_MB.parse(s)
+}
+
+/// Value parser of `rig --lost-after-s`.
+pub fn rig_lost_after_s(s: &str) -> Result<f64, String> {
+    RIG_LOST_AFTER_S.parse(s)
+}
+/// Value parser of `rig start --speed-kmh`.
+pub fn rig_speed_kmh(s: &str) -> Result<f32, String> {
+    RIG_SPEED_KMH.parse(s).map(|x| x as f32)
+}
+/// Value parser of `rig brake service DECEL_MPS2`.
+pub fn rig_service_decel_mps2(s: &str) -> Result<f32, String> {
+    RIG_SERVICE_DECEL_MPS2.parse(s).map(|x| x as f32)
+}
+/// Value parser of `rig calibrate CH gain GAIN`.
+pub fn rig_gain(s: &str) -> Result<f32, String> {
+    RIG_GAIN.parse(s).map(|x| x as f32)
+}
+/// Value parser of `rig calibrate CH offset COUNTS`.
+pub fn rig_offset_counts(s: &str) -> Result<f32, String> {
+    RIG_OFFSET_COUNTS.parse(s).map(|x| x as f32)
+}
+/// Value parser of `rig configure divider STEPS`.
+pub fn rig_divider(s: &str) -> Result<u16, String> {
+    RIG_DIVIDER.parse(s).map(|x| x as u16)
+}
+/// Value parser of `rig configure teeth TEETH`.
+pub fn rig_teeth(s: &str) -> Result<u16, String> {
+    RIG_TEETH.parse(s).map(|x| x as u16)
+}
+/// Value parser of `rig watch|record|wait --for-s`.
+pub fn rig_for_s(s: &str) -> Result<f64, String> {
+    RIG_FOR_S.parse(s)
+}
+/// Value parser of `rig watch --every-s`.
+pub fn rig_every_s(s: &str) -> Result<f64, String> {
+    RIG_EVERY_S.parse(s)
+}
+/// Value parser of `rig run --max-run-s`.
+pub fn rig_max_run_s(s: &str) -> Result<f64, String> {
+    RIG_MAX_RUN_S.parse(s)
+}
+/// Value parser of `rig run --settle-s`.
+pub fn rig_settle_s(s: &str) -> Result<f64, String> {
+    RIG_SETTLE_S.parse(s)
+}
+/// Value parser of `rig --sim-fault KIND=SECONDS`: the kind (`board-lost`, `bus-off`,
+/// `alive-frozen`) and the board time, s.
+pub fn rig_sim_fault(spec: &str) -> Result<(&str, f64), String> {
+    const KINDS: [&str; 3] = ["board-lost", "bus-off", "alive-frozen"];
+    let (kind, t) = spec
+        .split_once('=')
+        .ok_or_else(|| format!("`{spec}`: expected KIND=SECONDS"))?;
+    if !KINDS.contains(&kind) {
+        return Err(format!("`{spec}`: kinds are {}", KINDS.join(", ")));
+    }
+    Ok((kind, RIG_SIM_FAULT_S.parse(t)?))
+}
+/// [`rig_sim_fault`] as a clap value parser (the text is kept, checked).
+pub fn rig_sim_fault_text(spec: &str) -> Result<String, String> {
+    rig_sim_fault(spec).map(|_| spec.to_string())
 }

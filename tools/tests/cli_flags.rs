@@ -6,12 +6,16 @@ use clap::Parser;
 use hils::cli::{Cli, FLAGS, FlagRange};
 use proptest::prelude::*;
 
-/// A command line that sets `flag` to `value` (and whatever else the command needs).
+/// A command line that sets `flag` to `value` (and whatever else the command needs). A
+/// positional value (a `flag` without `--`) follows `--`, so that a negative number is a
+/// value, not an option.
 fn argv(f: &FlagRange, value: &str) -> Vec<String> {
-    let mut v = vec!["hils".to_string(), f.command.to_string()];
+    let mut v = vec!["hils".to_string()];
+    v.extend(f.command.split_whitespace().map(String::from));
     match f.command {
         "simulate" | "decode" => v.extend(["--out".into(), "/nonexistent/never-written".into()]),
         "diagnose" => v.extend(["--baseline".into(), "b.toml".into()]),
+        "rig run" => v.extend(["--programme".into(), "/nonexistent/p.toml".into()]),
         _ => {}
     }
     if f.flag == "--write-log-mb" {
@@ -20,7 +24,13 @@ fn argv(f: &FlagRange, value: &str) -> Vec<String> {
     if f.command == "decode" || f.command == "diagnose" {
         v.push("input.csv".into());
     }
-    v.push(format!("{}={value}", f.flag));
+    if !f.flag.starts_with("--") {
+        v.extend(["--".into(), value.into()]);
+    } else if f.flag == "--sim-fault" {
+        v.push(format!("{}=board-lost={value}", f.flag));
+    } else {
+        v.push(format!("{}={value}", f.flag));
+    }
     v
 }
 
