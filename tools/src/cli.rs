@@ -187,83 +187,39 @@ impl FlagRange {
     }
 }
 
-/// Value parser of `simulate --speed-kmh`.
-pub fn speed_kmh(s: &str) -> Result<f64, String> {
-    SPEED_KMH.parse(s)
-}
-/// Value parser of `simulate --sample-rate-hz`.
-pub fn sample_rate_hz(s: &str) -> Result<f64, String> {
-    SAMPLE_RATE_HZ.parse(s)
-}
-/// Value parser of `diagnose --step-s`.
-pub fn step_s(s: &str) -> Result<f64, String> {
-    STEP_S.parse(s)
-}
-/// Value parser of `bench --steps`.
-pub fn steps(s: &str) -> Result<usize, String> {
-    STEPS.parse(s).map(|x| x as usize)
-}
-/// Value parser of `bench --repeat`.
-pub fn repeat(s: &str) -> Result<usize, String> {
-    REPEAT.parse(s).map(|x| x as usize)
-}
-/// Value parser of `target-cost --timeout-s`.
-pub fn timeout_s(s: &str) -> Result<u64, String> {
-    TIMEOUT_S.parse(s).map(|x| x as u64)
-}
-/// Value parser of `decode --run`.
-pub fn run_index(s: &str) -> Result<usize, String> {
-    RUN.parse(s).map(|x| x as usize)
-}
-/// Value parser of `bench --write-log-mb`.
-pub fn log_mb(s: &str) -> Result<f64, String> {
-    LOG_MB.parse(s)
+/// Value parsers: `name: RANGE -> type` is `pub fn name(&str) -> Result<type, String>`, the
+/// value of `RANGE` as `type` (a count is whole, so the cast is exact).
+macro_rules! value_parsers {
+    ($($flag:literal $name:ident: $range:ident -> $ty:ty;)*) => {$(
+        #[doc = concat!("Value parser of `", $flag, "`.")]
+        pub fn $name(s: &str) -> Result<$ty, String> {
+            $range.parse(s).map(|x| x as $ty)
+        }
+    )*};
 }
 
-/// Value parser of `rig --lost-after-s`.
-pub fn rig_lost_after_s(s: &str) -> Result<f64, String> {
-    RIG_LOST_AFTER_S.parse(s)
+value_parsers! {
+    "simulate --speed-kmh" speed_kmh: SPEED_KMH -> f64;
+    "simulate --sample-rate-hz" sample_rate_hz: SAMPLE_RATE_HZ -> f64;
+    "diagnose --step-s" step_s: STEP_S -> f64;
+    "bench --steps" steps: STEPS -> usize;
+    "bench --repeat" repeat: REPEAT -> usize;
+    "target-cost --timeout-s" timeout_s: TIMEOUT_S -> u64;
+    "decode --run" run_index: RUN -> usize;
+    "bench --write-log-mb" log_mb: LOG_MB -> f64;
+    "rig --lost-after-s" rig_lost_after_s: RIG_LOST_AFTER_S -> f64;
+    "rig start --speed-kmh" rig_speed_kmh: RIG_SPEED_KMH -> f32;
+    "rig brake service DECEL_MPS2" rig_service_decel_mps2: RIG_SERVICE_DECEL_MPS2 -> f32;
+    "rig calibrate CH gain GAIN" rig_gain: RIG_GAIN -> f32;
+    "rig calibrate CH offset COUNTS" rig_offset_counts: RIG_OFFSET_COUNTS -> f32;
+    "rig configure divider STEPS" rig_divider: RIG_DIVIDER -> u16;
+    "rig configure teeth TEETH" rig_teeth: RIG_TEETH -> u16;
+    "rig watch|record|wait --for-s" rig_for_s: RIG_FOR_S -> f64;
+    "rig watch --every-s" rig_every_s: RIG_EVERY_S -> f64;
+    "rig run --max-run-s" rig_max_run_s: RIG_MAX_RUN_S -> f64;
+    "rig run --settle-s" rig_settle_s: RIG_SETTLE_S -> f64;
 }
-/// Value parser of `rig start --speed-kmh`.
-pub fn rig_speed_kmh(s: &str) -> Result<f32, String> {
-    RIG_SPEED_KMH.parse(s).map(|x| x as f32)
-}
-/// Value parser of `rig brake service DECEL_MPS2`.
-pub fn rig_service_decel_mps2(s: &str) -> Result<f32, String> {
-    RIG_SERVICE_DECEL_MPS2.parse(s).map(|x| x as f32)
-}
-/// Value parser of `rig calibrate CH gain GAIN`.
-pub fn rig_gain(s: &str) -> Result<f32, String> {
-    RIG_GAIN.parse(s).map(|x| x as f32)
-}
-/// Value parser of `rig calibrate CH offset COUNTS`.
-pub fn rig_offset_counts(s: &str) -> Result<f32, String> {
-    RIG_OFFSET_COUNTS.parse(s).map(|x| x as f32)
-}
-/// Value parser of `rig configure divider STEPS`.
-pub fn rig_divider(s: &str) -> Result<u16, String> {
-    RIG_DIVIDER.parse(s).map(|x| x as u16)
-}
-/// Value parser of `rig configure teeth TEETH`.
-pub fn rig_teeth(s: &str) -> Result<u16, String> {
-    RIG_TEETH.parse(s).map(|x| x as u16)
-}
-/// Value parser of `rig watch|record|wait --for-s`.
-pub fn rig_for_s(s: &str) -> Result<f64, String> {
-    RIG_FOR_S.parse(s)
-}
-/// Value parser of `rig watch --every-s`.
-pub fn rig_every_s(s: &str) -> Result<f64, String> {
-    RIG_EVERY_S.parse(s)
-}
-/// Value parser of `rig run --max-run-s`.
-pub fn rig_max_run_s(s: &str) -> Result<f64, String> {
-    RIG_MAX_RUN_S.parse(s)
-}
-/// Value parser of `rig run --settle-s`.
-pub fn rig_settle_s(s: &str) -> Result<f64, String> {
-    RIG_SETTLE_S.parse(s)
-}
+
 /// Value parser of `rig --sim-fault KIND=SECONDS`: the kind (`board-lost`, `bus-off`,
 /// `alive-frozen`) and the board time, s.
 pub fn rig_sim_fault(spec: &str) -> Result<(&str, f64), String> {

@@ -117,3 +117,49 @@ fn simulate_with_zero_sample_rate_writes_nothing() {
     assert!(err.contains("--sample-rate-hz"), "{err}");
     assert!(!out.exists(), "output directory created");
 }
+
+/// The rig's typed values reach the CAN command unchanged, and a session script line with
+/// a bad value fails at parse time naming the value (before anything is sent).
+#[test]
+fn rig_values_reach_the_command_and_bad_script_values_name_the_value() {
+    use hils::decode::rig_core::can::{Calibration, Command, ConfigItem};
+    use hils::decode::rig_core::sensor::SensorKind;
+    let path = std::path::PathBuf::from("s.rig");
+    let text = "calibrate 2 gain 12.5\ncalibrate 3 offset 409.5\ncalibrate 1 kind pressure\n\
+                configure teeth 90\nbrake service 0.8\n";
+    let lines = hils::rig::parse_script(&path, text).unwrap();
+    let cmds: Vec<Command> = lines
+        .iter()
+        .map(|l| hils::rig::command_of(l).unwrap().unwrap())
+        .collect();
+    assert_eq!(
+        cmds[..4],
+        [
+            Command::Calibrate {
+                channel: 1,
+                action: Calibration::SetGain(12.5)
+            },
+            Command::Calibrate {
+                channel: 2,
+                action: Calibration::SetOffset(409.5)
+            },
+            Command::Calibrate {
+                channel: 0,
+                action: Calibration::SetKind(SensorKind::PressureTransducer)
+            },
+            Command::Configure(ConfigItem::Teeth(90)),
+        ]
+    );
+    for (line, name) in [
+        ("calibrate 2 gain 0", "GAIN"),
+        ("calibrate 2 offset 5000", "COUNTS"),
+        ("configure divider 20000", "STEPS"),
+        ("brake service 11", "DECEL_MPS2"),
+        ("watch --every-s 0", "--every-s"),
+    ] {
+        let e = hils::rig::parse_script(&path, line)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("s.rig:1") && e.contains(name), "{line}: {e}");
+    }
+}
