@@ -80,85 +80,74 @@ const fn count(command: &'static str, flag: &'static str, min: f64, max: f64) ->
     }
 }
 
-/// `simulate --speed-kmh`: the paper's vehicle up to 400 km/h.
-pub const SPEED_KMH: FlagRange = range("simulate", "--speed-kmh", 1.0, 400.0);
-/// `simulate --sample-rate-hz`: 1 Hz up to the plant rate (10 kHz).
-pub const SAMPLE_RATE_HZ: FlagRange = range("simulate", "--sample-rate-hz", 1.0, 10_000.0);
-/// `diagnose --step-s`: the replay step, 10 us to 10 ms.
-pub const STEP_S: FlagRange = range("diagnose", "--step-s", 1e-5, 1e-2);
-/// `bench --steps`.
-pub const STEPS: FlagRange = count("bench", "--steps", 1.0, 1e9);
-/// `bench --repeat`.
-pub const REPEAT: FlagRange = count("bench", "--repeat", 1.0, 1000.0);
-/// `target-cost --timeout-s`.
-pub const TIMEOUT_S: FlagRange = count("target-cost", "--timeout-s", 1.0, 86_400.0);
-/// `decode --run` (1 = the first run).
-pub const RUN: FlagRange = count("decode", "--run", 1.0, 1e6);
+/// The numeric flags, each declared once: its range (a `pub const`), its value parser
+/// (`parser -> type`: the value as `type`; a count is whole, so the cast is exact) and its
+/// place in [`FLAGS`].
+macro_rules! flags {
+    ($($(#[$doc:meta])* $name:ident = $kind:ident($command:literal, $flag:literal, $min:expr, $max:expr), $parser:ident -> $ty:ty;)*) => {
+        $(
+            $(#[$doc])*
+            pub const $name: FlagRange = $kind($command, $flag, $min, $max);
+            #[doc = concat!("Value parser of `", $command, " ", $flag, "` ([`", stringify!($name), "`]).")]
+            pub fn $parser(s: &str) -> Result<$ty, String> {
+                $name.parse(s).map(|x| x as $ty)
+            }
+        )*
+        /// Every numeric flag of `hils` (the property test feeds each its bad values). A
+        /// `flag` without `--` is a positional value (named as in `--help`); `command` is the
+        /// command line up to it.
+        pub const FLAGS: &[FlagRange] = &[$($name),*];
+    };
+}
 
-/// `bench --write-log-mb`.
-pub const LOG_MB: FlagRange = range("bench", "--write-log-mb", 0.001, 10_000.0);
-
-/// `hils rig --lost-after-s`: two status periods (10 ms each) up to a minute.
-pub const RIG_LOST_AFTER_S: FlagRange = range("rig status", "--lost-after-s", 0.02, 60.0);
-/// `hils rig start --speed-kmh`: the board's start-speed signal, 1 km/h up to its top
-/// (163.82 km/h, 0.01 km/h per bit).
-pub const RIG_SPEED_KMH: FlagRange = range("rig start", "--speed-kmh", 1.0, 163.82);
-/// `hils rig brake service DECEL_MPS2`: 0.01 m/s^2 up to 5 m/s^2 (half of g: more than
-/// any wheel-rail adhesion gives).
-pub const RIG_SERVICE_DECEL_MPS2: FlagRange = range("rig brake service", "DECEL_MPS2", 0.01, 5.0);
-/// `hils rig calibrate CH gain GAIN`: N or Pa per ADC count, 0.01 (a 33 N load cell over
-/// the live-zero span of 3276 counts) up to 10,000 (a 33 MPa transducer).
-pub const RIG_GAIN: FlagRange = range("rig calibrate 1 gain", "GAIN", 0.01, 10_000.0);
-/// `hils rig calibrate CH offset COUNTS`: the zero-load reading, between the board's open
-/// (2 % of 4095) and short (98 %) thresholds: a zero outside them reads as a wiring fault.
-pub const RIG_OFFSET_COUNTS: FlagRange = range(
-    "rig calibrate 1 offset",
-    "COUNTS",
-    0.02 * 4095.0,
-    0.98 * 4095.0,
-);
-/// `hils rig configure divider STEPS`: telemetry every 1-10,000 plant steps (the board's
-/// range, `hils.dbc`).
-pub const RIG_DIVIDER: FlagRange = count("rig configure divider", "STEPS", 1.0, 10_000.0);
-/// `hils rig configure teeth TEETH`: teeth of the simulated speed-sensor wheel, 1-1000
-/// (the board's range, `hils.dbc`).
-pub const RIG_TEETH: FlagRange = count("rig configure teeth", "TEETH", 1.0, 1000.0);
-/// `hils rig watch|record|wait --for-s`: 1 ms up to a day.
-pub const RIG_FOR_S: FlagRange = range("rig wait", "--for-s", 0.001, 86_400.0);
-/// `hils rig watch --every-s`: one view per 10 ms (the status period) up to an hour.
-pub const RIG_EVERY_S: FlagRange = range("rig watch", "--every-s", 0.01, 3600.0);
-/// `hils rig run --max-run-s`: 1 s up to an hour of board time per run.
-pub const RIG_MAX_RUN_S: FlagRange = range("rig run", "--max-run-s", 1.0, 3600.0);
-/// `hils rig run --settle-s`: 0.1 s up to 10 min for the cylinders to vent between runs.
-pub const RIG_SETTLE_S: FlagRange = range("rig run", "--settle-s", 0.1, 600.0);
-/// `hils rig --sim-fault KIND=SECONDS`: board time of the fault, 1 ms up to a day.
-pub const RIG_SIM_FAULT_S: FlagRange = range("rig status", "--sim-fault", 0.001, 86_400.0);
-
-/// Every numeric flag of `hils` (the property test feeds each its bad values). A `flag`
-/// without `--` is a positional value (named as in `--help`); `command` is the command
-/// line up to it.
-pub const FLAGS: [FlagRange; 20] = [
-    LOG_MB,
-    SPEED_KMH,
-    SAMPLE_RATE_HZ,
-    STEP_S,
-    STEPS,
-    REPEAT,
-    TIMEOUT_S,
-    RUN,
-    RIG_LOST_AFTER_S,
-    RIG_SPEED_KMH,
-    RIG_SERVICE_DECEL_MPS2,
-    RIG_GAIN,
-    RIG_OFFSET_COUNTS,
-    RIG_DIVIDER,
-    RIG_TEETH,
-    RIG_FOR_S,
-    RIG_EVERY_S,
-    RIG_MAX_RUN_S,
-    RIG_SETTLE_S,
-    RIG_SIM_FAULT_S,
-];
+flags! {
+    /// `simulate --speed-kmh`: the paper's vehicle up to 400 km/h.
+    SPEED_KMH = range("simulate", "--speed-kmh", 1.0, 400.0), speed_kmh -> f64;
+    /// `simulate --sample-rate-hz`: 1 Hz up to the plant rate (10 kHz).
+    SAMPLE_RATE_HZ = range("simulate", "--sample-rate-hz", 1.0, 10_000.0), sample_rate_hz -> f64;
+    /// `diagnose --step-s`: the replay step, 10 us to 10 ms.
+    STEP_S = range("diagnose", "--step-s", 1e-5, 1e-2), step_s -> f64;
+    /// `bench --steps`.
+    STEPS = count("bench", "--steps", 1.0, 1e9), steps -> usize;
+    /// `bench --repeat`.
+    REPEAT = count("bench", "--repeat", 1.0, 1000.0), repeat -> usize;
+    /// `target-cost --timeout-s`.
+    TIMEOUT_S = count("target-cost", "--timeout-s", 1.0, 86_400.0), timeout_s -> u64;
+    /// `decode --run` (1 = the first run).
+    RUN = count("decode", "--run", 1.0, 1e6), run_index -> usize;
+    /// `bench --write-log-mb`.
+    LOG_MB = range("bench", "--write-log-mb", 0.001, 10_000.0), log_mb -> f64;
+    /// `hils rig --lost-after-s`: two status periods (10 ms each) up to a minute.
+    RIG_LOST_AFTER_S = range("rig status", "--lost-after-s", 0.02, 60.0), rig_lost_after_s -> f64;
+    /// `hils rig start --speed-kmh`: the board's start-speed signal, 1 km/h up to its top
+    /// (163.82 km/h, 0.01 km/h per bit).
+    RIG_SPEED_KMH = range("rig start", "--speed-kmh", 1.0, 163.82), rig_speed_kmh -> f32;
+    /// `hils rig brake service DECEL_MPS2`: 0.01 m/s^2 up to 5 m/s^2 (half of g: more than
+    /// any wheel-rail adhesion gives).
+    RIG_SERVICE_DECEL_MPS2 = range("rig brake service", "DECEL_MPS2", 0.01, 5.0), rig_service_decel_mps2 -> f32;
+    /// `hils rig calibrate CH gain GAIN`: N or Pa per ADC count, 0.01 (a 33 N load cell over
+    /// the live-zero span of 3276 counts) up to 10,000 (a 33 MPa transducer).
+    RIG_GAIN = range("rig calibrate 1 gain", "GAIN", 0.01, 10_000.0), rig_gain -> f32;
+    /// `hils rig calibrate CH offset COUNTS`: the zero-load reading, between the board's open
+    /// (2 % of 4095) and short (98 %) thresholds: a zero outside them reads as a wiring fault.
+    RIG_OFFSET_COUNTS = range("rig calibrate 1 offset", "COUNTS", 0.02 * 4095.0, 0.98 * 4095.0), rig_offset_counts -> f32;
+    /// `hils rig configure divider STEPS`: telemetry every 1-10,000 plant steps (the board's
+    /// range, `hils.dbc`).
+    RIG_DIVIDER = count("rig configure divider", "STEPS", 1.0, 10_000.0), rig_divider -> u16;
+    /// `hils rig configure teeth TEETH`: teeth of the simulated speed-sensor wheel, 1-1000
+    /// (the board's range, `hils.dbc`).
+    RIG_TEETH = count("rig configure teeth", "TEETH", 1.0, 1000.0), rig_teeth -> u16;
+    /// `hils rig watch|record|wait --for-s`: 1 ms up to a day.
+    RIG_FOR_S = range("rig wait", "--for-s", 0.001, 86_400.0), rig_for_s -> f64;
+    /// `hils rig watch --every-s`: one view per 10 ms (the status period) up to an hour.
+    RIG_EVERY_S = range("rig watch", "--every-s", 0.01, 3600.0), rig_every_s -> f64;
+    /// `hils rig run --max-run-s`: 1 s up to an hour of board time per run.
+    RIG_MAX_RUN_S = range("rig run", "--max-run-s", 1.0, 3600.0), rig_max_run_s -> f64;
+    /// `hils rig run --settle-s`: 0.1 s up to 10 min for the cylinders to vent between runs.
+    RIG_SETTLE_S = range("rig run", "--settle-s", 0.1, 600.0), rig_settle_s -> f64;
+    /// `hils rig --sim-fault KIND=SECONDS`: board time of the fault, 1 ms up to a day.
+    RIG_SIM_FAULT_S = range("rig status", "--sim-fault", 0.001, 86_400.0), rig_sim_fault_s -> f64;
+}
 
 impl FlagRange {
     /// Whether `x` is a value of this flag (finite, within the range, whole if a count).
@@ -187,39 +176,6 @@ impl FlagRange {
     }
 }
 
-/// Value parsers: `name: RANGE -> type` is `pub fn name(&str) -> Result<type, String>`, the
-/// value of `RANGE` as `type` (a count is whole, so the cast is exact).
-macro_rules! value_parsers {
-    ($($flag:literal $name:ident: $range:ident -> $ty:ty;)*) => {$(
-        #[doc = concat!("Value parser of `", $flag, "`.")]
-        pub fn $name(s: &str) -> Result<$ty, String> {
-            $range.parse(s).map(|x| x as $ty)
-        }
-    )*};
-}
-
-value_parsers! {
-    "simulate --speed-kmh" speed_kmh: SPEED_KMH -> f64;
-    "simulate --sample-rate-hz" sample_rate_hz: SAMPLE_RATE_HZ -> f64;
-    "diagnose --step-s" step_s: STEP_S -> f64;
-    "bench --steps" steps: STEPS -> usize;
-    "bench --repeat" repeat: REPEAT -> usize;
-    "target-cost --timeout-s" timeout_s: TIMEOUT_S -> u64;
-    "decode --run" run_index: RUN -> usize;
-    "bench --write-log-mb" log_mb: LOG_MB -> f64;
-    "rig --lost-after-s" rig_lost_after_s: RIG_LOST_AFTER_S -> f64;
-    "rig start --speed-kmh" rig_speed_kmh: RIG_SPEED_KMH -> f32;
-    "rig brake service DECEL_MPS2" rig_service_decel_mps2: RIG_SERVICE_DECEL_MPS2 -> f32;
-    "rig calibrate CH gain GAIN" rig_gain: RIG_GAIN -> f32;
-    "rig calibrate CH offset COUNTS" rig_offset_counts: RIG_OFFSET_COUNTS -> f32;
-    "rig configure divider STEPS" rig_divider: RIG_DIVIDER -> u16;
-    "rig configure teeth TEETH" rig_teeth: RIG_TEETH -> u16;
-    "rig watch|record|wait --for-s" rig_for_s: RIG_FOR_S -> f64;
-    "rig watch --every-s" rig_every_s: RIG_EVERY_S -> f64;
-    "rig run --max-run-s" rig_max_run_s: RIG_MAX_RUN_S -> f64;
-    "rig run --settle-s" rig_settle_s: RIG_SETTLE_S -> f64;
-}
-
 /// Value parser of `rig --sim-fault KIND=SECONDS`: the kind (`board-lost`, `bus-off`,
 /// `alive-frozen`) and the board time, s.
 pub fn rig_sim_fault(spec: &str) -> Result<(&str, f64), String> {
@@ -230,7 +186,7 @@ pub fn rig_sim_fault(spec: &str) -> Result<(&str, f64), String> {
     if !KINDS.contains(&kind) {
         return Err(format!("`{spec}`: kinds are {}", KINDS.join(", ")));
     }
-    Ok((kind, RIG_SIM_FAULT_S.parse(t)?))
+    Ok((kind, rig_sim_fault_s(t)?))
 }
 /// [`rig_sim_fault`] as a clap value parser (the text is kept, checked).
 pub fn rig_sim_fault_text(spec: &str) -> Result<String, String> {
