@@ -7,7 +7,7 @@ use std::sync::OnceLock;
 use hils::scenario::{EbOptions, Run, run_eb};
 use hils_brake_unit::BrakeDemand;
 use hils_plant::{FrictionModel, Params, Rail};
-use hils_sil::{ClosedLoop, ParamFile};
+use hils_sil::{ClosedLoop, KMH_PER_MPS, ParamFile};
 
 fn params(model: FrictionModel) -> ParamFile {
     let mut p = ParamFile::default();
@@ -184,7 +184,7 @@ fn f32_run_matches_f64_run() {
 /// change), integrated over the run in f64.
 fn energy_balance(model: FrictionModel) -> (f64, f64, f64, f64) {
     let p = params(model);
-    let mut sim = ClosedLoop::<f64>::from_file(&p, Rail::Wet, 150.0 / 3.6).unwrap();
+    let mut sim = ClosedLoop::<f64>::from_file(&p, Rail::Wet, 150.0 / KMH_PER_MPS).unwrap();
     sim.set_demand(BrakeDemand::Emergency);
     let e0 = sim.plant.energy();
     let dt = sim.plant.dt();
@@ -209,7 +209,7 @@ fn energy_balance_closes_within_one_percent() {
     for model in [FrictionModel::Variable, FrictionModel::Constant] {
         let (lost, brake, contact, damper) = energy_balance(model);
         let dissipated = brake + contact + damper;
-        let ke0 = 0.5 * Params::default().effective_mass() * (150.0f64 / 3.6).powi(2);
+        let ke0 = 0.5 * Params::default().effective_mass() * (150.0f64 / KMH_PER_MPS).powi(2);
         assert!(
             (lost - ke0).abs() < 0.01 * ke0,
             "lost {lost} vs initial KE {ke0}"

@@ -14,8 +14,8 @@ use hils::rig::sim::{SimBoard, SimFaults};
 use hils::rig::{Line, parse_script, run_session};
 use hils_brake_unit::BrakeDemand;
 use hils_plant::{FrictionModel, Params, Rail};
-use hils_sil::ClosedLoop;
 use hils_sil::scenario::at_standstill;
+use hils_sil::{ClosedLoop, KMH_PER_MPS};
 
 fn session(faults: SimFaults) -> Session<SimBoard> {
     Session::new(SimBoard::new(faults, false), 0.5)
@@ -40,7 +40,8 @@ fn out_dir(name: &str) -> PathBuf {
 /// Independent reference: the SIL loop in f64 from the same start, brake at t = 0; the time
 /// to standstill, s.
 fn sil_stop_s(rail: Rail, demand: BrakeDemand, speed_kmh: f64) -> f64 {
-    let mut sil = ClosedLoop::<f64>::new(&Params::default(), rail, speed_kmh / 3.6).unwrap();
+    let mut sil =
+        ClosedLoop::<f64>::new(&Params::default(), rail, speed_kmh / KMH_PER_MPS).unwrap();
     sil.set_demand(demand);
     let mut steps = 0u32;
     while !at_standstill(sil.step().vehicle_speed) {
@@ -63,7 +64,7 @@ fn start_status_stop_agree_with_the_board() {
     assert_eq!(s.link.rig().state(), RigState::Running);
     // The status frame's speed is the board's plant speed (0.01 km/h resolution).
     let st = s.next_status(1).unwrap();
-    let v = s.link.rig().outputs().unwrap().vehicle_speed * 3.6;
+    let v = s.link.rig().outputs().unwrap().vehicle_speed * hils::decode::rig_core::KMH_PER_MPS;
     assert!(
         (st.vehicle_speed_kmh - v).abs() < 0.05,
         "{} vs {v}",
@@ -213,7 +214,7 @@ fn eb_run_over_the_bus_matches_sil_and_its_log_is_diagnosed() {
         .cloned()
         .fold(0.0, f64::max);
     assert!(peak > 1e5, "EB pressure measured by the board: {peak} Pa");
-    assert!((log.omega_radps[0][0] * r * 3.6 - 100.0).abs() < 0.01);
+    assert!((log.omega_radps[0][0] * r * KMH_PER_MPS - 100.0).abs() < 0.01);
 
     let json = dir.join("diag.json");
     hils::diagnose::main(hils::diagnose::DiagnoseArgs {
@@ -399,7 +400,7 @@ fn programme_runs_each_run_on_the_board_and_reports() {
         runs[0]["stop_time_s"].as_f64().unwrap(),
         runs[0]["stop_distance_m"].as_f64().unwrap(),
     );
-    let v0 = 50.0 / 3.6;
+    let v0 = 50.0 / KMH_PER_MPS;
     assert!(x > 0.5 * v0 * t && x < v0 * t, "x {x} t {t}");
     for name in ["wet-eb-50", "dry-service-40"] {
         let log =

@@ -80,37 +80,81 @@ const fn count(command: &'static str, flag: &'static str, min: f64, max: f64) ->
     }
 }
 
-/// `simulate --speed-kmh`: the paper's vehicle up to 400 km/h.
-pub const SPEED_KMH: FlagRange = range("simulate", "--speed-kmh", 1.0, 400.0);
-/// `simulate --sample-rate-hz`: 1 Hz up to the plant rate (10 kHz).
-pub const SAMPLE_RATE_HZ: FlagRange = range("simulate", "--sample-rate-hz", 1.0, 10_000.0);
-/// `diagnose --step-s`: the replay step, 10 us to 10 ms.
-pub const STEP_S: FlagRange = range("diagnose", "--step-s", 1e-5, 1e-2);
-/// `bench --steps`.
-pub const STEPS: FlagRange = count("bench", "--steps", 1.0, 1e9);
-/// `bench --repeat`.
-pub const REPEAT: FlagRange = count("bench", "--repeat", 1.0, 1000.0);
-/// `target-cost --timeout-s`.
-pub const TIMEOUT_S: FlagRange = count("target-cost", "--timeout-s", 1.0, 86_400.0);
-/// `decode --run` (1 = the first run).
-pub const RUN: FlagRange = count("decode", "--run", 1.0, 1e6);
+/// The numeric flags, each declared once: its range (a `pub const`), its value parser
+/// (`parser -> type`: the value as `type`; a count is whole, so the cast is exact) and its
+/// place in [`FLAGS`].
+macro_rules! flags {
+    ($($(#[$doc:meta])* $name:ident = $kind:ident($command:literal, $flag:literal, $min:expr, $max:expr), $parser:ident -> $ty:ty;)*) => {
+        $(
+            $(#[$doc])*
+            pub const $name: FlagRange = $kind($command, $flag, $min, $max);
+            #[doc = concat!("Value parser of `", $command, " ", $flag, "` ([`", stringify!($name), "`]).")]
+            pub fn $parser(s: &str) -> Result<$ty, String> {
+                $name.parse(s).map(|x| x as $ty)
+            }
+        )*
+        /// Every numeric flag of `hils` (the property test feeds each its bad values). A
+        /// `flag` without `--` is a positional value (named as in `--help`); `command` is the
+        /// command line up to it.
+        pub const FLAGS: &[FlagRange] = &[$($name),*];
+    };
+}
 
-/// `bench --write-log-mb`.
-pub const LOG_MB: FlagRange = range("bench", "--write-log-mb", 0.001, 10_000.0);
-
-/// Every numeric flag of `hils` (the property test feeds each its bad values).
-pub const FLAGS: [FlagRange; 8] = [
-    LOG_MB,
-    SPEED_KMH,
-    SAMPLE_RATE_HZ,
-    STEP_S,
-    STEPS,
-    REPEAT,
-    TIMEOUT_S,
-    RUN,
-];
+flags! {
+    /// `simulate --speed-kmh`: the paper's vehicle up to 400 km/h.
+    SPEED_KMH = range("simulate", "--speed-kmh", 1.0, 400.0), speed_kmh -> f64;
+    /// `simulate --sample-rate-hz`: 1 Hz up to the plant rate (10 kHz).
+    SAMPLE_RATE_HZ = range("simulate", "--sample-rate-hz", 1.0, 10_000.0), sample_rate_hz -> f64;
+    /// `diagnose --step-s`: the replay step, 10 us to 10 ms.
+    STEP_S = range("diagnose", "--step-s", 1e-5, 1e-2), step_s -> f64;
+    /// `bench --steps`.
+    STEPS = count("bench", "--steps", 1.0, 1e9), steps -> usize;
+    /// `bench --repeat`.
+    REPEAT = count("bench", "--repeat", 1.0, 1000.0), repeat -> usize;
+    /// `target-cost --timeout-s`.
+    TIMEOUT_S = count("target-cost", "--timeout-s", 1.0, 86_400.0), timeout_s -> u64;
+    /// `decode --run` (1 = the first run).
+    RUN = count("decode", "--run", 1.0, 1e6), run_index -> usize;
+    /// `bench --write-log-mb`.
+    LOG_MB = range("bench", "--write-log-mb", 0.001, 10_000.0), log_mb -> f64;
+    /// `hils rig --lost-after-s`: two status periods (10 ms each) up to a minute.
+    RIG_LOST_AFTER_S = range("rig status", "--lost-after-s", 0.02, 60.0), rig_lost_after_s -> f64;
+    /// `hils rig start --speed-kmh`: the board's start-speed signal, 1 km/h up to its top
+    /// (163.82 km/h, 0.01 km/h per bit).
+    RIG_SPEED_KMH = range("rig start", "--speed-kmh", 1.0, 163.82), rig_speed_kmh -> f32;
+    /// `hils rig brake service DECEL_MPS2`: 0.01 m/s^2 up to 5 m/s^2 (half of g: more than
+    /// any wheel-rail adhesion gives).
+    RIG_SERVICE_DECEL_MPS2 = range("rig brake service", "DECEL_MPS2", 0.01, 5.0), rig_service_decel_mps2 -> f32;
+    /// `hils rig calibrate CH gain GAIN`: N or Pa per ADC count, 0.01 (a 33 N load cell over
+    /// the live-zero span of 3276 counts) up to 10,000 (a 33 MPa transducer).
+    RIG_GAIN = range("rig calibrate 1 gain", "GAIN", 0.01, 10_000.0), rig_gain -> f32;
+    /// `hils rig calibrate CH offset COUNTS`: the zero-load reading, between the board's open
+    /// (2 % of 4095) and short (98 %) thresholds: a zero outside them reads as a wiring fault.
+    RIG_OFFSET_COUNTS = range("rig calibrate 1 offset", "COUNTS", 0.02 * 4095.0, 0.98 * 4095.0), rig_offset_counts -> f32;
+    /// `hils rig configure divider STEPS`: telemetry every 1-10,000 plant steps (the board's
+    /// range, `hils.dbc`).
+    RIG_DIVIDER = count("rig configure divider", "STEPS", 1.0, 10_000.0), rig_divider -> u16;
+    /// `hils rig configure teeth TEETH`: teeth of the simulated speed-sensor wheel, 1-1000
+    /// (the board's range, `hils.dbc`).
+    RIG_TEETH = count("rig configure teeth", "TEETH", 1.0, 1000.0), rig_teeth -> u16;
+    /// `hils rig watch|record|wait --for-s`: 1 ms up to a day.
+    RIG_FOR_S = range("rig wait", "--for-s", 0.001, 86_400.0), rig_for_s -> f64;
+    /// `hils rig watch --every-s`: one view per 10 ms (the status period) up to an hour.
+    RIG_EVERY_S = range("rig watch", "--every-s", 0.01, 3600.0), rig_every_s -> f64;
+    /// `hils rig run --max-run-s`: 1 s up to an hour of board time per run.
+    RIG_MAX_RUN_S = range("rig run", "--max-run-s", 1.0, 3600.0), rig_max_run_s -> f64;
+    /// `hils rig run --settle-s`: 0.1 s up to 10 min for the cylinders to vent between runs.
+    RIG_SETTLE_S = range("rig run", "--settle-s", 0.1, 600.0), rig_settle_s -> f64;
+    /// `hils rig --sim-fault KIND=SECONDS`: board time of the fault, 1 ms up to a day.
+    RIG_SIM_FAULT_S = range("rig status", "--sim-fault", 0.001, 86_400.0), rig_sim_fault_s -> f64;
+}
 
 impl FlagRange {
+    /// Whether `x` is a value of this flag (finite, within the range, whole if a count).
+    pub fn contains(&self, x: f64) -> bool {
+        x >= self.min && x <= self.max && !(self.integer && x.fract() != 0.0)
+    }
+
     /// Parses a value of this flag: a finite number within the range (whole if a count).
     pub fn parse(&self, text: &str) -> Result<f64, String> {
         let x: f64 = text
@@ -122,7 +166,7 @@ impl FlagRange {
         } else {
             "a number"
         };
-        if !(x >= self.min && x <= self.max) || (self.integer && x.fract() != 0.0) {
+        if !self.contains(x) {
             return Err(format!(
                 "`{text}` is outside the accepted range: {kind} in [{}, {}]",
                 self.min, self.max
@@ -132,35 +176,19 @@ impl FlagRange {
     }
 }
 
-/// Value parser of `simulate --speed-kmh`.
-pub fn speed_kmh(s: &str) -> Result<f64, String> {
-    SPEED_KMH.parse(s)
+/// Value parser of `rig --sim-fault KIND=SECONDS`: the kind (`board-lost`, `bus-off`,
+/// `alive-frozen`) and the board time, s.
+pub fn rig_sim_fault(spec: &str) -> Result<(&str, f64), String> {
+    const KINDS: [&str; 3] = ["board-lost", "bus-off", "alive-frozen"];
+    let (kind, t) = spec
+        .split_once('=')
+        .ok_or_else(|| format!("`{spec}`: expected KIND=SECONDS"))?;
+    if !KINDS.contains(&kind) {
+        return Err(format!("`{spec}`: kinds are {}", KINDS.join(", ")));
+    }
+    Ok((kind, rig_sim_fault_s(t)?))
 }
-/// Value parser of `simulate --sample-rate-hz`.
-pub fn sample_rate_hz(s: &str) -> Result<f64, String> {
-    SAMPLE_RATE_HZ.parse(s)
-}
-/// Value parser of `diagnose --step-s`.
-pub fn step_s(s: &str) -> Result<f64, String> {
-    STEP_S.parse(s)
-}
-/// Value parser of `bench --steps`.
-pub fn steps(s: &str) -> Result<usize, String> {
-    STEPS.parse(s).map(|x| x as usize)
-}
-/// Value parser of `bench --repeat`.
-pub fn repeat(s: &str) -> Result<usize, String> {
-    REPEAT.parse(s).map(|x| x as usize)
-}
-/// Value parser of `target-cost --timeout-s`.
-pub fn timeout_s(s: &str) -> Result<u64, String> {
-    TIMEOUT_S.parse(s).map(|x| x as u64)
-}
-/// Value parser of `decode --run`.
-pub fn run_index(s: &str) -> Result<usize, String> {
-    RUN.parse(s).map(|x| x as usize)
-}
-/// Value parser of `bench --write-log-mb`.
-pub fn log_mb(s: &str) -> Result<f64, String> {
-    LOG_MB.parse(s)
+/// [`rig_sim_fault`] as a clap value parser (the text is kept, checked).
+pub fn rig_sim_fault_text(spec: &str) -> Result<String, String> {
+    rig_sim_fault(spec).map(|_| spec.to_string())
 }

@@ -204,7 +204,6 @@ fn state_text(code: u8) -> &'static str {
     }
 }
 
-
 /// A float cell: the f32's shortest exact text, empty for NaN (not measured).
 fn cell(x: f32) -> String {
     if x.is_nan() {

@@ -6,12 +6,16 @@ use clap::Parser;
 use hils::cli::{Cli, FLAGS, FlagRange};
 use proptest::prelude::*;
 
-/// A command line that sets `flag` to `value` (and whatever else the command needs).
+/// A command line that sets `flag` to `value` (and whatever else the command needs). A
+/// positional value (a `flag` without `--`) follows `--`, so that a negative number is a
+/// value, not an option.
 fn argv(f: &FlagRange, value: &str) -> Vec<String> {
-    let mut v = vec!["hils".to_string(), f.command.to_string()];
+    let mut v = vec!["hils".to_string()];
+    v.extend(f.command.split_whitespace().map(String::from));
     match f.command {
         "simulate" | "decode" => v.extend(["--out".into(), "/nonexistent/never-written".into()]),
         "diagnose" => v.extend(["--baseline".into(), "b.toml".into()]),
+        "rig run" => v.extend(["--programme".into(), "/nonexistent/p.toml".into()]),
         _ => {}
     }
     if f.flag == "--write-log-mb" {
@@ -20,7 +24,13 @@ fn argv(f: &FlagRange, value: &str) -> Vec<String> {
     if f.command == "decode" || f.command == "diagnose" {
         v.push("input.csv".into());
     }
-    v.push(format!("{}={value}", f.flag));
+    if !f.flag.starts_with("--") {
+        v.extend(["--".into(), value.into()]);
+    } else if f.flag == "--sim-fault" {
+        v.push(format!("{}=board-lost={value}", f.flag));
+    } else {
+        v.push(format!("{}={value}", f.flag));
+    }
     v
 }
 
@@ -106,4 +116,50 @@ fn simulate_with_zero_sample_rate_writes_nothing() {
     let err = String::from_utf8_lossy(&status.stderr);
     assert!(err.contains("--sample-rate-hz"), "{err}");
     assert!(!out.exists(), "output directory created");
+}
+
+/// The rig's typed values reach the CAN command unchanged, and a session script line with
+/// a bad value fails at parse time naming the value (before anything is sent).
+#[test]
+fn rig_values_reach_the_command_and_bad_script_values_name_the_value() {
+    use hils::decode::rig_core::can::{Calibration, Command, ConfigItem};
+    use hils::decode::rig_core::sensor::SensorKind;
+    let path = std::path::PathBuf::from("s.rig");
+    let text = "calibrate 2 gain 12.5\ncalibrate 3 offset 409.5\ncalibrate 1 kind pressure\n\
+                configure teeth 90\nbrake service 0.8\n";
+    let lines = hils::rig::parse_script(&path, text).unwrap();
+    let cmds: Vec<Command> = lines
+        .iter()
+        .map(|l| hils::rig::command_of(l).unwrap().unwrap())
+        .collect();
+    assert_eq!(
+        cmds[..4],
+        [
+            Command::Calibrate {
+                channel: 1,
+                action: Calibration::SetGain(12.5)
+            },
+            Command::Calibrate {
+                channel: 2,
+                action: Calibration::SetOffset(409.5)
+            },
+            Command::Calibrate {
+                channel: 0,
+                action: Calibration::SetKind(SensorKind::PressureTransducer)
+            },
+            Command::Configure(ConfigItem::Teeth(90)),
+        ]
+    );
+    for (line, name) in [
+        ("calibrate 2 gain 0", "GAIN"),
+        ("calibrate 2 offset 5000", "COUNTS"),
+        ("configure divider 20000", "STEPS"),
+        ("brake service 11", "DECEL_MPS2"),
+        ("watch --every-s 0", "--every-s"),
+    ] {
+        let e = hils::rig::parse_script(&path, line)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("s.rig:1") && e.contains(name), "{line}: {e}");
+    }
 }

@@ -367,13 +367,16 @@ pub struct BrakeUnit<F: Real> {
 /// What the unit shows after a step.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct UnitOutputs<F> {
+    /// Brake cylinder pressure of each wheelset, Pa (the input of paper Eq (1)).
     pub cylinder_pressure: [F; WHEELSETS],
     /// Valve commands of the WSP. The valve acts at once; the cylinder feels it after
     /// the pneumatic dead time.
     pub valves: [Valve; WHEELSETS],
     /// True while a wheelset's WSP valve vents (the `wsp1..4` column of a run log).
     pub venting: [bool; WHEELSETS],
+    /// The WSP's reference (vehicle) speed estimate, m/s.
     pub reference_speed: F,
+    /// Cylinder pressure the brake demand asks for (before the WSP), Pa.
     pub demand_pressure: F,
 }
 

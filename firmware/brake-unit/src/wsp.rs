@@ -136,23 +136,37 @@ impl WspTuning {
 /// Precomputed tuning in the unit's float type, for a control period `dt`.
 #[derive(Clone, Copy, Debug)]
 pub struct WspConstants<F> {
+    /// [`WspTuning::deficit_min`], m/s.
     pub deficit_min: F,
+    /// [`WspTuning::deficit_ratio`] (share of the reference speed).
     pub deficit_ratio: F,
+    /// [`WspTuning::reapply_ratio`] (share of the deficit threshold).
     pub reapply_ratio: F,
+    /// [`WspTuning::decel_threshold`], m/s^2.
     pub decel_threshold: F,
+    /// [`WspTuning::recover_accel`], m/s^2.
     pub recover_accel: F,
+    /// [`WspTuning::caught_up_accel`], m/s^2.
     pub caught_up_accel: F,
+    /// [`WspTuning::lock_ratio`] (share of the reference speed).
     pub lock_ratio: F,
+    /// [`WspTuning::vent_max`] in control periods (rounded).
     pub vent_max_cycles: u32,
+    /// [`WspTuning::hold_max`] in control periods (rounded).
     pub hold_max_cycles: u32,
+    /// [`WspTuning::min_speed`], m/s.
     pub min_speed: F,
+    /// Largest fall of the reference speed in one control period, m/s
+    /// ([`WspTuning::ref_max_decel`] x dt).
     pub ref_fall_per_cycle: F,
+    /// 1 / dt, 1/s (the control period's rate).
     pub inv_dt: F,
     /// Filter gain dt / (tau + dt).
     pub accel_gain: F,
 }
 
 impl<F: Real> WspConstants<F> {
+    /// The tuning `t` in the float type `F` for the control period `dt` (s).
     pub fn new(t: &WspTuning, dt: f64) -> Self {
         let cycles = |s: f64| (s / dt + 0.5) as u32;
         Self {
@@ -177,6 +191,7 @@ impl<F: Real> WspConstants<F> {
 /// falls (rises re-anchor it and are left out, so `accel <= 0` under braking).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct ReferenceSpeed<F> {
+    /// Estimated vehicle (reference) speed, m/s.
     pub speed: F,
     /// Filtered rate of change, m/s^2.
     pub accel: F,
@@ -184,6 +199,8 @@ pub struct ReferenceSpeed<F> {
 }
 
 impl<F: Real> ReferenceSpeed<F> {
+    /// One control period: the fastest wheel speed (m/s), limited to a fall of
+    /// `ref_fall_per_cycle`, and the filtered rate of the fall.
     pub fn update(&mut self, k: &WspConstants<F>, wheel_speeds: &[F; 4]) {
         let fastest = wheel_speeds.iter().fold(F::ZERO, |m, &v| m.max(v));
         if !self.initialised {
@@ -207,6 +224,7 @@ impl<F: Real> ReferenceSpeed<F> {
 /// One wheelset's WSP channel.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct WspChannel<F> {
+    /// The dump valve command of this wheelset.
     pub valve: Valve,
     /// Filtered wheel acceleration, m/s^2.
     pub accel: F,

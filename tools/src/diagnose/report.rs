@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use hils_plant::WHEELSETS;
+use hils_sil::KMH_PER_MPS;
 
 use super::Outcome;
 use super::replay::{Group, Prepared, Quantity, Replay};
@@ -442,7 +443,7 @@ pub fn write(dir: &Path, out: &Outcome) -> Result<Vec<PathBuf>> {
         let _ = writeln!(
             md,
             "Initial speed {:.2} km/h (measured), rail {:?}{}, {} samples over {:.2} s, replay step {} ms, comparison bins of {} ms (every third 0.2 s block is validation data).\n",
-            run.v0 * 3.6,
+            run.v0 * KMH_PER_MPS,
             run.rail,
             if run.rail_from_metadata {
                 " (metadata)"
@@ -484,19 +485,19 @@ pub fn write(dir: &Path, out: &Outcome) -> Result<Vec<PathBuf>> {
         );
         c.series.push(Series::new(
             "measured",
-            t_series(run, &run.v_bin, 3.6),
+            t_series(run, &run.v_bin, KMH_PER_MPS),
             Style::Solid,
             7,
         ));
         c.series.push(Series::new(
             "baseline",
-            t_series(run, &base.v_bin, 3.6),
+            t_series(run, &base.v_bin, KMH_PER_MPS),
             Style::Dashed,
             1,
         ));
         c.series.push(Series::new(
             "extended",
-            t_series(run, &ext.v_bin, 3.6),
+            t_series(run, &ext.v_bin, KMH_PER_MPS),
             Style::Dotted,
             2,
         ));
@@ -551,25 +552,25 @@ pub fn write(dir: &Path, out: &Outcome) -> Result<Vec<PathBuf>> {
             );
             c.series.push(Series::new(
                 "v_ref measured",
-                t_series(run, &run.v_bin, 3.6),
+                t_series(run, &run.v_bin, KMH_PER_MPS),
                 Style::Dotted,
                 6,
             ));
             c.series.push(Series::new(
                 "measured",
-                t_series(run, &run.wheel_bin[j], 3.6),
+                t_series(run, &run.wheel_bin[j], KMH_PER_MPS),
                 Style::Solid,
                 7,
             ));
             c.series.push(Series::new(
                 "baseline",
-                t_series(run, &base.wheel_bin[j], 3.6),
+                t_series(run, &base.wheel_bin[j], KMH_PER_MPS),
                 Style::Dashed,
                 1,
             ));
             c.series.push(Series::new(
                 "extended",
-                t_series(run, &ext.wheel_bin[j], 3.6),
+                t_series(run, &ext.wheel_bin[j], KMH_PER_MPS),
                 Style::Solid,
                 2,
             ));

@@ -52,15 +52,15 @@ pub struct RigArgs {
     /// under test) or a SocketCAN interface (`can0`).
     #[arg(long, global = true, default_value = "can0")]
     pub interface: String,
-    /// No frame from the board for this long (s) = board lost.
-    #[arg(long, global = true, default_value_t = 0.5)]
+    /// No frame from the board for this long (s) = board lost; 0.02-60 s.
+    #[arg(long, global = true, default_value_t = 0.5, value_parser = crate::cli::rig_lost_after_s)]
     pub lost_after_s: f64,
     /// Sim: pace the board to the wall clock (else it runs as fast as the host steps it).
     #[arg(long, global = true)]
     pub realtime: bool,
     /// Sim: a fault at a board time, `board-lost=S`, `bus-off=S` or `alive-frozen=S`
-    /// (repeatable).
-    #[arg(long = "sim-fault", global = true)]
+    /// (repeatable); S is 0.001-86400 s.
+    #[arg(long = "sim-fault", global = true, value_parser = crate::cli::rig_sim_fault_text)]
     pub sim_faults: Vec<String>,
     #[command(subcommand)]
     pub command: RigCommand,
@@ -90,31 +90,33 @@ pub enum Line {
     /// Brake command: `eb`, `service DECEL_MPS2` or `release`.
     Brake {
         demand: BrakeKind,
-        /// Service deceleration, m/s^2 (for `service`).
+        /// Service deceleration, m/s^2 (for `service`): 0.01-5.
+        #[arg(value_parser = crate::cli::rig_service_decel_mps2)]
         decel_mps2: Option<f32>,
     },
     /// Inject a sensor fault on channel 1-4 (`none` removes it).
     Inject { channel: u8, fault: FaultKind },
-    /// Calibrate channel 1-4: `tare`, `gain X`, `offset X`, `kind load-cell|pressure`.
+    /// Calibrate channel 1-4: `tare`, `gain GAIN`, `offset COUNTS`, `kind load-cell|pressure`.
     Calibrate {
         channel: u8,
+        #[command(subcommand)]
         action: CalAction,
-        /// The gain (unit per count), offset (counts) or kind (`load-cell`, `pressure`).
-        value: Option<String>,
     },
     /// Clear latched faults whose cause is gone.
     ClearFaults,
     /// Set the telemetry divider or the sensor-wheel teeth (no run active).
-    Configure { item: ConfigKind, value: u16 },
+    #[command(subcommand)]
+    Configure(ConfigKind),
     /// Print the board's status.
     Status,
     /// Live view of the board (at the status rate on a terminal).
     Watch {
-        /// Stop after this long (s); default: until the board is lost.
-        #[arg(long)]
+        /// Stop after this long (s, 0.001-86400); default: until the board is lost.
+        #[arg(long, value_parser = crate::cli::rig_for_s)]
         for_s: Option<f64>,
-        /// When the output is not a terminal: one view per this much board time, s.
-        #[arg(long, default_value_t = 1.0)]
+        /// When the output is not a terminal: one view per this much board time, s
+        /// (0.01-3600).
+        #[arg(long, default_value_t = 1.0, value_parser = crate::cli::rig_every_s)]
         every_s: f64,
     },
     /// Record the wheel-speed and status frames as a run log. Alone: until a run ends (or
@@ -122,12 +124,14 @@ pub enum Line {
     Record {
         #[arg(long)]
         out: PathBuf,
-        #[arg(long)]
+        /// Record at most this long, s (0.001-86400).
+        #[arg(long, value_parser = crate::cli::rig_for_s)]
         for_s: Option<f64>,
     },
     /// Wait: `--for-s S`, or `--until-end` (a run was running and no longer is).
     Wait {
-        #[arg(long)]
+        /// Wait this long, s (0.001-86400).
+        #[arg(long, value_parser = crate::cli::rig_for_s)]
         for_s: Option<f64>,
         #[arg(long)]
         until_end: bool,
@@ -136,8 +140,8 @@ pub enum Line {
 
 #[derive(Args, Debug, Clone)]
 pub struct StartArgs {
-    /// Initial speed, km/h (the board takes 0-163.82).
-    #[arg(long)]
+    /// Initial speed, km/h: 1-163.82 (the top of the board's start-speed signal).
+    #[arg(long, value_parser = crate::cli::rig_speed_kmh)]
     pub speed_kmh: f32,
     #[arg(long, value_enum, default_value_t = RailArg::Wet)]
     pub rail: RailArg,
@@ -183,17 +187,45 @@ pub enum FaultKind {
     OutOfRange,
     None,
 }
-#[derive(ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+/// `calibrate CH ...`: what to set.
+#[derive(Subcommand, Debug, Clone, Copy, PartialEq)]
 pub enum CalAction {
+    /// The present reading becomes the zero (offset).
     Tare,
-    Gain,
-    Offset,
-    Kind,
+    /// Gain, N or Pa per ADC count: 0.01-10000.
+    Gain {
+        #[arg(value_parser = crate::cli::rig_gain)]
+        gain: f32,
+    },
+    /// Offset, ADC counts of the zero load: 81.9-4013.1 (inside the open/short thresholds).
+    Offset {
+        #[arg(value_parser = crate::cli::rig_offset_counts)]
+        counts: f32,
+    },
+    /// The measured quantity (resets the calibration to the kind's default).
+    Kind { kind: SensorKindArg },
 }
+/// `calibrate CH kind ...`.
 #[derive(ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SensorKindArg {
+    /// Caliper load cell, N.
+    LoadCell,
+    /// Cylinder pressure transducer, Pa.
+    Pressure,
+}
+/// `configure ...`: an item and its value.
+#[derive(Subcommand, Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ConfigKind {
-    Divider,
-    Teeth,
+    /// Telemetry every STEPS plant steps: 1-10000.
+    Divider {
+        #[arg(value_parser = crate::cli::rig_divider)]
+        steps: u16,
+    },
+    /// Teeth of the simulated speed-sensor wheel: 1-1000.
+    Teeth {
+        #[arg(value_parser = crate::cli::rig_teeth)]
+        teeth: u16,
+    },
 }
 
 impl RailArg {
@@ -248,13 +280,15 @@ pub fn command_of(line: &Line) -> Result<Option<Command>> {
         Line::Brake { demand, decel_mps2 } => Command::Brake(match (demand, decel_mps2) {
             (BrakeKind::Eb, None) => BrakeCommand::Emergency,
             (BrakeKind::Release, None) => BrakeCommand::Release,
-            (BrakeKind::Service, Some(d)) if d.is_finite() && (0.0..=10.0).contains(d) => {
+            (BrakeKind::Service, Some(d))
+                if crate::cli::RIG_SERVICE_DECEL_MPS2.contains(*d as f64) =>
+            {
                 BrakeCommand::Service {
                     deceleration_mps2: *d,
                 }
             }
             (BrakeKind::Service, _) => {
-                bail!("brake service needs a deceleration 0-10 m/s^2 (`brake service 1.0`)")
+                bail!("brake service needs a deceleration 0.01-5 m/s^2 (`brake service 1.0`)")
             }
             (_, Some(_)) => bail!("only `brake service` takes a deceleration"),
         }),
@@ -268,36 +302,22 @@ pub fn command_of(line: &Line) -> Result<Option<Command>> {
                 FaultKind::None => None,
             },
         },
-        Line::Calibrate {
-            channel: c,
-            action,
-            value,
-        } => {
-            let number = || -> Result<f32> {
-                let v = value
-                    .as_deref()
-                    .ok_or_else(|| anyhow!("calibrate {action:?} needs a value"))?;
-                v.parse::<f32>()
-                    .map_err(|_| anyhow!("calibration value `{v}` is not a number"))
-            };
-            Command::Calibrate {
-                channel: channel(*c)?,
-                action: match action {
-                    CalAction::Tare => Calibration::Tare,
-                    CalAction::Gain => Calibration::SetGain(number()?),
-                    CalAction::Offset => Calibration::SetOffset(number()?),
-                    CalAction::Kind => Calibration::SetKind(match value.as_deref() {
-                        Some("load-cell") => SensorKind::LoadCell,
-                        Some("pressure") => SensorKind::PressureTransducer,
-                        _ => bail!("calibrate kind: `load-cell` or `pressure`"),
-                    }),
-                },
-            }
-        }
+        Line::Calibrate { channel: c, action } => Command::Calibrate {
+            channel: channel(*c)?,
+            action: match *action {
+                CalAction::Tare => Calibration::Tare,
+                CalAction::Gain { gain } => Calibration::SetGain(gain),
+                CalAction::Offset { counts } => Calibration::SetOffset(counts),
+                CalAction::Kind { kind } => Calibration::SetKind(match kind {
+                    SensorKindArg::LoadCell => SensorKind::LoadCell,
+                    SensorKindArg::Pressure => SensorKind::PressureTransducer,
+                }),
+            },
+        },
         Line::ClearFaults => Command::ClearFaults,
-        Line::Configure { item, value } => Command::Configure(match item {
-            ConfigKind::Divider => ConfigItem::TelemetryDivider(*value),
-            ConfigKind::Teeth => ConfigItem::Teeth(*value),
+        Line::Configure(item) => Command::Configure(match *item {
+            ConfigKind::Divider { steps } => ConfigItem::TelemetryDivider(steps),
+            ConfigKind::Teeth { teeth } => ConfigItem::Teeth(teeth),
         }),
         Line::Status | Line::Watch { .. } | Line::Record { .. } | Line::Wait { .. } => {
             return Ok(None);
@@ -469,19 +489,11 @@ pub fn finish<T: Transport>(
 pub fn sim_faults(specs: &[String]) -> Result<SimFaults> {
     let mut f = SimFaults::default();
     for spec in specs {
-        let (k, v) = spec
-            .split_once('=')
-            .ok_or_else(|| anyhow!("--sim-fault {spec}: expected KIND=SECONDS"))?;
-        let t: f64 = v
-            .parse()
-            .ok()
-            .filter(|t: &f64| t.is_finite() && *t >= 0.0)
-            .ok_or_else(|| anyhow!("--sim-fault {spec}: `{v}` is not a time in s"))?;
-        match k {
+        let (kind, t) = crate::cli::rig_sim_fault(spec).map_err(|e| anyhow!("--sim-fault {e}"))?;
+        match kind {
             "board-lost" => f.board_lost_at_s = Some(t),
             "bus-off" => f.bus_off_at_s = Some(t),
-            "alive-frozen" => f.status_alive_frozen_at_s = Some(t),
-            _ => bail!("--sim-fault {spec}: kinds are board-lost, bus-off, alive-frozen"),
+            _ => f.status_alive_frozen_at_s = Some(t),
         }
     }
     Ok(f)

@@ -61,12 +61,12 @@ pub struct RunArgs {
     /// Friction model of the board's plant for every run.
     #[arg(long, value_enum, default_value_t = FrictionArg::Variable)]
     pub friction: FrictionArg,
-    /// Longest a run may take (board time, s); then it is stopped.
-    #[arg(long, default_value_t = 180.0)]
+    /// Longest a run may take (board time, s: 1-3600); then it is stopped.
+    #[arg(long, default_value_t = 180.0, value_parser = crate::cli::rig_max_run_s)]
     pub max_run_s: f64,
     /// Wait after releasing the brake before each start, s (the controller under test
-    /// vents its cylinders; nothing in `hils.dbc` shows their pressure).
-    #[arg(long, default_value_t = 3.0)]
+    /// vents its cylinders; nothing in `hils.dbc` shows their pressure): 0.1-600 s.
+    #[arg(long, default_value_t = 3.0, value_parser = crate::cli::rig_settle_s)]
     pub settle_s: f64,
     /// Only the runs whose name contains this.
     #[arg(long)]

@@ -6,6 +6,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use hils_plant::Surface;
+use hils_sil::KMH_PER_MPS;
 
 use super::Outcome;
 use super::metrics::Verdict;
@@ -89,14 +90,14 @@ fn run_plots(dir: &Path, o: &Outcome) -> Result<()> {
     let v = t
         .iter()
         .zip(&o.trace.v_mps)
-        .map(|(&t, &v)| (t, v * 3.6))
+        .map(|(&t, &v)| (t, v * KMH_PER_MPS))
         .collect();
     speeds
         .series
         .push(Series::new("vehicle", v, Style::Dashed, 7));
     speeds
         .series
-        .extend(per_wheelset("wheelset", t, &o.trace.wheel_mps, 3.6));
+        .extend(per_wheelset("wheelset", t, &o.trace.wheel_mps, KMH_PER_MPS));
     speeds.save_svg(&dir.join(format!("{}-speeds.svg", o.run.name)))?;
 
     let mut pressures = Chart::new(
