@@ -119,9 +119,9 @@ flags! {
     LOG_MB = range("bench", "--write-log-mb", 0.001, 10_000.0), log_mb -> f64;
     /// `hils rig --lost-after-s`: two status periods (10 ms each) up to a minute.
     RIG_LOST_AFTER_S = range("rig status", "--lost-after-s", 0.02, 60.0), rig_lost_after_s -> f64;
-    /// `hils rig start --speed-kmh`: the board's start-speed signal, 1 km/h up to its top
-    /// (163.82 km/h, 0.01 km/h per bit).
-    RIG_SPEED_KMH = range("rig start", "--speed-kmh", 1.0, 163.82), rig_speed_kmh -> f32;
+    /// `hils rig start --speed-kmh`: 1 km/h up to the top of the wheel-speed frames
+    /// (655.34 km/h, 0.01 km/h per bit; `hils_rig_core::can::WHEEL_SPEED_MAX_KMH`).
+    RIG_SPEED_KMH = range("rig start", "--speed-kmh", 1.0, 655.34), rig_speed_kmh -> f32;
     /// `hils rig brake service DECEL_MPS2`: 0.01 m/s^2 up to 5 m/s^2 (half of g: more than
     /// any wheel-rail adhesion gives).
     RIG_SERVICE_DECEL_MPS2 = range("rig brake service", "DECEL_MPS2", 0.01, 5.0), rig_service_decel_mps2 -> f32;

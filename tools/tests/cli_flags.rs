@@ -163,3 +163,10 @@ fn rig_values_reach_the_command_and_bad_script_values_name_the_value() {
         assert!(e.contains("s.rig:1") && e.contains(name), "{line}: {e}");
     }
 }
+
+/// `rig start --speed-kmh` accepts exactly the speeds the wheel-speed frames carry.
+#[test]
+fn rig_start_speed_range_is_the_wheel_speed_frames_range() {
+    let top = hils::decode::rig_core::can::WHEEL_SPEED_MAX_KMH as f64;
+    assert!((hils::cli::RIG_SPEED_KMH.max - top).abs() < 0.005, "{top}");
+}

@@ -140,7 +140,7 @@ pub enum Line {
 
 #[derive(Args, Debug, Clone)]
 pub struct StartArgs {
-    /// Initial speed, km/h: 1-163.82 (the top of the board's start-speed signal).
+    /// Initial speed, km/h: 1-655.34 (the top of the wheel-speed frames).
     #[arg(long, value_parser = crate::cli::rig_speed_kmh)]
     pub speed_kmh: f32,
     #[arg(long, value_enum, default_value_t = RailArg::Wet)]

@@ -13,7 +13,7 @@
 //! # What the board can run
 //!
 //! `RIG_COMMAND`'s start carries a rail (`wet` or `dry`), the friction model and the initial
-//! speed (0-163.82 km/h); the board's plant has the default vehicle. A run whose track is a
+//! speed (0-655.34 km/h); the board's plant has the default vehicle. A run whose track is a
 //! uniform `wet` or `dry` surface with the default vehicle runs on the board; any other
 //! (low-adhesion surfaces, zones, vehicle variants, demands other than `emergency` and
 //! `service:<m/s^2>`) is listed as *not run on the rig* with the reason, not approximated.
