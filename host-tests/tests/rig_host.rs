@@ -387,6 +387,12 @@ fn programme_runs_each_run_on_the_board_and_reports() {
     ] {
         assert!(runs[0].get(key).is_some(), "key {key}: {}", runs[0]);
     }
+    // The rig's log has no vent commands of the controller under test: the air and timer
+    // figures are flagged as not measured, not passed silently.
+    assert_eq!(
+        runs[0]["not_measured"],
+        serde_json::json!(["air_consumption_l", "wsp_timer_actions"])
+    );
     assert!(runs[1]["end"].as_str().unwrap().contains("surface `low`"));
     assert_eq!(runs[1]["on_rig"], false);
     assert_eq!(runs[1]["passed"], false);

@@ -161,6 +161,8 @@ pub struct RigRun {
     /// `finished`, `stopped`, `fault`, or why the run did not run or ended early.
     pub end: String,
     pub outcome: Option<Outcome>,
+    /// Metrics the log cannot give (their values are 0, not measured).
+    pub not_measured: Vec<&'static str>,
 }
 
 impl RigRun {
@@ -173,6 +175,9 @@ impl RigRun {
         if let Some(m) = v.as_object_mut() {
             m.insert("on_rig".into(), self.on_rig.into());
             m.insert("end".into(), self.end.clone().into());
+            if !self.not_measured.is_empty() {
+                m.insert("not_measured".into(), self.not_measured.clone().into());
+            }
         }
         v
     }
@@ -267,6 +272,7 @@ pub fn run_programme<T: Transport>(
             on_rig: false,
             end: String::new(),
             outcome: None,
+            not_measured: Vec::new(),
         };
         match (&stopped, plan) {
             (Some(e), _) => rig.end = format!("not run: the programme ended ({e})"),
@@ -282,6 +288,10 @@ pub fn run_programme<T: Transport>(
                         // RIG_STATUS carries the vehicle speed at 0.01 km/h.
                         trace.speed_resolution_mps =
                             (WHEEL_SPEED_RESOLUTION_KMH / hils_sil::KMH_PER_MPS as f32) as f64;
+                        if trace.venting.iter().any(Vec::is_empty) {
+                            // The log has no WSP vent commands: not measured, not passed.
+                            rig.not_measured = vec!["air_consumption_l", "wsp_timer_actions"];
+                        }
                         rig.outcome = Some(judge_trace(run.clone(), trace, criteria));
                     }
                     Err(e) => rig.end = format!("{}; not judged: {e:#}", rig.end),
@@ -300,10 +310,20 @@ pub fn summary_table(rig: &[RigRun], sil: &[Outcome]) -> String {
     let mut not_judged = String::new();
     for (r, s) in rig.iter().zip(sil) {
         match &r.outcome {
-            Some(o) => rows.push(Verdict {
-                name: format!("{} (rig)", r.name),
-                ..o.verdict.clone()
-            }),
+            Some(o) => {
+                rows.push(Verdict {
+                    name: format!("{} (rig)", r.name),
+                    ..o.verdict.clone()
+                });
+                if !r.not_measured.is_empty() {
+                    let _ = writeln!(
+                        not_judged,
+                        "- {} (rig): not measured (the log has no WSP vent commands): {}",
+                        r.name,
+                        r.not_measured.join(", ")
+                    );
+                }
+            }
             None => {
                 let _ = writeln!(not_judged, "- {} (rig): {}", r.name, r.end);
             }
@@ -316,7 +336,10 @@ pub fn summary_table(rig: &[RigRun], sil: &[Outcome]) -> String {
     let refs: Vec<&Verdict> = rows.iter().collect();
     let mut t = report::table(&refs);
     if !not_judged.is_empty() {
-        let _ = write!(t, "\nNot judged on the rig:\n\n{not_judged}");
+        let _ = write!(
+            t,
+            "\nNot judged or not measured on the rig:\n\n{not_judged}"
+        );
     }
     t
 }
