@@ -309,7 +309,7 @@ fn a_rejected_script_line_ends_the_session_with_a_non_zero_result() {
 }
 
 const PROGRAMME: &str = r#"
-[criteria]              # wsp-test's; the rig ignores it
+[criteria]              # wsp-test's, judging the rig runs too
 max_distance_ratio = 1.35
 [tracks.wet]
 base = "wet"
@@ -360,8 +360,9 @@ fn programme_args(
 }
 
 /// `hils rig run --programme` against the in-process board: the runs the board can run are
-/// run and recorded, the service brake reaches its demanded deceleration, the others are
-/// listed with the reason.
+/// run, recorded and judged by `hils wsp-test`'s metrics (its JSON keys), the service brake
+/// reaches its demanded deceleration, the others are listed with the reason; the report
+/// puts each rig run beside its SIL run.
 #[test]
 fn programme_runs_each_run_on_the_board_and_reports() {
     let dir = out_dir("programme");
@@ -373,9 +374,30 @@ fn programme_runs_each_run_on_the_board_and_reports() {
     assert_eq!(runs.len(), 3);
     assert_eq!(runs[0]["end"], "finished");
     assert_eq!(runs[0]["on_rig"], true);
+    for key in [
+        "name",
+        "passed",
+        "stopping_distance_m",
+        "allowed_distance_m",
+        "distance_ratio",
+        "adhesion_utilisation",
+        "air_consumption_l",
+        "max_lock_s",
+        "lock_count",
+        "wsp_timer_actions",
+    ] {
+        assert!(runs[0].get(key).is_some(), "key {key}: {}", runs[0]);
+    }
+    // The rig's log has no vent commands of the controller under test: the air and timer
+    // figures are flagged as not measured, not passed silently.
+    assert_eq!(
+        runs[0]["not_measured"],
+        serde_json::json!(["air_consumption_l", "wsp_timer_actions"])
+    );
     assert!(runs[1]["end"].as_str().unwrap().contains("surface `low`"));
     assert_eq!(runs[1]["on_rig"], false);
-    // Each run stops as the SIL loop of the same start does (3 %).
+    assert_eq!(runs[1]["passed"], false);
+    // Each run stops (from its brake command) as the SIL loop of the same start does (3 %).
     for (k, rail, demand, v) in [
         (0, Rail::Wet, BrakeDemand::Emergency, 50.0),
         (
@@ -395,13 +417,21 @@ fn programme_runs_each_run_on_the_board_and_reports() {
             runs[k]["name"]
         );
     }
-    // Stopping distance v0 t / 2 .. v0 t (decelerating throughout).
-    let (t, x) = (
+    // Stopping distance v0 t / 2 .. v0 t (decelerating throughout); the ratio is over the
+    // allowed distance.
+    let (t, x, allowed) = (
         runs[0]["stop_time_s"].as_f64().unwrap(),
-        runs[0]["stop_distance_m"].as_f64().unwrap(),
+        runs[0]["stopping_distance_m"].as_f64().unwrap(),
+        runs[0]["allowed_distance_m"].as_f64().unwrap(),
     );
     let v0 = 50.0 / KMH_PER_MPS;
     assert!(x > 0.5 * v0 * t && x < v0 * t, "x {x} t {t}");
+    let ratio = runs[0]["distance_ratio"].as_f64().unwrap();
+    assert!(
+        (ratio - x / allowed).abs() < 1e-9 && allowed > 0.5 * v0 * t,
+        "{}",
+        runs[0]
+    );
     for name in ["wet-eb-50", "dry-service-40"] {
         let log =
             hils::measured::read_run_log(&dir.join("report").join(format!("{name}.csv"))).unwrap();
@@ -413,7 +443,16 @@ fn programme_runs_each_run_on_the_board_and_reports() {
         );
     }
     let report = std::fs::read_to_string(dir.join("report").join("report.md")).unwrap();
-    assert!(report.contains("| wet-eb-50 | wet | 50.0 | emergency | finished |"));
+    for row in [
+        "| wet-eb-50 (rig) |",
+        "| wet-eb-50 (SIL) |",
+        "| low-eb-50 (SIL) |",
+    ] {
+        assert!(report.contains(row), "{row} in {report}");
+    }
+    assert!(report.contains("- low-eb-50 (rig): not run on the rig: surface `low`"));
+    assert!(dir.join("report").join("wet-eb-50-rig-speeds.svg").exists());
+    assert!(dir.join("report").join("wet-eb-50-sil-speeds.svg").exists());
 }
 
 #[test]

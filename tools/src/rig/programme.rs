@@ -1,49 +1,57 @@
 //! `hils rig run --programme FILE`: a WSP test programme run on the rig, one run after
-//! another, each recorded as a run log (`# run: NAME`), with a JSON summary and a report.
+//! another, each recorded as a run log (`# run: NAME`), judged by `hils wsp-test`'s
+//! metrics and criteria beside the SIL run of the same programme run.
 //!
 //! # The programme
 //!
-//! The format of `hils wsp-test --programme` (issue 13, `programmes/*.toml`): `[[run]]`
-//! entries with `name`, `speed_kmh`, `demand` (`emergency` or `service:<m/s^2>`), `track`
-//! (a `[tracks.X]` name) and an optional `vehicle`; `[criteria]` and `[vehicles]` are read
-//! by `wsp-test`. This module reads only what the board can run, tolerating the rest, until
-//! the two branches are merged and it takes `crate::wsp::programme::Programme` instead (one
-//! parser of the format).
+//! The `hils wsp-test --programme` format, read by its parser
+//! ([`crate::wsp::programme::Programme`]: one parser of the format): `[criteria]`,
+//! `[tracks]`, `[vehicles]` and `[[run]]`.
 //!
 //! # What the board can run
 //!
 //! `RIG_COMMAND`'s start carries a rail (`wet` or `dry`), the friction model and the initial
 //! speed (0-655.34 km/h); the board's plant has the default vehicle. A run whose track is a
-//! uniform `wet` or `dry` surface with the default vehicle runs on the board; any other
-//! (low-adhesion surfaces, zones, vehicle variants, demands other than `emergency` and
-//! `service:<m/s^2>`) is listed as *not run on the rig* with the reason, not approximated.
+//! uniform `wet` or `dry` surface with the default vehicle and an `emergency` or
+//! `service:<m/s^2 <= 10>` demand runs on the board; any other (low-adhesion surfaces,
+//! zones, vehicle variants, `step:` demands, faster starts) is listed as *not run on the
+//! rig* with the reason, not approximated.
 //!
 //! # A run
 //!
 //! `brake release`, `--settle-s` (3 s: the controller vents the last run's brake), `start`
-//! (rig mode), the run's brake demand, then frames until the board
-//! leaves `running` (or `--max-run-s`, then `stop`). Each run's log is judged by
-//! `hils wsp-test --programme FILE --log LOG` (its `# run:` names the run); the summary here
-//! has stopping time and distance from the brake command, mean deceleration and each
-//! wheelset's lowest wheel/vehicle speed ratio. A lost board, a bus-off, a stuck alive
-//! counter or a rejected command ends the programme: the runs so far, the partial log and the
-//! summary are written, and the exit code is non-zero.
+//! (rig mode), the run's brake demand, then frames until the board leaves `running` (or
+//! `--max-run-s`, then `stop`). The run's log (`NAME.csv`, spec run-log schema) is judged
+//! from its brake command exactly as `hils wsp-test --programme FILE --log NAME.csv` judges
+//! it ([`crate::wsp::trace_of_log`], [`crate::wsp::judge_trace`]); every run of the programme
+//! is also simulated in SIL ([`crate::wsp::run_one`]). `--json` holds one entry per run: the
+//! rig verdict's keys (those of `hils wsp-test --json`) with `on_rig` and `end`, or for a
+//! run not judged its `name`, `passed: false`, `on_rig` and `end` (why). `--report DIR`
+//! writes `report.md` (rig and SIL rows side by side, the `wsp-test` sections and plots of
+//! both: `NAME-rig-*.svg`, `NAME-sil-*.svg`) and the logs. A lost board, a bus-off, a stuck
+//! alive counter or a rejected command ends the programme: the runs so far, the partial
+//! log and the summary are written, and the exit code is non-zero.
 
-use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, anyhow, bail};
+use anyhow::{Context, Result, anyhow};
 use clap::Args;
-use hils_plant::{Params, Rail};
-use hils_rig_core::can::{BrakeCommand, Command, RigMode, RigState};
-use serde::{Deserialize, Serialize};
+use hils_brake_unit::BrakeDemand;
+use hils_plant::{Rail, Surface};
+use hils_rig_core::can::{
+    BrakeCommand, Command, RigMode, RigState, WHEEL_SPEED_MAX_KMH, WHEEL_SPEED_RESOLUTION_KMH,
+};
+use rayon::prelude::*;
 
 use super::commands::{Flow, Session, state_name};
 use super::monitor::Seen;
 use super::record::{Recorder, RunMeta};
 use super::transport::Transport;
 use super::{FrictionArg, RigArgs, Stop, open};
+use crate::wsp::metrics::Verdict;
+use crate::wsp::programme::{Criteria, Programme, Run};
+use crate::wsp::{Outcome, judge_trace, report, trace_of_log};
 
 /// Arguments of `hils rig run`.
 #[derive(Args, Debug, Clone)]
@@ -51,14 +59,15 @@ pub struct RunArgs {
     /// The programme (the `hils wsp-test --programme` format).
     #[arg(long)]
     pub programme: PathBuf,
-    /// Write the summary JSON here.
+    /// Write the per-run results as JSON here (the `hils wsp-test --json` keys, with
+    /// `on_rig` and `end`).
     #[arg(long)]
     pub json: Option<PathBuf>,
-    /// Write report.md and each run's log (NAME.csv) into this directory (default: the
-    /// current directory for the logs, no report).
+    /// Write report.md, the plots and each run's log (NAME.csv) into this directory
+    /// (default: the current directory for the logs, no report).
     #[arg(long)]
     pub report: Option<PathBuf>,
-    /// Friction model of the board's plant for every run.
+    /// Friction model of the board's plant (and of the SIL runs) for every run.
     #[arg(long, value_enum, default_value_t = FrictionArg::Variable)]
     pub friction: FrictionArg,
     /// Longest a run may take (board time, s: 1-3600); then it is stopped.
@@ -73,188 +82,122 @@ pub struct RunArgs {
     pub only: Option<String>,
 }
 
-#[derive(Deserialize, Debug, Clone)]
-struct TrackSpec {
-    base: String,
-    #[serde(default)]
-    zone: Vec<toml::Value>,
-}
-
-#[derive(Deserialize, Debug, Clone)]
-struct RunSpec {
-    name: String,
-    speed_kmh: f64,
-    demand: String,
-    track: String,
-    #[serde(default)]
-    vehicle: Option<String>,
-}
-
-/// The part of a programme file the rig reads (other tables are `wsp-test`'s).
-#[derive(Deserialize, Debug, Clone)]
-struct ProgrammeFile {
-    #[serde(default)]
-    tracks: BTreeMap<String, TrackSpec>,
-    run: Vec<RunSpec>,
-}
-
 /// A run of the programme as the board can (or cannot) run it.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub struct BoardRun {
-    pub name: String,
-    pub speed_kmh: f32,
-    pub demand_text: String,
+    pub run: Run,
     /// The board's rail and brake command, or why the run cannot be run on the board.
     pub plan: Result<(Rail, BrakeCommand), String>,
 }
 
-/// The brake command of a programme demand: `emergency` or `service:<m/s^2>`.
-pub fn parse_demand(text: &str) -> Result<BrakeCommand> {
-    if text == "emergency" {
-        return Ok(BrakeCommand::Emergency);
+/// What the board runs of a programme run, or why not (module doc).
+fn board_plan(vehicle: Option<&str>, run: &Run) -> Result<(Rail, BrakeCommand), String> {
+    if let Some(v) = vehicle {
+        return Err(format!(
+            "vehicle `{v}`: the board's plant has the default vehicle"
+        ));
     }
-    text.strip_prefix("service:")
-        .and_then(|d| d.trim().parse::<f32>().ok())
-        .filter(|d| d.is_finite() && *d > 0.0 && *d <= 10.0)
-        .map(|deceleration_mps2| BrakeCommand::Service { deceleration_mps2 })
-        .ok_or_else(|| anyhow!("demand `{text}`: `emergency` or `service:<0-10 m/s^2>`"))
+    let zones = run.track.zones().len();
+    if zones > 0 {
+        return Err(format!(
+            "the track has {zones} zone(s): the board runs one rail condition"
+        ));
+    }
+    let rail = match run.track.base() {
+        Surface::Wet => Rail::Wet,
+        Surface::Dry => Rail::Dry,
+        other => {
+            return Err(format!(
+                "surface `{}`: the start frame carries rail wet or dry only",
+                other.name()
+            ));
+        }
+    };
+    let speed_kmh = run.speed_mps * hils_sil::KMH_PER_MPS;
+    if speed_kmh > WHEEL_SPEED_MAX_KMH as f64 {
+        return Err(format!(
+            "{speed_kmh:.1} km/h: the start frame carries up to {WHEEL_SPEED_MAX_KMH:.2} km/h"
+        ));
+    }
+    let demand = match run.demand {
+        BrakeDemand::Emergency => BrakeCommand::Emergency,
+        BrakeDemand::Service { deceleration_mps2 } if deceleration_mps2 <= 10.0 => {
+            BrakeCommand::Service { deceleration_mps2 }
+        }
+        other => {
+            return Err(format!(
+                "demand {other:?}: the brake frame carries emergency or service 0-10 m/s^2"
+            ));
+        }
+    };
+    Ok((rail, demand))
 }
 
-/// Reads a programme: the runs, each with the board's rail or why not.
-pub fn load(path: &Path) -> Result<Vec<BoardRun>> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read programme {}", path.display()))?;
-    let p: ProgrammeFile =
-        toml::from_str(&text).with_context(|| format!("programme {}", path.display()))?;
-    if p.run.is_empty() {
-        bail!("programme {}: no [[run]]", path.display());
-    }
-    p.run
+/// Reads a programme with `hils wsp-test`'s parser: its criteria and runs (on the default
+/// parameters with the friction model `friction`), each with the board's plan or why not.
+pub fn load(path: &Path, friction: FrictionArg) -> Result<(Criteria, Vec<BoardRun>)> {
+    let programme = Programme::load(path)?;
+    let mut file = crate::params_file::params_or_default(None)?;
+    file.plant.friction.model = friction.model();
+    let runs = programme
+        .runs(&file)
+        .with_context(|| format!("programme {}", path.display()))?;
+    let runs = programme
+        .run
         .iter()
-        .map(|r| {
-            let track = p.tracks.get(&r.track).ok_or_else(|| {
-                anyhow!(
-                    "programme {}: run `{}`: no track `{}`",
-                    path.display(),
-                    r.name,
-                    r.track
-                )
-            })?;
-            let rail = match (track.base.as_str(), track.zone.len(), &r.vehicle) {
-                (_, _, Some(v)) => Err(format!(
-                    "vehicle `{v}`: the board's plant has the default vehicle"
-                )),
-                (_, n, _) if n > 0 => Err(format!(
-                    "track `{}` has {n} zone(s): the board runs one rail condition",
-                    r.track
-                )),
-                ("wet", ..) => Ok(Rail::Wet),
-                ("dry", ..) => Ok(Rail::Dry),
-                (other, ..) => Err(format!(
-                    "surface `{other}`: the start frame carries rail wet or dry only"
-                )),
-            };
-            if !(r.speed_kmh.is_finite() && r.speed_kmh > 0.0) {
-                bail!("run `{}`: speed_kmh must be > 0", r.name);
-            }
-            let demand = parse_demand(&r.demand).map_err(|e| format!("{e}"));
-            Ok(BoardRun {
-                name: r.name.clone(),
-                speed_kmh: r.speed_kmh as f32,
-                demand_text: r.demand.clone(),
-                plan: rail.and_then(|rail| demand.map(|d| (rail, d))),
-            })
+        .zip(runs)
+        .map(|(spec, run)| BoardRun {
+            plan: board_plan(spec.vehicle.as_deref(), &run),
+            run,
         })
-        .collect()
+        .collect();
+    Ok((programme.criteria, runs))
 }
 
-/// The summary of one run.
-#[derive(Clone, Debug, Default, Serialize, PartialEq)]
-pub struct RunSummary {
+/// The rig's side of one run: its log, how it ended, its judged outcome.
+pub struct RigRun {
     pub name: String,
-    pub speed_kmh: f64,
-    pub demand: String,
-    pub rail: Option<String>,
+    pub on_rig: bool,
     /// `finished`, `stopped`, `fault`, or why the run did not run or ended early.
     pub end: String,
-    pub on_rig: bool,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub log: Option<PathBuf>,
-    /// From the brake command to standstill, s (None: no standstill).
-    pub stop_time_s: Option<f64>,
-    /// Distance from the brake command to standstill (or the end), m.
-    pub stop_distance_m: Option<f64>,
-    pub mean_deceleration_mps2: Option<f64>,
-    /// Lowest wheel speed over vehicle speed of each wheelset above 1.4 m/s.
-    pub min_wheel_speed_ratio: Option<[f64; 4]>,
+    pub outcome: Option<Outcome>,
+    /// Metrics the log cannot give (their values are 0, not measured).
+    pub not_measured: Vec<&'static str>,
 }
 
-/// Speed below which the WSP is inhibited and ratios are not taken, m/s (as `wsp-test`).
-const MIN_SPEED_MPS: f64 = 1.4;
-
-/// The figures of a run from its log (as the reader reads it).
-fn figures(s: &mut RunSummary, log_path: &Path) -> Result<()> {
-    let log = crate::measured::read_run_log(log_path).map_err(|e| anyhow!("{e}"))?;
-    let t_eb: f64 = log
-        .metadata
-        .get("brake_command_s")
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(0.0);
-    let r_w = Params::default().vehicle.wheel_radius;
-    let mut x = 0.0;
-    let mut stop = None;
-    let mut ratio = [f64::INFINITY; 4];
-    let mut v0 = None;
-    for k in 0..log.len() {
-        let (t, v) = (log.t_s[k], log.v_ref_mps[k]);
-        if t < t_eb {
-            continue;
-        }
-        v0.get_or_insert(v);
-        if k > 0 && log.t_s[k - 1] >= t_eb {
-            x += 0.5 * (v + log.v_ref_mps[k - 1]) * (t - log.t_s[k - 1]);
-        }
-        if v >= MIN_SPEED_MPS {
-            for (j, r) in ratio.iter_mut().enumerate() {
-                *r = r.min(log.omega_radps[j][k] * r_w / v);
+impl RigRun {
+    /// The JSON entry (module doc).
+    fn json(&self) -> serde_json::Value {
+        let mut v = match &self.outcome {
+            Some(o) => serde_json::to_value(&o.verdict).unwrap_or_default(),
+            None => serde_json::json!({ "name": self.name, "passed": false }),
+        };
+        if let Some(m) = v.as_object_mut() {
+            m.insert("on_rig".into(), self.on_rig.into());
+            m.insert("end".into(), self.end.clone().into());
+            if !self.not_measured.is_empty() {
+                m.insert("not_measured".into(), self.not_measured.clone().into());
             }
         }
-        if v < 0.05 && stop.is_none() {
-            stop = Some(t - t_eb);
-            break;
-        }
+        v
     }
-    s.stop_time_s = stop;
-    s.stop_distance_m = Some(x);
-    s.mean_deceleration_mps2 = stop.zip(v0).map(|(t, v0)| v0 / t.max(1e-9));
-    s.min_wheel_speed_ratio = ratio.iter().all(|r| r.is_finite()).then_some(ratio);
-    Ok(())
 }
 
 /// Runs one run on the board; records into `log`.
 fn run_one<T: Transport>(
     s: &mut Session<T>,
-    run: &BoardRun,
+    run: &Run,
     (rail, demand): (Rail, BrakeCommand),
     args: &RunArgs,
     log: &Path,
-) -> (RunSummary, Option<Stop>) {
-    let mut summary = RunSummary {
-        name: run.name.clone(),
-        speed_kmh: run.speed_kmh as f64,
-        demand: run.demand_text.clone(),
-        rail: Some(format!("{rail:?}").to_lowercase()),
-        on_rig: true,
-        log: Some(log.to_path_buf()),
-        ..Default::default()
-    };
+) -> (String, Option<Stop>) {
     s.recorder = Some(Recorder::default());
     let start = Command::Start {
         mode: RigMode::Rig,
         rail,
         friction: args.friction.model(),
         emergency: false,
-        initial_speed_kmh: run.speed_kmh,
+        initial_speed_kmh: (run.speed_mps * hils_sil::KMH_PER_MPS) as f32,
     };
     let mut stop = None;
     let mut steps = || -> Result<String, Stop> {
@@ -279,7 +222,11 @@ fn run_one<T: Transport>(
             }
             _ => Flow::Continue,
         })?;
-        if running {
+        if !running {
+            // The board's standstill: the frames after it (speeds 0.00 km/h, the next status)
+            // close the log at standstill, as the judge needs.
+            s.run_for(0.05, |_, _| Flow::Continue)?;
+        } else {
             let o = s.command(Command::Stop)?;
             return Ok(format!("not at standstill after {} s: {o}", args.max_run_s));
         }
@@ -288,7 +235,7 @@ fn run_one<T: Transport>(
             .map_or("unknown", |st| state_name(st.state))
             .to_string())
     };
-    summary.end = match steps() {
+    let mut end = match steps() {
         Ok(end) => end,
         Err(e) => {
             let end = format!("ended early: {e}");
@@ -301,117 +248,153 @@ fn run_one<T: Transport>(
         source: format!("hils rig run over {}", s.link.describe()),
         run: Some(run.name.clone()),
         start: s.last_start,
-        end: summary.end.clone(),
+        end: end.clone(),
     };
-    match rec
-        .write(log, &meta)
-        .and_then(|_| figures(&mut summary, log))
-    {
-        Ok(()) => {}
-        Err(e) => summary.end = format!("{}; log: {e:#}", summary.end),
+    if let Err(e) = rec.write(log, &meta) {
+        end = format!("{end}; log: {e:#}");
     }
-    (summary, stop)
+    (end, stop)
 }
 
-/// Runs a programme in a session; every run's summary, and what ended it early.
+/// Runs a programme in a session and judges each run's log; what ended it early.
 pub fn run_programme<T: Transport>(
     s: &mut Session<T>,
     runs: &[BoardRun],
+    criteria: &Criteria,
     args: &RunArgs,
     log_dir: &Path,
-) -> (Vec<RunSummary>, Option<Stop>) {
+) -> (Vec<RigRun>, Option<Stop>) {
     let mut out = Vec::new();
     let mut stopped: Option<Stop> = None;
-    for run in runs {
-        let not_run = |end: String| RunSummary {
+    for BoardRun { run, plan } in runs {
+        let mut rig = RigRun {
             name: run.name.clone(),
-            speed_kmh: run.speed_kmh as f64,
-            demand: run.demand_text.clone(),
-            end,
-            ..Default::default()
+            on_rig: false,
+            end: String::new(),
+            outcome: None,
+            not_measured: Vec::new(),
         };
-        if let Some(e) = &stopped {
-            out.push(not_run(format!("not run: the programme ended ({e})")));
-            continue;
-        }
-        match &run.plan {
-            Err(why) => out.push(not_run(format!("not run on the rig: {why}"))),
-            Ok(plan) => {
+        match (&stopped, plan) {
+            (Some(e), _) => rig.end = format!("not run: the programme ended ({e})"),
+            (None, Err(why)) => rig.end = format!("not run on the rig: {why}"),
+            (None, Ok(plan)) => {
                 let log = log_dir.join(format!("{}.csv", run.name));
-                let (summary, stop) = run_one(s, run, *plan, args, &log);
-                println!("{}: {}", summary.name, summary.end);
-                out.push(summary);
+                let (end, stop) = run_one(s, run, *plan, args, &log);
+                rig.on_rig = true;
+                rig.end = end;
                 stopped = stop;
+                match trace_of_log(&log, &run.file) {
+                    Ok((mut trace, _)) => {
+                        // RIG_STATUS carries the vehicle speed at 0.01 km/h.
+                        trace.speed_resolution_mps =
+                            (WHEEL_SPEED_RESOLUTION_KMH / hils_sil::KMH_PER_MPS as f32) as f64;
+                        if trace.venting.iter().any(Vec::is_empty) {
+                            // The log has no WSP vent commands: not measured, not passed.
+                            rig.not_measured = vec!["air_consumption_l", "wsp_timer_actions"];
+                        }
+                        rig.outcome = Some(judge_trace(run.clone(), trace, criteria));
+                    }
+                    Err(e) => rig.end = format!("{}; not judged: {e:#}", rig.end),
+                }
             }
         }
+        println!("{}: {}", rig.name, rig.end);
+        out.push(rig);
     }
     (out, stopped)
 }
 
-fn cell(x: Option<f64>, d: usize) -> String {
-    x.map_or("-".into(), |x| format!("{x:.d$}"))
-}
-
-/// report.md of the runs.
-pub fn report_text(programme: &Path, source: &str, runs: &[RunSummary]) -> String {
-    let mut r = String::new();
-    let _ = writeln!(r, "# Rig runs of {}\n", programme.display());
-    let _ = writeln!(r, "Interface: {source}\n");
-    r.push_str("| run | rail | speed km/h | demand | end | stop s | distance m | mean decel m/s2 | lowest wheel/vehicle speed 1-4 |\n|---|---|---|---|---|---|---|---|---|\n");
-    for s in runs {
-        let ratios = s.min_wheel_speed_ratio.map_or("-".into(), |r| {
-            r.iter()
-                .map(|x| format!("{x:.2}"))
-                .collect::<Vec<_>>()
-                .join(" ")
+/// The summary table: each run's rig row beside its SIL row, then the runs not judged.
+pub fn summary_table(rig: &[RigRun], sil: &[Outcome]) -> String {
+    let mut rows: Vec<Verdict> = Vec::new();
+    let mut not_judged = String::new();
+    for (r, s) in rig.iter().zip(sil) {
+        match &r.outcome {
+            Some(o) => {
+                rows.push(Verdict {
+                    name: format!("{} (rig)", r.name),
+                    ..o.verdict.clone()
+                });
+                if !r.not_measured.is_empty() {
+                    let _ = writeln!(
+                        not_judged,
+                        "- {} (rig): not measured (the log has no WSP vent commands): {}",
+                        r.name,
+                        r.not_measured.join(", ")
+                    );
+                }
+            }
+            None => {
+                let _ = writeln!(not_judged, "- {} (rig): {}", r.name, r.end);
+            }
+        }
+        rows.push(Verdict {
+            name: format!("{} (SIL)", s.verdict.name),
+            ..s.verdict.clone()
         });
-        let _ = writeln!(
-            r,
-            "| {} | {} | {:.1} | {} | {} | {} | {} | {} | {} |",
-            s.name,
-            s.rail.as_deref().unwrap_or("-"),
-            s.speed_kmh,
-            s.demand,
-            s.end,
-            cell(s.stop_time_s, 2),
-            cell(s.stop_distance_m, 1),
-            cell(s.mean_deceleration_mps2, 3),
-            ratios
+    }
+    let refs: Vec<&Verdict> = rows.iter().collect();
+    let mut t = report::table(&refs);
+    if !not_judged.is_empty() {
+        let _ = write!(
+            t,
+            "\nNot judged or not measured on the rig:\n\n{not_judged}"
         );
     }
-    let _ = writeln!(
-        r,
-        "\nEach run's log is `NAME.csv` here (spec run-log schema, `# run: NAME`); judge it against the programme's criteria with `hils wsp-test --programme {} --log NAME.csv`.",
-        programme.display()
-    );
-    r
+    t
+}
+
+/// Renames an outcome's run (its plot files) to `NAME-suffix`.
+fn tagged(mut o: Outcome, suffix: &str) -> Outcome {
+    o.run.name = format!("{}-{suffix}", o.run.name);
+    o
 }
 
 /// `hils rig run`.
 pub fn main(rig: &RigArgs, args: &RunArgs) -> Result<()> {
-    let mut runs = load(&args.programme)?;
+    let (criteria, mut runs) = load(&args.programme, args.friction)?;
     if let Some(only) = &args.only {
-        runs.retain(|r| r.name.contains(only.as_str()));
+        runs.retain(|r| r.run.name.contains(only.as_str()));
     }
     let log_dir = args.report.clone().unwrap_or_else(|| PathBuf::from("."));
     std::fs::create_dir_all(&log_dir)
         .with_context(|| format!("cannot create {}", log_dir.display()))?;
     let mut s = Session::new(open(rig)?, rig.lost_after_s);
-    let (summaries, stopped) = run_programme(&mut s, &runs, args, &log_dir);
-    let on_rig = summaries.iter().filter(|r| r.on_rig).count();
-    println!("{on_rig}/{} runs on the rig", summaries.len());
+    let (rig_runs, stopped) = run_programme(&mut s, &runs, &criteria, args, &log_dir);
+    let sil: Vec<Outcome> = runs
+        .par_iter()
+        .map(|r| crate::wsp::run_one(r.run.clone(), &criteria))
+        .collect::<Result<_>>()?;
+    let table = summary_table(&rig_runs, &sil);
+    println!("{table}");
+    let on_rig = rig_runs.iter().filter(|r| r.on_rig).count();
+    let passed = rig_runs
+        .iter()
+        .filter(|r| r.outcome.as_ref().is_some_and(|o| o.verdict.passed))
+        .count();
+    println!(
+        "{on_rig}/{} runs on the rig, {passed} passed",
+        rig_runs.len()
+    );
     if let Some(out) = &args.json {
-        std::fs::write(out, serde_json::to_string_pretty(&summaries)?)
+        let json: Vec<serde_json::Value> = rig_runs.iter().map(RigRun::json).collect();
+        std::fs::write(out, serde_json::to_string_pretty(&json)?)
             .with_context(|| format!("cannot write {}", out.display()))?;
     }
     if let Some(dir) = &args.report {
-        let path = dir.join("report.md");
-        std::fs::write(
-            &path,
-            report_text(&args.programme, &s.link.describe(), &summaries),
-        )
-        .with_context(|| format!("cannot write {}", path.display()))?;
-        println!("report: {}", path.display());
+        let heading = format!(
+            "# Rig runs of {}\n\nInterface: {}. Each run's log is `NAME.csv` here (spec run-log schema, `# run: NAME`), judged from its brake command as `hils wsp-test --programme {} --log NAME.csv` judges it; `(SIL)` rows: the same run simulated with the simulated brake unit.\n\n",
+            args.programme.display(),
+            s.link.describe(),
+            args.programme.display()
+        );
+        let mut outcomes = Vec::new();
+        for (r, o) in rig_runs.into_iter().zip(sil) {
+            outcomes.extend(r.outcome.map(|x| tagged(x, "rig")));
+            outcomes.push(tagged(o, "sil"));
+        }
+        report::write_with(dir, &heading, &table, &outcomes, &criteria)?;
+        println!("report: {}", dir.join("report.md").display());
     }
     match stopped {
         Some(e) => Err(anyhow!("programme ended early: {e}")),

@@ -45,6 +45,9 @@ pub struct Trace {
     pub p_cyl_pa: [Vec<f64>; 4],
     /// WSP vent command per wheelset.
     pub venting: [Vec<bool>; 4],
+    /// Resolution of the logged vehicle speed, m/s (0 for a simulated trace): a speed within
+    /// it of the stop speed cannot be told from standstill.
+    pub speed_resolution_mps: f64,
 }
 
 /// Available adhesion of each surface as a function of speed (1 m/s grid).
@@ -159,7 +162,8 @@ pub struct Criterion {
 /// Judges `trace` against the criteria; `allowed` is the perfect-WSP stop of the run.
 pub fn judge(name: &str, trace: &Trace, allowed: &AllowedStop, c: &Criteria) -> Verdict {
     let n = trace.t_s.len();
-    let stop = (0..n).find(|&k| trace.v_mps[k] <= hils_sil::scenario::STOP_SPEED_MPS);
+    let stop_mps = hils_sil::scenario::STOP_SPEED_MPS + trace.speed_resolution_mps.max(0.0);
+    let stop = (0..n).find(|&k| trace.v_mps[k] <= stop_mps);
     let stopping = stop.map(|k| trace.x_m[k]);
     let v0 = trace.v_mps.first().copied().unwrap_or(0.0);
     let allowed_m = allowed.distance(v0);

@@ -99,7 +99,7 @@ pub fn simulate(run: &Run) -> Result<(Trace, Vec<[Surface; 4]>)> {
 }
 
 /// The perfect-WSP stop of a run.
-fn allowed_stop<'a>(run: &'a Run, adhesion: &'a AvailableAdhesion) -> AllowedStop<'a> {
+pub fn allowed_stop<'a>(run: &'a Run, adhesion: &'a AvailableAdhesion) -> AllowedStop<'a> {
     let p = &run.file.plant;
     let u = &run.file.brake_unit;
     let demand = match run.demand {
@@ -138,35 +138,74 @@ pub fn run_one(run: Run, criteria: &Criteria) -> Result<Outcome> {
     })
 }
 
-/// A captured rig run log as a trace (distance integrated from the vehicle speed).
-fn trace_of_log(path: &std::path::Path, file: &ParamFile) -> Result<(Trace, Option<String>)> {
+/// A captured rig run log as a trace from the brake command (its `brake_command_s`
+/// metadata, else the first sample; distance integrated from the vehicle speed), and the
+/// run its `# run:` metadata names.
+pub fn trace_of_log(path: &std::path::Path, file: &ParamFile) -> Result<(Trace, Option<String>)> {
     let log = crate::measured::read_run_log(path).map_err(|e| anyhow!("{e}"))?;
-    if log.len() < 2 {
-        bail!("{}: fewer than two samples", path.display());
+    let t_brake = match log.metadata.get("brake_command_s") {
+        Some(t) => t
+            .parse::<f64>()
+            .ok()
+            .filter(|t| t.is_finite())
+            .ok_or_else(|| anyhow!("{}: brake_command_s `{t}` is not a time", path.display()))?,
+        None => log.t_s.first().copied().unwrap_or(0.0),
+    };
+    let k0 = log
+        .t_s
+        .iter()
+        .position(|&t| t >= t_brake)
+        .unwrap_or(log.len());
+    if log.len() < k0 + 2 {
+        bail!(
+            "{}: fewer than two samples from the brake command",
+            path.display()
+        );
     }
     let r = file.plant.vehicle.wheel_radius;
+    let t0 = log.t_s[k0];
     let mut trace = Trace {
-        t_s: log.t_s.iter().map(|t| t - log.t_s[0]).collect(),
-        v_mps: log.v_ref_mps.clone(),
+        t_s: log.t_s[k0..].iter().map(|t| t - t0).collect(),
+        v_mps: log.v_ref_mps[k0..].to_vec(),
         ..Trace::default()
     };
     let mut x = 0.0;
     trace.x_m.push(0.0);
-    for k in 1..log.len() {
-        x += 0.5 * (log.v_ref_mps[k] + log.v_ref_mps[k - 1]) * (trace.t_s[k] - trace.t_s[k - 1]);
+    for k in 1..trace.t_s.len() {
+        x += 0.5 * (trace.v_mps[k] + trace.v_mps[k - 1]) * (trace.t_s[k] - trace.t_s[k - 1]);
         trace.x_m.push(x);
     }
     for j in 0..WHEELSETS {
-        trace.wheel_mps[j] = log.omega_radps[j].iter().map(|w| w * r).collect();
+        trace.wheel_mps[j] = log.omega_radps[j][k0..].iter().map(|w| w * r).collect();
         if let Some(p) = &log.p_cyl_pa[j] {
-            trace.p_cyl_pa[j] = p.clone();
+            trace.p_cyl_pa[j] = p[k0..].to_vec();
         }
         if let Some(w) = &log.wsp[j] {
-            trace.venting[j] = w.iter().map(|&b| b > 0.5).collect();
+            trace.venting[j] = w[k0..].iter().map(|&b| b > 0.5).collect();
         }
     }
     let run = log.metadata.get("run").map(|s| s.to_string());
     Ok((trace, run))
+}
+
+/// Judges a captured run log as `run` of the programme (`hils wsp-test --log` and
+/// `hils rig run`): the same metrics and criteria as a SIL run; the surfaces under the
+/// wheelsets are those of the run's track at the logged distance.
+pub fn judge_trace(run: Run, trace: Trace, criteria: &Criteria) -> Outcome {
+    let adhesion = AvailableAdhesion::new(&run.file.plant, &run.sets);
+    let verdict = judge(&run.name, &trace, &allowed_stop(&run, &adhesion), criteria);
+    let offsets = wheelset_offsets(&run.file.plant);
+    let surfaces = trace
+        .x_m
+        .iter()
+        .map(|&x| offsets.map(|o| run.track.surface_at(x + o)))
+        .collect();
+    Outcome {
+        run,
+        trace,
+        surfaces,
+        verdict,
+    }
 }
 
 fn print_table(verdicts: &[&Verdict]) {
@@ -190,8 +229,7 @@ pub fn main(args: WspTestArgs) -> Result<()> {
             .into_iter()
             .find(|r| r.name == name)
             .ok_or_else(|| anyhow!("the programme has no run `{name}`"))?;
-        let adhesion = AvailableAdhesion::new(&run.file.plant, &run.sets);
-        let verdict = judge(&name, &trace, &allowed_stop(&run, &adhesion), &criteria);
+        let verdict = judge_trace(run, trace, &criteria).verdict;
         print_table(&[&verdict]);
         if let Some(out) = &args.json {
             write_json(out, &[&verdict])?;

@@ -127,15 +127,33 @@ fn run_plots(dir: &Path, o: &Outcome) -> Result<()> {
 
 /// Writes `report.md` and the plots of every run into `dir`.
 pub fn write(dir: &Path, outcomes: &[Outcome], criteria: &Criteria) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let verdicts: Vec<&Verdict> = outcomes.iter().map(|o| &o.verdict).collect();
-    let mut md = String::from("# WSP test report\n\n");
+    write_with(
+        dir,
+        "# WSP test report\n\n",
+        &table(&verdicts),
+        outcomes,
+        criteria,
+    )
+}
+
+/// Writes `report.md` (`heading`, the criteria, `summary`, then a section per outcome) and
+/// the plots of every outcome (files named after `run.name`) into `dir`.
+pub fn write_with(
+    dir: &Path,
+    heading: &str,
+    summary: &str,
+    outcomes: &[Outcome],
+    criteria: &Criteria,
+) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let mut md = String::from(heading);
     let _ = writeln!(md, "Criteria: {criteria:?}\n");
-    md.push_str(&table(&verdicts));
+    md.push_str(summary);
     for o in outcomes {
         run_plots(dir, o)?;
         let v = &o.verdict;
-        let _ = writeln!(md, "\n## {}\n", v.name);
+        let _ = writeln!(md, "\n## {}\n", o.run.name);
         for c in &v.criteria {
             let verdict = if c.passed { "pass" } else { "FAIL" };
             let _ = writeln!(md, "- {}: {verdict}", c.criterion);
@@ -149,7 +167,7 @@ pub fn write(dir: &Path, outcomes: &[Outcome], criteria: &Criteria) -> Result<()
             v.lock_count
         );
         for kind in ["speeds", "pressures", "valves"] {
-            let _ = writeln!(md, "![{kind}]({}-{kind}.svg)", v.name);
+            let _ = writeln!(md, "![{kind}]({}-{kind}.svg)", o.run.name);
         }
     }
     std::fs::write(dir.join("report.md"), md)
