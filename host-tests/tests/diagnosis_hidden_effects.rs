@@ -220,11 +220,7 @@ cases! { assert_field_case;
     field_logger_friction_level: Kind::FrictionLevel, 106;
     field_logger_friction_pressure: Kind::FrictionPressure, 108;
     field_logger_running_resistance: Kind::RunningResistance, 109;
-}
-
-// Held-out field-logger seeds that failed before the speed channels' noise grew with the
-// speed (phonic-wheel tooth-pitch error): they pass now.
-cases! { assert_field_case;
+    // Failed before the speed channels' noise grew with the speed (phonic-wheel pitch).
     field_logger_null: Kind::None, 101;
     field_logger_friction_speed: Kind::FrictionSpeed, 102;
 }
