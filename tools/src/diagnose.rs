@@ -1031,6 +1031,60 @@ fn lookalike_swaps(
 /// Look-alike swaps refitted per cause (see [`lookalike_swaps`]).
 pub const LOOKALIKES_PER_CAUSE: usize = 2;
 
+/// Links of the signal chain (`links::localise`) that the model of `set` leaves
+/// unexplained on validation data (None: the set cannot replay the runs).
+fn unexplained_links(d: &Diagnoser, set: &SetFit) -> Option<usize> {
+    let reps = d.replays(&d.models(&set.effects, &set.x))?;
+    let checks = links::localise(&d.runs, &reps, &reps);
+    Some(checks.iter().filter(|c| !c.explained).count())
+}
+
+/// Among look-alikes (the result and its confirmed swaps whose effect sits in one of the
+/// `confounded` groups), the one that leaves the fewest links of the signal chain
+/// unexplained: look-alikes explain the fitted channels equally, but a logged channel the
+/// fit does not use (disc temperature: a heavier vehicle heats the discs more than a lower
+/// friction level does) may contradict one of them. Ties keep the result; among
+/// alternatives as good as each other, the lower validation error.
+fn choose_by_links(
+    d: &Diagnoser,
+    current: SetFit,
+    confirmed: &[(usize, Effect, SetFit)],
+    confounded: &[Vec<String>],
+) -> SetFit {
+    if confounded.is_empty() {
+        return current;
+    }
+    let in_group = |k: usize, a: Effect| {
+        let own = current.effects[k].name();
+        confounded
+            .iter()
+            .any(|g| g.iter().any(|n| n == own) && g.iter().any(|n| n == a.name()))
+    };
+    let alts: Vec<&SetFit> = confirmed
+        .iter()
+        .filter(|(k, a, _)| in_group(*k, *a))
+        .map(|(_, _, f)| f)
+        .collect();
+    let Some(now) = unexplained_links(d, &current) else {
+        return current;
+    };
+    if now == 0 || alts.is_empty() {
+        return current;
+    }
+    let counted: Vec<(usize, &SetFit)> = alts
+        .par_iter()
+        .filter_map(|f| unexplained_links(d, f).map(|n| (n, *f)))
+        .collect();
+    let best = counted
+        .into_iter()
+        .filter(|(n, _)| *n < now)
+        .min_by(|a, b| a.0.cmp(&b.0).then(a.1.val().total_cmp(&b.1.val())));
+    match best {
+        Some((_, f)) => f.clone(),
+        None => current,
+    }
+}
+
 /// Forward selection with linearised candidate ranking, backward elimination, and the
 /// confounding check, all at the fit step.
 fn search(d: &Diagnoser, base: &SetFit, started: Instant) -> Search {
@@ -1154,6 +1208,7 @@ fn search(d: &Diagnoser, base: &SetFit, started: Instant) -> Search {
                 confounded.push(group);
             }
         }
+        current = choose_by_links(d, current, &confirmed, &confounded);
     }
     debug(started, d.replays_done(), "confounded alternatives");
     // Polish: the fit that produced the result may have been cut by its budget on the way

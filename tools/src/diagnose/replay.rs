@@ -211,6 +211,47 @@ pub struct Prepared {
 
 pub use crate::measured::noise_sigma;
 
+/// Noise that grows with the measured level, sigma(x) = sqrt(a^2 + (r x)^2), from the
+/// noise of the samples above and below the median |x| (a speed sensor's relative error:
+/// a phonic wheel's tooth-pitch error, a radar's scale error). Returns (a, r); r = 0
+/// where the upper half is not noisier than the lower half.
+fn noise_by_level(t: &[f64], x: &[f64]) -> (f64, f64) {
+    let mut mags: Vec<f64> = x
+        .iter()
+        .filter(|v| v.is_finite())
+        .map(|v| v.abs())
+        .collect();
+    if mags.len() < 16 {
+        return (noise_sigma(t, x), 0.0);
+    }
+    mags.sort_by(f64::total_cmp);
+    let median = mags[mags.len() / 2];
+    let half = |upper: bool| -> (f64, f64) {
+        let masked: Vec<f64> = x
+            .iter()
+            .map(|&v| {
+                if (v.abs() > median) == upper {
+                    v
+                } else {
+                    f64::NAN
+                }
+            })
+            .collect();
+        let part = if upper {
+            &mags[mags.len() / 2..]
+        } else {
+            &mags[..mags.len() / 2]
+        };
+        (noise_sigma(t, &masked), part[part.len() / 2])
+    };
+    let ((lo, v_lo), (hi, v_hi)) = (half(false), half(true));
+    if !(hi > lo && v_hi > v_lo) {
+        return (noise_sigma(t, x), 0.0);
+    }
+    let r2 = (hi * hi - lo * lo) / (v_hi * v_hi - v_lo * v_lo);
+    ((lo * lo - r2 * v_lo * v_lo).max(0.0).sqrt(), r2.sqrt())
+}
+
 /// Quantile `q` of the finite values within +-`half` samples of each sample (NaN where none).
 fn running_quantile(x: &[f64], half: usize, q: f64) -> Vec<f64> {
     // Evaluated every `step` samples and held in between: the slip baseline varies slowly.
@@ -425,6 +466,12 @@ impl Prepared {
         let mut channels = Vec::new();
         let mut add = |quantity: Quantity, x: &[f64], slip_inflate: Option<&[f64]>| {
             let noise = noise_sigma(&t, x);
+            // Speeds: noise that grows with the speed (sensor's relative error).
+            let level_noise = if quantity.group() == Group::Speeds {
+                noise_by_level(&t, x)
+            } else {
+                (0.0, 0.0)
+            };
             let mut sum = vec![0.0; n_bins];
             let mut tsum = vec![0.0; n_bins];
             let mut cnt = vec![0u32; n_bins];
@@ -465,11 +512,19 @@ impl Prepared {
             // the sample-to-sample estimate divided by sqrt(n) would underrate).
             let bin_t: Vec<f64> = bins.iter().map(|&b| tsum[b] / cnt[b] as f64).collect();
             let bin_noise = noise_sigma(&bin_t, &measured);
+            let bin_level = if quantity.group() == Group::Speeds {
+                noise_by_level(&bin_t, &measured)
+            } else {
+                (0.0, 0.0)
+            };
+            let at_level = |(a, r): (f64, f64), x: f64| (a * a + (r * x).powi(2)).sqrt();
             let sigma = bins
                 .iter()
-                .map(|&b| {
-                    let s = (noise / (cnt[b] as f64).sqrt())
-                        .max(bin_noise)
+                .zip(&measured)
+                .map(|(&b, &m)| {
+                    let sample = noise.max(at_level(level_noise, m));
+                    let s = (sample / (cnt[b] as f64).sqrt())
+                        .max(bin_noise.max(at_level(bin_level, m)))
                         .max(speed_floor(b));
                     match slip_inflate {
                         Some(slip) if slip[b].is_finite() => {
