@@ -79,9 +79,8 @@ fn check_safe_state(rig: &Rig, io: &FuzzIo) {
         rig.state(),
         RigState::Idle | RigState::Stopped | RigState::Fault
     );
-    // (`Finished` is documented silent too, but the fuzzer found trains running there:
-    // reported in issue 12's note, owned by the rig; checked here for the safe states.)
-    if safe {
+    // `Finished` (at rest) is silent too; its speeds are 0.00 km/h, not "not available".
+    if safe || rig.state() == RigState::Finished {
         assert!(
             rig.pulses().iter().all(|p| p.is_silent()),
             "{:?}",

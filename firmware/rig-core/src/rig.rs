@@ -1018,17 +1018,26 @@ impl<S: SimStore> Rig<S> {
         let (v, a) = o
             .map(|o| (o.vehicle_speed, o.carbody_accel))
             .unwrap_or((0.0, 0.0));
+        // At rest after the run (`Finished`): trains silent, speeds 0.00 km/h (the plant's
+        // residual creep and carbody swing-back are not wheel rotation to report).
+        let at_rest = self.state == RigState::Finished;
         for j in 0..WHEELSETS {
             let regs = match o {
-                Some(o) => self
+                Some(o) if !at_rest => self
                     .config
                     .pulse_timer
                     .registers(wheel_frequency_hz(o.wheelsets[j].omega, self.config.teeth)),
-                None => self.config.pulse_timer.silent(),
+                _ => self.config.pulse_timer.silent(),
             };
             self.pulses[j] = regs;
             io.set_pulse(j, &regs);
-            self.wheel_speed_kmh[j] = o.map(|_| speeds[j] * KMH_PER_MPS);
+            self.wheel_speed_kmh[j] = o.map(|_| {
+                if at_rest {
+                    0.0
+                } else {
+                    speeds[j] * KMH_PER_MPS
+                }
+            });
         }
 
         if WHEEL_SPEED_SCHEDULE.due(self.tick) {

@@ -180,6 +180,13 @@ fn self_test_paper_run_matches_the_closed_loop_and_streams_it() {
         }
     }
     assert_eq!(rig.state(), RigState::Finished);
+    // At rest (module doc; a fuzz finding): trains silent, speeds 0.00 km/h, tick after tick.
+    for _ in 0..100 {
+        rig.step(&mut io);
+        ticks += 1;
+        assert!(rig.pulses().iter().all(|p| p.is_silent()));
+        assert_eq!(rig.wheel_speeds_kmh(), [Some(0.0); 4]);
+    }
     let stop_s = rig.run_steps() as f64 * 1e-4;
     // The paper scenario with variable friction stops at ~29.1 s (host f64: 29.06 s).
     assert!((stop_s - 29.1).abs() < 0.3, "stop at {stop_s} s");
