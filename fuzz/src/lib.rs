@@ -62,7 +62,8 @@ pub fn check_run_log(r: &RunLog) {
         }
     };
     check("v_ref_mps", &r.v_ref_mps);
-    assert!(!r.v_ref_mps.iter().any(|x| x.is_nan()), "empty v_ref cell");
+    // Empty v_ref cells are allowed (spec/measured-data.md: "Empty cells mean not measured
+    // at this sample"; a radar drops out): NaN there, checked finite or NaN above.
     for (j, w) in r.omega_radps.iter().enumerate() {
         check(&format!("omega{}_radps", j + 1), w);
     }
