@@ -23,8 +23,10 @@ use serde::Deserialize;
     serde(rename_all = "lowercase")
 )]
 pub enum Rail {
+    /// Wet rail: the `[contact]` set (paper Table 2, the paper's scenario).
     #[default]
     Wet,
+    /// Dry rail: the `[contact.dry]` set.
     Dry,
 }
 
@@ -43,91 +45,146 @@ pub enum FrictionModel {
     Constant,
 }
 
+/// One table per section: each key's type, valid range `[min, max]` (where it has one) and
+/// default, written once. It makes the struct (with serde's `deny_unknown_fields`), its
+/// `DEFAULT` and `Default` (equal to `spec/reference-parameters.toml`) and `check_ranges`, whose error
+/// names the file's key `section.key`.
 macro_rules! section {
-    ($(#[$m:meta])* $name:ident { $($(#[$fm:meta])* $field:ident : $ty:ty = $val:expr),* $(,)? }) => {
+    ($(#[$m:meta])* $name:ident $key:literal {
+        $($(#[$fm:meta])* $field:ident : $ty:ty $([$min:expr, $max:expr])? = $val:expr),* $(,)?
+    }) => {
         $(#[$m])*
         #[derive(Clone, Copy, Debug, PartialEq)]
         #[cfg_attr(feature = "serde", derive(Deserialize), serde(deny_unknown_fields))]
         pub struct $name { $($(#[$fm])* pub $field: $ty),* }
         impl Default for $name {
-            fn default() -> Self { Self { $($field: $val),* } }
+            fn default() -> Self { Self::DEFAULT }
+        }
+        impl $name {
+            /// The reference file's values of this section.
+            pub const DEFAULT: Self = Self { $($field: $val),* };
+
+            /// Checks each key of this section against its valid range (NaN and inf are out
+            /// of range); the error names the first key that fails.
+            pub fn check_ranges(&self) -> Result<(), ParamError> {
+                $($(check(concat!($key, ".", stringify!($field)), f64::from(self.$field), $min, $max)?;)?)*
+                Ok(())
+            }
         }
     };
 }
 
 section!(
     /// `[vehicle]`: one car, 1 carbody, 2 bogies, 4 wheelsets (paper Table 3).
-    VehicleParams {
-        g: f64 = 9.81,
-        carbody_mass: f64 = 35000.0,
-        carbody_pitch_inertia: f64 = 1.2e6,
-        carbody_cog_height: f64 = 1.2,
-        bogie_mass: f64 = 2500.0,
-        bogie_pitch_inertia: f64 = 950.0,
-        bogie_cog_height: f64 = 0.62,
-        wheelset_mass: f64 = 850.0,
-        wheelset_spin_inertia: f64 = 280.0,
-        wheel_radius: f64 = 0.43,
-        bogie_base: f64 = 14.0,
-        wheel_base: f64 = 2.5,
+    VehicleParams "vehicle" {
+        /// Gravitational acceleration g, m/s^2.
+        g: f64 [0.1, 100.0] = 9.81,
+        /// Carbody mass, kg (paper Table 3).
+        carbody_mass: f64 [1e3, 1e6] = 35000.0,
+        /// Carbody pitch inertia, kg m^2 (paper Table 3).
+        carbody_pitch_inertia: f64 [1e3, 1e9] = 1.2e6,
+        /// Carbody centre of gravity above the top of rail, m (paper Table 3).
+        carbody_cog_height: f64 [0.0, 10.0] = 1.2,
+        /// Mass of one bogie frame, kg (paper Table 3).
+        bogie_mass: f64 [100.0, 1e5] = 2500.0,
+        /// Pitch inertia of one bogie frame, kg m^2 (paper Table 3).
+        bogie_pitch_inertia: f64 [10.0, 1e6] = 950.0,
+        /// Bogie centre of gravity above the top of rail, m (paper Table 3).
+        bogie_cog_height: f64 [0.0, 10.0] = 0.62,
+        /// Mass of one wheelset, kg (paper Table 3).
+        wheelset_mass: f64 [50.0, 1e4] = 850.0,
+        /// Wheelset spin inertia about its axle, kg m^2 (paper Table 3, Eq (7)).
+        wheelset_spin_inertia: f64 [1.0, 1e4] = 280.0,
+        /// Wheel rolling radius r, m (paper text: diameter 0.86 m).
+        wheel_radius: f64 [0.05, 2.0] = 0.43,
+        /// Distance between the bogie centres, m (paper Table 3: +-7 m).
+        bogie_base: f64 [0.5, 100.0] = 14.0,
+        /// Distance between the wheelsets of a bogie, m (paper Table 3: +-1.25 m).
+        wheel_base: f64 [0.1, 20.0] = 2.5,
     }
 );
 
 section!(
     /// `[suspension]`: per element values and counts of parallel elements (2-D model).
-    SuspensionParams {
-        secondary_vertical_stiffness: f64 = 700e3,
-        secondary_vertical_count: u32 = 2,
-        secondary_vertical_damping: f64 = 30e3,
-        secondary_longitudinal_stiffness: f64 = 200e3,
-        secondary_longitudinal_count: u32 = 2,
-        traction_link_stiffness: f64 = 13000e3,
-        secondary_longitudinal_damping: f64 = 40e3,
-        secondary_longitudinal_height: f64 = 0.75,
-        primary_vertical_stiffness: f64 = 2000e3,
-        primary_vertical_count: u32 = 2,
-        primary_vertical_damping: f64 = 15e3,
-        primary_longitudinal_stiffness: f64 = 18000e3,
-        primary_longitudinal_count: u32 = 2,
-        primary_longitudinal_damping: f64 = 5e3,
-        primary_longitudinal_height: f64 = 0.43,
+    SuspensionParams "suspension" {
+        /// Secondary (air spring) vertical stiffness per spring, N/m (paper Table 3).
+        secondary_vertical_stiffness: f64 [1e3, 1e9] = 700e3,
+        /// Secondary vertical springs acting in parallel per bogie.
+        secondary_vertical_count: u32 [1.0, 16.0] = 2,
+        /// Secondary vertical damping per side, N s/m.
+        secondary_vertical_damping: f64 [0.0, 1e7] = 30e3,
+        /// Secondary longitudinal stiffness per spring, N/m (paper Table 3).
+        secondary_longitudinal_stiffness: f64 [1e3, 1e9] = 200e3,
+        /// Secondary longitudinal springs acting in parallel per bogie.
+        secondary_longitudinal_count: u32 [1.0, 16.0] = 2,
+        /// Traction link stiffness, one per bogie, N/m (paper Table 3).
+        traction_link_stiffness: f64 [0.0, 1e9] = 13000e3,
+        /// Secondary longitudinal damping per bogie, N s/m.
+        secondary_longitudinal_damping: f64 [0.0, 1e8] = 40e3,
+        /// Height above rail at which the secondary longitudinal forces act, m.
+        secondary_longitudinal_height: f64 [0.0, 10.0] = 0.75,
+        /// Primary vertical stiffness per axle box spring, N/m (paper Table 3).
+        primary_vertical_stiffness: f64 [1e3, 1e9] = 2000e3,
+        /// Primary vertical springs acting in parallel per wheelset.
+        primary_vertical_count: u32 [1.0, 16.0] = 2,
+        /// Primary vertical damping per axle box, N s/m.
+        primary_vertical_damping: f64 [0.0, 1e7] = 15e3,
+        /// Primary longitudinal stiffness per axle box guide, N/m (paper Table 3).
+        primary_longitudinal_stiffness: f64 [1e3, 1e9] = 18000e3,
+        /// Primary longitudinal guides acting in parallel per wheelset.
+        primary_longitudinal_count: u32 [1.0, 16.0] = 2,
+        /// Primary longitudinal damping per axle box, N s/m.
+        primary_longitudinal_damping: f64 [0.0, 1e8] = 5e3,
+        /// Height above rail at which the axle-box guidance acts, m.
+        primary_longitudinal_height: f64 [0.0, 10.0] = 0.43,
     }
 );
 
 section!(
-    /// One Polach parameter set (paper Eqs 9-12, Table 2).
-    AdhesionSet {
-        k_a: f64 = 0.30,
-        k_s: f64 = 0.10,
-        mu_0: f64 = 0.21,
-        a_ratio: f64 = 0.40,
-        b_exp: f64 = 0.20,
+    /// One Polach parameter set (paper Eqs 9-12, Table 2): here `[contact.dry]`, Polach's
+    /// dry-rail values.
+    AdhesionSet "contact.dry" {
+        /// k_A, reduction of the initial slope of the adhesion curve in the adhesion area
+        /// (paper Eq (10)).
+        k_a: f64 [1e-3, 100.0] = 1.00,
+        /// k_S, reduction factor in the slip area (paper Eq (10)).
+        k_s: f64 [1e-3, 100.0] = 0.40,
+        /// mu_0, maximum friction coefficient at zero slip velocity (paper Eq (12)).
+        mu_0: f64 [1e-3, 2.0] = 0.55,
+        /// A = mu_inf / mu_0, friction at infinite over zero slip velocity (paper Eq (12)).
+        a_ratio: f64 [0.0, 1.0] = 0.40,
+        /// B, exponential friction decrease with slip velocity, s/m (paper Eq (12)).
+        b_exp: f64 [0.0, 100.0] = 0.60,
     }
 );
 
 impl AdhesionSet {
     /// Polach's dry-rail values of the reference file (`[contact.dry]`).
-    pub const DRY: AdhesionSet = AdhesionSet {
-        k_a: 1.00,
-        k_s: 0.40,
-        mu_0: 0.55,
-        a_ratio: 0.40,
-        b_exp: 0.60,
-    };
+    pub const DRY: AdhesionSet = AdhesionSet::DEFAULT;
 }
 
 section!(
     /// `[contact]`: the wet set (paper Table 2), contact geometry, and `[contact.dry]`.
-    ContactParams {
-        k_a: f64 = 0.30,
-        k_s: f64 = 0.10,
-        mu_0: f64 = 0.21,
-        a_ratio: f64 = 0.40,
-        b_exp: f64 = 0.20,
-        semi_axis_a: f64 = 6.0e-3,
-        semi_axis_b: f64 = 4.5e-3,
-        shear_stiffness_c: f64 = 4.3e13,
-        creep_speed_floor: f64 = 0.1,
+    ContactParams "contact" {
+        /// Wet-rail k_A (paper Table 2, Eq (10)).
+        k_a: f64 [1e-3, 100.0] = 0.30,
+        /// Wet-rail k_S (paper Table 2, Eq (10)).
+        k_s: f64 [1e-3, 100.0] = 0.10,
+        /// Wet-rail mu_0 (paper Table 2, Eq (12)).
+        mu_0: f64 [1e-3, 2.0] = 0.21,
+        /// Wet-rail A = mu_inf / mu_0 (paper Table 2, Eq (12)).
+        a_ratio: f64 [0.0, 1.0] = 0.40,
+        /// Wet-rail B, s/m (paper Table 2, Eq (12)).
+        b_exp: f64 [0.0, 100.0] = 0.20,
+        /// Contact ellipse half-axis a (longitudinal), m (paper Eq (11)).
+        semi_axis_a: f64 [1e-5, 0.1] = 6.0e-3,
+        /// Contact ellipse half-axis b (lateral), m (paper Eq (11)).
+        semi_axis_b: f64 [1e-5, 0.1] = 4.5e-3,
+        /// C, tangential contact stiffness per unit area, N/m^3 (paper Eq (11)).
+        shear_stiffness_c: f64 [1e9, 1e17] = 4.3e13,
+        /// Speed floor of the creepage s = (v - r w) / max(|v|, floor), m/s (paper Eq (9)).
+        creep_speed_floor: f64 [1e-3, 10.0] = 0.1,
+        /// `[contact.dry]`: the dry-rail set.
         dry: AdhesionSet = AdhesionSet::DRY,
     }
 );
@@ -173,62 +230,85 @@ impl ContactParams {
 
 section!(
     /// `[brake]`: paper Eq (1), T_b = mu_d (A_c P_c - K_r) r_c l_p N_d.
-    BrakeParams {
-        piston_area: f64 = 0.0227,
-        retaining_spring_force: f64 = 1000.0,
-        lever_ratio: f64 = 2.5,
-        friction_radius: f64 = 0.275,
-        friction_faces: u32 = 4,
-        supply_pressure: f64 = 500e3,
+    BrakeParams "brake" {
+        /// A_c, brake cylinder piston area, m^2 (paper Eq (1)).
+        piston_area: f64 [1e-5, 1.0] = 0.0227,
+        /// K_r, retaining spring force of the cylinder, N (paper Eq (1)).
+        retaining_spring_force: f64 [0.0, 1e5] = 1000.0,
+        /// r_c, lever (rigging) ratio from piston to pad (paper Eq (1)).
+        lever_ratio: f64 [0.01, 100.0] = 2.5,
+        /// l_p, effective friction radius of the disc, m (paper Eq (1); v_d = omega l_p).
+        friction_radius: f64 [0.01, 2.0] = 0.275,
+        /// N_d, friction faces per wheelset (paper Eq (1)).
+        friction_faces: u32 [1.0, 16.0] = 4,
+        /// Highest cylinder pressure the brake unit can reach, Pa.
+        supply_pressure: f64 [1e3, 2e6] = 500e3,
         /// Extension (not in the reference file): first-order lag of the pad force behind
         /// the cylinder pressure, s (0 = none). The diagnosis effect `actuator-lag`, `tau_s`.
         #[cfg_attr(feature = "serde", serde(default))]
-        actuator_lag_s: f64 = 0.0,
+        actuator_lag_s: f64 [0.0, 10.0] = 0.0,
     }
 );
 
 section!(
     /// `[friction]`: paper Eq (2) and Table 1.
-    FrictionParams {
+    FrictionParams "friction" {
+        /// Which disc-pad friction law applies.
         model: FrictionModel = FrictionModel::Variable,
-        mu_d0: f64 = 0.38,
-        n_v: f64 = 0.184,
-        m_v: f64 = 0.1,
-        n_t: f64 = 0.105,
-        m_t: f64 = 0.014,
-        correction_c: f64 = 0.98,
+        /// mu_d0, nominal disc-pad friction coefficient (paper Table 1, Eq (2)).
+        mu_d0: f64 [1e-3, 2.0] = 0.38,
+        /// n_v, amplitude of the speed term (paper Table 1, Eq (2)).
+        n_v: f64 [0.0, 10.0] = 0.184,
+        /// m_v, decay of the speed term, s/m (paper Table 1, Eq (2)).
+        m_v: f64 [0.0, 10.0] = 0.1,
+        /// n_T, amplitude of the temperature term (paper Table 1, Eq (2)).
+        n_t: f64 [0.0, 10.0] = 0.105,
+        /// m_T, decay of the temperature term, 1/degC (paper Table 1, Eq (2)).
+        m_t: f64 [0.0, 10.0] = 0.014,
+        /// c, the correction constant applied as a factor to Eq (2) (paper text).
+        correction_c: f64 [0.01, 10.0] = 0.98,
         /// Extension (not in the reference file): relative change of mu_d per 10 kN of pad
         /// clamp force, mu_d *= 1 + k_p f_clamp / 10 kN (0 = none). Effect `friction-pressure`.
         #[cfg_attr(feature = "serde", serde(default))]
-        k_p: f64 = 0.0,
+        k_p: f64 [-0.9, 10.0] = 0.0,
     }
 );
 
 section!(
     /// `[thermal]`: paper Eqs (3)-(6), lumped disc energy balance per wheelset.
-    ThermalParams {
-        heat_partition: f64 = 0.9,
-        disc_mass: f64 = 80.0,
-        specific_heat: f64 = 460.0,
-        alpha: f64 = 50.0,
-        beta: f64 = 10.0,
-        ambient_rise: f64 = 0.0,
+    ThermalParams "thermal" {
+        /// sigma_d, share of the braking power that heats the disc (paper Eq (3)).
+        heat_partition: f64 [0.0, 1.0] = 0.9,
+        /// m_disc, effective heated disc mass per wheelset, kg (paper Eq (3)).
+        disc_mass: f64 [1.0, 1e4] = 80.0,
+        /// c_p, specific heat of the disc, J/(kg K) (paper Eq (3)).
+        specific_heat: f64 [10.0, 1e5] = 460.0,
+        /// alpha, conduction to the axle, W/K (paper Eq (4)).
+        alpha: f64 [0.0, 1e6] = 50.0,
+        /// beta, convection, W/(K (m/s)^0.8), with the wheel speed v_w = r omega (paper Eq (5)).
+        beta: f64 [0.0, 1e6] = 10.0,
+        /// Initial disc temperature rise T_d above ambient, degC (paper Eq (6)).
+        ambient_rise: f64 [-100.0, 1000.0] = 0.0,
     }
 );
 
 section!(
     /// `[track]`.
-    TrackParams {
-        gradient_permille: f64 = 0.0,
+    TrackParams "track" {
+        /// Gradient, per mille (positive = uphill).
+        gradient_permille: f64 [-100.0, 100.0] = 0.0,
     }
 );
 
 section!(
     /// `[resistance]`: Davis running resistance F = a + b v + c v^2 (the paper has none).
-    ResistanceParams {
-        davis_a_n: f64 = 0.0,
-        davis_b_n_per_mps: f64 = 0.0,
-        davis_c_n_per_mps2: f64 = 0.0,
+    ResistanceParams "resistance" {
+        /// Davis constant term a, N.
+        davis_a_n: f64 [0.0, 1e6] = 0.0,
+        /// Davis linear term b, N per m/s.
+        davis_b_n_per_mps: f64 [0.0, 1e6] = 0.0,
+        /// Davis quadratic term c, N per (m/s)^2.
+        davis_c_n_per_mps2: f64 [0.0, 1e5] = 0.0,
     }
 );
 
@@ -237,15 +317,23 @@ section!(
     /// discs, the track). The brake unit and the scenario own their own sections
     /// (`hils_brake_unit::BrakeUnitParams`, `hils_sil::ScenarioParams`); the whole file is
     /// `hils_sil::ParamFile`.
-    Params {
-        vehicle: VehicleParams = VehicleParams::default(),
-        suspension: SuspensionParams = SuspensionParams::default(),
-        contact: ContactParams = ContactParams::default(),
-        brake: BrakeParams = BrakeParams::default(),
-        friction: FrictionParams = FrictionParams::default(),
-        thermal: ThermalParams = ThermalParams::default(),
-        track: TrackParams = TrackParams::default(),
-        resistance: ResistanceParams = ResistanceParams::default(),
+    Params "" {
+        /// `[vehicle]`.
+        vehicle: VehicleParams = VehicleParams::DEFAULT,
+        /// `[suspension]`.
+        suspension: SuspensionParams = SuspensionParams::DEFAULT,
+        /// `[contact]` with `[contact.dry]`.
+        contact: ContactParams = ContactParams::DEFAULT,
+        /// `[brake]`.
+        brake: BrakeParams = BrakeParams::DEFAULT,
+        /// `[friction]`.
+        friction: FrictionParams = FrictionParams::DEFAULT,
+        /// `[thermal]`.
+        thermal: ThermalParams = ThermalParams::DEFAULT,
+        /// `[track]`.
+        track: TrackParams = TrackParams::DEFAULT,
+        /// `[resistance]`.
+        resistance: ResistanceParams = ResistanceParams::DEFAULT,
     }
 );
 
@@ -259,8 +347,11 @@ pub const STEP_S: f64 = 1.0e-4;
 pub struct ParamError {
     /// `section.key` as in the parameter file.
     pub key: &'static str,
+    /// The value found, in the key's unit.
     pub value: f64,
+    /// Lowest valid value.
     pub min: f64,
+    /// Highest valid value.
     pub max: f64,
 }
 
@@ -288,10 +379,6 @@ pub fn check(key: &'static str, value: f64, min: f64, max: f64) -> Result<(), Pa
             max,
         })
     }
-}
-
-fn check_count(key: &'static str, value: u32) -> Result<(), ParamError> {
-    check(key, value as f64, 1.0, 16.0)
 }
 
 #[cfg(feature = "serde")]
@@ -347,202 +434,16 @@ impl Params {
     /// Checks every value against its physical range (NaN and inf are out of range).
     /// The plant refuses parameters that fail, so a step never meets them.
     pub fn validate(&self) -> Result<(), ParamError> {
+        self.vehicle.check_ranges()?;
+        self.suspension.check_ranges()?;
+        self.contact.check_ranges()?;
+        self.contact.dry.check_ranges()?;
+        self.brake.check_ranges()?;
+        self.friction.check_ranges()?;
+        self.thermal.check_ranges()?;
+        self.track.check_ranges()?;
+        self.resistance.check_ranges()?;
         let v = &self.vehicle;
-        check("vehicle.g", v.g, 0.1, 100.0)?;
-        check("vehicle.carbody_mass", v.carbody_mass, 1e3, 1e6)?;
-        check(
-            "vehicle.carbody_pitch_inertia",
-            v.carbody_pitch_inertia,
-            1e3,
-            1e9,
-        )?;
-        check(
-            "vehicle.carbody_cog_height",
-            v.carbody_cog_height,
-            0.0,
-            10.0,
-        )?;
-        check("vehicle.bogie_mass", v.bogie_mass, 100.0, 1e5)?;
-        check(
-            "vehicle.bogie_pitch_inertia",
-            v.bogie_pitch_inertia,
-            10.0,
-            1e6,
-        )?;
-        check("vehicle.bogie_cog_height", v.bogie_cog_height, 0.0, 10.0)?;
-        check("vehicle.wheelset_mass", v.wheelset_mass, 50.0, 1e4)?;
-        check(
-            "vehicle.wheelset_spin_inertia",
-            v.wheelset_spin_inertia,
-            1.0,
-            1e4,
-        )?;
-        check("vehicle.wheel_radius", v.wheel_radius, 0.05, 2.0)?;
-        check("vehicle.bogie_base", v.bogie_base, 0.5, 100.0)?;
-        check("vehicle.wheel_base", v.wheel_base, 0.1, 20.0)?;
-
-        let s = &self.suspension;
-        check(
-            "suspension.secondary_vertical_stiffness",
-            s.secondary_vertical_stiffness,
-            1e3,
-            1e9,
-        )?;
-        check_count(
-            "suspension.secondary_vertical_count",
-            s.secondary_vertical_count,
-        )?;
-        check(
-            "suspension.secondary_vertical_damping",
-            s.secondary_vertical_damping,
-            0.0,
-            1e7,
-        )?;
-        check(
-            "suspension.secondary_longitudinal_stiffness",
-            s.secondary_longitudinal_stiffness,
-            1e3,
-            1e9,
-        )?;
-        check_count(
-            "suspension.secondary_longitudinal_count",
-            s.secondary_longitudinal_count,
-        )?;
-        check(
-            "suspension.traction_link_stiffness",
-            s.traction_link_stiffness,
-            0.0,
-            1e9,
-        )?;
-        check(
-            "suspension.secondary_longitudinal_damping",
-            s.secondary_longitudinal_damping,
-            0.0,
-            1e8,
-        )?;
-        check(
-            "suspension.secondary_longitudinal_height",
-            s.secondary_longitudinal_height,
-            0.0,
-            10.0,
-        )?;
-        check(
-            "suspension.primary_vertical_stiffness",
-            s.primary_vertical_stiffness,
-            1e3,
-            1e9,
-        )?;
-        check_count(
-            "suspension.primary_vertical_count",
-            s.primary_vertical_count,
-        )?;
-        check(
-            "suspension.primary_vertical_damping",
-            s.primary_vertical_damping,
-            0.0,
-            1e7,
-        )?;
-        check(
-            "suspension.primary_longitudinal_stiffness",
-            s.primary_longitudinal_stiffness,
-            1e3,
-            1e9,
-        )?;
-        check_count(
-            "suspension.primary_longitudinal_count",
-            s.primary_longitudinal_count,
-        )?;
-        check(
-            "suspension.primary_longitudinal_damping",
-            s.primary_longitudinal_damping,
-            0.0,
-            1e8,
-        )?;
-        check(
-            "suspension.primary_longitudinal_height",
-            s.primary_longitudinal_height,
-            0.0,
-            10.0,
-        )?;
-
-        let c = &self.contact;
-        for (rail, name) in [(Rail::Wet, "contact"), (Rail::Dry, "contact.dry")] {
-            let set = c.set(rail);
-            let key = |k: &'static str, w: &'static str| if name == "contact" { k } else { w };
-            check(key("contact.k_a", "contact.dry.k_a"), set.k_a, 1e-3, 100.0)?;
-            check(key("contact.k_s", "contact.dry.k_s"), set.k_s, 1e-3, 100.0)?;
-            check(key("contact.mu_0", "contact.dry.mu_0"), set.mu_0, 1e-3, 2.0)?;
-            check(
-                key("contact.a_ratio", "contact.dry.a_ratio"),
-                set.a_ratio,
-                0.0,
-                1.0,
-            )?;
-            check(
-                key("contact.b_exp", "contact.dry.b_exp"),
-                set.b_exp,
-                0.0,
-                100.0,
-            )?;
-        }
-        check("contact.semi_axis_a", c.semi_axis_a, 1e-5, 0.1)?;
-        check("contact.semi_axis_b", c.semi_axis_b, 1e-5, 0.1)?;
-        check("contact.shear_stiffness_c", c.shear_stiffness_c, 1e9, 1e17)?;
-        check("contact.creep_speed_floor", c.creep_speed_floor, 1e-3, 10.0)?;
-
-        let b = &self.brake;
-        check("brake.piston_area", b.piston_area, 1e-5, 1.0)?;
-        check(
-            "brake.retaining_spring_force",
-            b.retaining_spring_force,
-            0.0,
-            1e5,
-        )?;
-        check("brake.lever_ratio", b.lever_ratio, 0.01, 100.0)?;
-        check("brake.friction_radius", b.friction_radius, 0.01, 2.0)?;
-        check("brake.friction_faces", b.friction_faces as f64, 1.0, 16.0)?;
-        check("brake.supply_pressure", b.supply_pressure, 1e3, 2e6)?;
-        check("brake.actuator_lag_s", b.actuator_lag_s, 0.0, 10.0)?;
-
-        let f = &self.friction;
-        check("friction.mu_d0", f.mu_d0, 1e-3, 2.0)?;
-        check("friction.n_v", f.n_v, 0.0, 10.0)?;
-        check("friction.m_v", f.m_v, 0.0, 10.0)?;
-        check("friction.n_t", f.n_t, 0.0, 10.0)?;
-        check("friction.m_t", f.m_t, 0.0, 10.0)?;
-        check("friction.correction_c", f.correction_c, 0.01, 10.0)?;
-        check("friction.k_p", f.k_p, -0.9, 10.0)?;
-
-        let t = &self.thermal;
-        check("thermal.heat_partition", t.heat_partition, 0.0, 1.0)?;
-        check("thermal.disc_mass", t.disc_mass, 1.0, 1e4)?;
-        check("thermal.specific_heat", t.specific_heat, 10.0, 1e5)?;
-        check("thermal.alpha", t.alpha, 0.0, 1e6)?;
-        check("thermal.beta", t.beta, 0.0, 1e6)?;
-        check("thermal.ambient_rise", t.ambient_rise, -100.0, 1000.0)?;
-
-        check(
-            "track.gradient_permille",
-            self.track.gradient_permille,
-            -100.0,
-            100.0,
-        )?;
-
-        let r = &self.resistance;
-        check("resistance.davis_a_n", r.davis_a_n, 0.0, 1e6)?;
-        check(
-            "resistance.davis_b_n_per_mps",
-            r.davis_b_n_per_mps,
-            0.0,
-            1e6,
-        )?;
-        check(
-            "resistance.davis_c_n_per_mps2",
-            r.davis_c_n_per_mps2,
-            0.0,
-            1e5,
-        )?;
-
         // Geometry: the wheelsets of a bogie must fit between the bogie centres.
         check("vehicle.wheel_base", v.wheel_base, 0.1, v.bogie_base)?;
         Ok(())
