@@ -1,5 +1,7 @@
 //! Two defects of the WSP and the cylinder lag (issue 13), each with the case that showed it.
 
+mod common;
+
 use hils_brake_unit::{BrakeDemand, BrakeUnit, UnitConfig, Valve};
 use hils_plant::Params;
 
@@ -9,10 +11,8 @@ use hils_plant::Params;
 /// re-anchoring is no vehicle acceleration and must not make wheelset 2 a runaway.
 #[test]
 fn another_wheels_recovery_does_not_vent_a_normally_braking_wheel() {
-    let p = Params::default();
-    let mut unit = BrakeUnit::<f32>::new(&p, &UnitConfig::new(1e-4)).unwrap();
-    unit.set_demand(BrakeDemand::Emergency);
-    let dt = 1e-4;
+    let mut unit = common::emergency_unit::<f32>();
+    let dt = common::DT;
     let creep = 0.5;
     let mut vented = [false; 3];
     let mut max_ref_rise = 0.0f64;

@@ -1,9 +1,10 @@
 //! The paper's brake unit (issue 13): EP valve with PI control and hysteresis
 //! compensation, service brake steps, pulsed WSP reapply.
 
+mod common;
+
 use hils_brake_unit::ep::{EpConstants, EpValve};
-use hils_brake_unit::{BrakeDemand, BrakeUnit, BrakeUnitParams, UnitConfig, Valve};
-use hils_plant::Params;
+use hils_brake_unit::{BrakeDemand, BrakeUnitParams, Valve};
 
 /// Control cycles until the pilot stays within `tol` Pa of `target` (from 0).
 fn settling_cycles(compensate: bool, target: f64, tol: f64) -> usize {
@@ -51,8 +52,7 @@ fn ep_valve_follows_falling_targets_and_stays_in_supply() {
 
 #[test]
 fn service_steps_scale_the_pressure() {
-    let p = Params::default();
-    let mut unit = BrakeUnit::<f64>::new(&p, &UnitConfig::new(1e-4)).unwrap();
+    let mut unit = common::reference_unit::<f64>();
     let eb = unit.eb_pressure();
     let speeds = [30.0; 4];
     let mut at = Vec::new();
@@ -79,10 +79,8 @@ fn service_steps_scale_the_pressure() {
 fn wsp_reapplies_in_pulses() {
     // Wheel 4 slides at 3 s and recovers; after the WSP's hold the cylinder refills in
     // steps: held plateaus between fills.
-    let p = Params::default();
-    let mut unit = BrakeUnit::<f64>::new(&p, &UnitConfig::new(1e-4)).unwrap();
-    unit.set_demand(BrakeDemand::Emergency);
-    let dt = 1e-4;
+    let mut unit = common::emergency_unit::<f64>();
+    let dt = common::DT;
     let mut v = 40.0;
     let mut trace = Vec::new();
     let mut valves = Vec::new();

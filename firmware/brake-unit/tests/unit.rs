@@ -1,6 +1,8 @@
 //! The simulated brake unit alone: pneumatic dead time and lags, and the wheel slide
 //! protection's states and bounds.
 
+mod common;
+
 use hils_brake_unit::{BrakeDemand, BrakeUnit, UnitConfig, Valve};
 use hils_plant::Params;
 
@@ -47,10 +49,8 @@ fn cylinder_follows_the_demand_after_the_dead_time_with_the_fill_lag() {
 
 #[test]
 fn wsp_vents_holds_and_reapplies_a_sliding_wheel() {
-    let p = Params::default();
-    let mut unit = BrakeUnit::<f64>::new(&p, &UnitConfig::new(1e-4)).unwrap();
-    unit.set_demand(BrakeDemand::Emergency);
-    let dt = 1e-4;
+    let mut unit = common::emergency_unit::<f64>();
+    let dt = common::DT;
     let mut v = 40.0;
     let mut wheel4 = 40.0;
     let mut states = Vec::new();
@@ -101,9 +101,7 @@ fn wsp_vents_holds_and_reapplies_a_sliding_wheel() {
 
 #[test]
 fn wsp_timer_gives_the_brake_back() {
-    let p = Params::default();
-    let mut unit = BrakeUnit::<f64>::new(&p, &UnitConfig::new(1e-4)).unwrap();
-    unit.set_demand(BrakeDemand::Emergency);
+    let mut unit = common::emergency_unit::<f64>();
     // Wheel 4 reads standstill while the vehicle runs (a locked wheel that never recovers,
     // or a dead sensor): the valve may not vent longer than vent_max (3 s), then it applies.
     let mut longest_vent = 0usize;
