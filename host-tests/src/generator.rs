@@ -19,6 +19,7 @@
 
 use std::fmt::Write as _;
 
+use hils::diagnose::effects::Effect;
 use hils::runlog;
 use hils_brake_unit::{BrakeDemand, BrakeUnit, UnitConfig};
 use hils_plant::{FrictionModel, Params, Rail, STEP_S, WHEELSETS};
@@ -36,38 +37,43 @@ use rand::{RngExt, SeedableRng};
 pub enum Kind {
     /// No effect: noise only.
     None,
-    FrictionSpeed,
-    FrictionTemperature,
+    /// One effect of the spec's table (the diagnosis' own list), hidden in the data.
+    /// `SensorGainPressure` is drawn as `SensorGain` (which sensor follows the logged inputs).
+    Hidden(Effect),
     /// The paper's case: friction speed and temperature with the Table 1 values.
     Paper,
-    FrictionLevel,
-    FrictionPressure,
-    Adhesion,
-    RunningResistance,
-    Gradient,
-    Mass,
-    ActuatorLag,
-    SensorGain,
     /// An effect outside the spec's list: the vehicle-speed sensor (radar) drifts, reading
     /// v + d t. No listed effect can explain it; the diagnosis must not blame one.
     Unlisted,
 }
 
+/// Every kind, in the order that numbers them (the number seeds a case's draw).
 pub const KINDS: [Kind; 13] = [
     Kind::None,
-    Kind::FrictionSpeed,
-    Kind::FrictionTemperature,
+    Kind::Hidden(Effect::FrictionSpeed),
+    Kind::Hidden(Effect::FrictionTemperature),
     Kind::Paper,
-    Kind::FrictionLevel,
-    Kind::FrictionPressure,
-    Kind::Adhesion,
-    Kind::RunningResistance,
-    Kind::Gradient,
-    Kind::Mass,
-    Kind::ActuatorLag,
-    Kind::SensorGain,
+    Kind::Hidden(Effect::FrictionLevel),
+    Kind::Hidden(Effect::FrictionPressure),
+    Kind::Hidden(Effect::Adhesion),
+    Kind::Hidden(Effect::RunningResistance),
+    Kind::Hidden(Effect::Gradient),
+    Kind::Hidden(Effect::Mass),
+    Kind::Hidden(Effect::ActuatorLag),
+    Kind::Hidden(Effect::SensorGain),
     Kind::Unlisted,
 ];
+
+impl Kind {
+    /// The kind's place in [`KINDS`].
+    pub fn number(self) -> u64 {
+        let kind = match self {
+            Kind::Hidden(Effect::SensorGainPressure) => Kind::Hidden(Effect::SensorGain),
+            k => k,
+        };
+        KINDS.iter().position(|k| *k == kind).unwrap_or(0) as u64
+    }
+}
 
 /// Which sensor a `sensor-gain` case scales.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -199,23 +205,23 @@ fn draw_scenario(rng: &mut StdRng, kind: Kind) -> Scenario {
     // What each effect needs to be seen (a rig engineer logs it).
     match kind {
         // Pad force lags pressure: visible only where both are logged.
-        Kind::ActuatorLag => s.inputs = Inputs::Both,
+        Kind::Hidden(Effect::ActuatorLag) => s.inputs = Inputs::Both,
         // A scaled sensor: both logged, or the tangential force beside the pressure.
-        Kind::SensorGain => {
+        Kind::Hidden(Effect::SensorGain) => {
             if s.inputs != Inputs::Both {
                 s.inputs = Inputs::Pressure;
                 s.log_f_brake = true;
             }
         }
         // Mass vs friction level: the axle loads tell.
-        Kind::Mass => s.log_q = true,
+        Kind::Hidden(Effect::Mass) => s.log_q = true,
         // Friction level vs a clamp-force gain and vs mass: pressure and force, loads.
-        Kind::FrictionLevel => {
+        Kind::Hidden(Effect::FrictionLevel) => {
             s.inputs = Inputs::Both;
             s.log_q = true;
         }
         // Friction vs clamp force: the clamp force must vary (stepped service brake).
-        Kind::FrictionPressure => {
+        Kind::Hidden(Effect::FrictionPressure) => {
             let n = rng.random_range(2..4);
             s.service_steps = (0..n)
                 .map(|_| (rng.random_range(0.35..1.0), rng.random_range(5.0..9.0)))
@@ -224,7 +230,9 @@ fn draw_scenario(rng: &mut StdRng, kind: Kind) -> Scenario {
             s.log_q = true;
         }
         // Resistance and gradient act while coasting too.
-        Kind::RunningResistance | Kind::Gradient => s.coast_s = rng.random_range(1.5..4.0),
+        Kind::Hidden(Effect::RunningResistance) | Kind::Hidden(Effect::Gradient) => {
+            s.coast_s = rng.random_range(1.5..4.0)
+        }
         _ => {}
     }
     s
@@ -239,7 +247,7 @@ pub fn case(kind: Kind, seed: u64) -> Case {
 /// case the diagnosis cannot resolve).
 pub fn case_with(kind: Kind, seed: u64, tweak: impl FnOnce(&mut Scenario)) -> Case {
     let mut rng =
-        StdRng::seed_from_u64(seed ^ (kind as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        StdRng::seed_from_u64(seed ^ (kind.number() + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15));
     let mut scenario = draw_scenario(&mut rng, kind);
     tweak(&mut scenario);
     let nominal = constant_baseline();
@@ -247,7 +255,7 @@ pub fn case_with(kind: Kind, seed: u64, tweak: impl FnOnce(&mut Scenario)) -> Ca
     let mut sensor = None;
     let (causes, params): (Vec<&'static str>, Vec<(String, f64)>) = match kind {
         Kind::None => (vec![], vec![]),
-        Kind::FrictionSpeed => {
+        Kind::Hidden(Effect::FrictionSpeed) => {
             let (n, m) = (rng.random_range(0.12..0.3), rng.random_range(0.06..0.2));
             let f = &mut truth_params.friction;
             f.model = FrictionModel::Variable;
@@ -259,7 +267,7 @@ pub fn case_with(kind: Kind, seed: u64, tweak: impl FnOnce(&mut Scenario)) -> Ca
                 vec![("n_v".into(), n), ("m_v".into(), m)],
             )
         }
-        Kind::FrictionTemperature => {
+        Kind::Hidden(Effect::FrictionTemperature) => {
             let (n, m) = (rng.random_range(0.08..0.25), rng.random_range(0.008..0.025));
             let f = &mut truth_params.friction;
             f.model = FrictionModel::Variable;
@@ -282,7 +290,7 @@ pub fn case_with(kind: Kind, seed: u64, tweak: impl FnOnce(&mut Scenario)) -> Ca
                 ],
             )
         }
-        Kind::FrictionLevel => {
+        Kind::Hidden(Effect::FrictionLevel) => {
             let factor = if rng.random::<f64>() < 0.5 {
                 rng.random_range(0.8..0.92)
             } else {
@@ -294,12 +302,12 @@ pub fn case_with(kind: Kind, seed: u64, tweak: impl FnOnce(&mut Scenario)) -> Ca
                 vec![("mu_d0".into(), truth_params.friction.mu_d0)],
             )
         }
-        Kind::FrictionPressure => {
+        Kind::Hidden(Effect::FrictionPressure) => {
             let k_p = rng.random_range(0.06..0.2);
             truth_params.friction.k_p = k_p;
             (vec!["friction-pressure"], vec![("k_p".into(), k_p)])
         }
-        Kind::Adhesion => {
+        Kind::Hidden(Effect::Adhesion) => {
             // A poorer rail than the baseline's set assumes (wheels slide).
             let set = truth_params.contact.set_mut(scenario.rail);
             let mu_0 = match scenario.rail {
@@ -309,7 +317,7 @@ pub fn case_with(kind: Kind, seed: u64, tweak: impl FnOnce(&mut Scenario)) -> Ca
             *set[2] = mu_0;
             (vec!["adhesion"], vec![("mu_0".into(), mu_0)])
         }
-        Kind::RunningResistance => {
+        Kind::Hidden(Effect::RunningResistance) => {
             let (a, cc) = (
                 rng.random_range(2000.0..5000.0),
                 rng.random_range(5.0..12.0),
@@ -321,19 +329,19 @@ pub fn case_with(kind: Kind, seed: u64, tweak: impl FnOnce(&mut Scenario)) -> Ca
                 vec![("davis_a_n".into(), a), ("davis_c_n_per_mps2".into(), cc)],
             )
         }
-        Kind::Gradient => {
+        Kind::Hidden(Effect::Gradient) => {
             let g =
                 rng.random_range(3.0..10.0) * if rng.random::<f64>() < 0.5 { -1.0 } else { 1.0 };
             truth_params.track.gradient_permille = g;
             (vec!["gradient"], vec![("gradient_permille".into(), g)])
         }
-        Kind::Mass => {
+        Kind::Hidden(Effect::Mass) => {
             let total = nominal.total_mass() * rng.random_range(1.1..1.3);
             truth_params.vehicle.carbody_mass =
                 total - (nominal.total_mass() - nominal.vehicle.carbody_mass);
             (vec!["mass"], vec![("mass_kg".into(), total)])
         }
-        Kind::ActuatorLag => {
+        Kind::Hidden(Effect::ActuatorLag) => {
             let tau = rng.random_range(0.06..0.35);
             truth_params.brake.actuator_lag_s = tau;
             (vec!["actuator-lag"], vec![("tau_s".into(), tau)])
@@ -342,7 +350,7 @@ pub fn case_with(kind: Kind, seed: u64, tweak: impl FnOnce(&mut Scenario)) -> Ca
             vec![],
             vec![("v_ref_drift_mps_per_s".into(), rng.random_range(0.02..0.05))],
         ),
-        Kind::SensorGain => {
+        Kind::Hidden(Effect::SensorGain | Effect::SensorGainPressure) => {
             let j = rng.random_range(0..WHEELSETS);
             let g = if rng.random::<f64>() < 0.5 {
                 rng.random_range(0.75..0.88)
