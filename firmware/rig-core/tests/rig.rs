@@ -111,6 +111,13 @@ fn paper_start(friction: FrictionModel) -> Command {
     Command::paper_self_test(friction)
 }
 
+/// A rig on the Nucleo board and its mock I/O, the paper's self-test started (command 1).
+fn paper_self_test_started(friction: FrictionModel) -> (Rig, MockBoard) {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    command(&mut rig, 1, paper_start(friction)).unwrap();
+    (rig, MockBoard::new())
+}
+
 /// A rig-mode start (measured brake inputs) on the wet rail with Eq (2), no EB.
 fn rig_start(initial_speed_kmh: f32) -> Command {
     Command::Start {
@@ -154,9 +161,7 @@ fn load_cell_counts(force_n: f64) -> f64 {
 
 #[test]
 fn self_test_paper_run_matches_the_closed_loop_and_streams_it() {
-    let mut rig = Rig::new(RigConfig::nucleo_g474re());
-    let mut io = MockBoard::new();
-    command(&mut rig, 1, paper_start(FrictionModel::Variable)).unwrap();
+    let (mut rig, mut io) = paper_self_test_started(FrictionModel::Variable);
     // The same closed loop, stepped directly (one copy of the physics: must agree bit for bit).
     let params = Params::default();
     let mut reference = ClosedLoop::<f32>::new(&params, Rail::Wet, 150.0 / 3.6).unwrap();
@@ -277,9 +282,7 @@ fn self_test_paper_run_matches_the_closed_loop_and_streams_it() {
 
 #[test]
 fn wheel_speed_outputs_follow_the_plant() {
-    let mut rig = Rig::new(RigConfig::nucleo_g474re());
-    let mut io = MockBoard::new();
-    command(&mut rig, 1, paper_start(FrictionModel::Constant)).unwrap();
+    let (mut rig, mut io) = paper_self_test_started(FrictionModel::Constant);
     for _ in 0..50_000 {
         rig.step(&mut io);
         let o = rig.outputs().unwrap();
@@ -662,9 +665,7 @@ fn set_kind_clears_no_fault_and_a_rig_start_stays_refused() {
 
 #[test]
 fn a_stalled_dma_in_self_test_is_adc_stale_not_four_stuck_sensors() {
-    let mut rig = Rig::new(RigConfig::nucleo_g474re());
-    let mut io = MockBoard::new();
-    command(&mut rig, 1, paper_start(FrictionModel::Variable)).unwrap();
+    let (mut rig, mut io) = paper_self_test_started(FrictionModel::Variable);
     for _ in 0..100 {
         rig.step(&mut io);
     }
@@ -713,9 +714,7 @@ fn stale_adc_fault_is_not_cleared_while_the_adc_is_stale() {
 
 #[test]
 fn bus_state_reaches_flags_and_diag_and_clear_is_passed_to_the_board() {
-    let mut rig = Rig::new(RigConfig::nucleo_g474re());
-    let mut io = MockBoard::new();
-    command(&mut rig, 1, paper_start(FrictionModel::Variable)).unwrap();
+    let (mut rig, mut io) = paper_self_test_started(FrictionModel::Variable);
     rig.set_bus(true, false, 0);
     rig.step(&mut io);
     assert!(rig.faults().contains(Faults::CAN_ERROR_PASSIVE));
@@ -878,9 +877,7 @@ fn idle_outputs_are_safe_and_frames_keep_coming() {
 
 #[test]
 fn full_queues_and_overruns_are_counted_and_flagged() {
-    let mut rig = Rig::new(RigConfig::nucleo_g474re());
-    let mut io = MockBoard::new();
-    command(&mut rig, 1, paper_start(FrictionModel::Variable)).unwrap();
+    let (mut rig, mut io) = paper_self_test_started(FrictionModel::Variable);
     io.frame_room = 3;
     io.telemetry_room = 2;
     for k in 0..1000u32 {
