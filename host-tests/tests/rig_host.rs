@@ -255,26 +255,29 @@ fn a_lost_board_ends_the_session_and_keeps_the_recording() {
     assert!(log.metadata.get("end").unwrap().contains("board lost"));
 }
 
+/// A session with `faults` simulated, started at 100 km/h and run up to 5 s: the session
+/// and the alarm that must end it before then.
+fn session_ended_by(faults: SimFaults) -> (Session<SimBoard>, Alarm) {
+    let mut s = session(faults);
+    assert!(s.command(start(100.0)).unwrap().accepted);
+    let e = s
+        .run_for(5.0, |_, _| hils::rig::commands::Flow::Continue)
+        .unwrap_err();
+    (s, e)
+}
+
 #[test]
 fn bus_off_and_a_stuck_alive_counter_end_the_session() {
-    let mut s = session(SimFaults {
+    let (s, e) = session_ended_by(SimFaults {
         bus_off_at_s: Some(0.3),
         ..Default::default()
     });
-    assert!(s.command(start(100.0)).unwrap().accepted);
-    let e = s
-        .run_for(5.0, |_, _| hils::rig::commands::Flow::Continue)
-        .unwrap_err();
     assert_eq!(e, Alarm::HostBusOff);
 
-    let mut s = session(SimFaults {
+    let (s, e) = session_ended_by(SimFaults {
         status_alive_frozen_at_s: Some(0.5),
         ..Default::default()
     });
-    assert!(s.command(start(100.0)).unwrap().accepted);
-    let e = s
-        .run_for(5.0, |_, _| hils::rig::commands::Flow::Continue)
-        .unwrap_err();
     assert_eq!(
         e,
         Alarm::AliveStuck {
