@@ -23,6 +23,18 @@ fn log_spanning(span_s: f64) -> String {
     text
 }
 
+/// Runs `hils` with `args`, checks that it exits like any error (code 1, not an abort) and
+/// returns its standard error.
+fn hils_fails(args: &[&std::ffi::OsStr]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_hils"))
+        .args(args)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    err
+}
+
 fn temp_dir(tag: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("hils-bad-{tag}-{}", std::process::id()));
     std::fs::create_dir_all(&d).unwrap();
@@ -41,17 +53,14 @@ fn diagnose_refuses_a_30000_s_log_and_writes_nothing() {
         .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared"))
         .join("spec/reference-parameters.toml");
     let json = dir.join("out.json");
-    let out = Command::new(env!("CARGO_BIN_EXE_hils"))
-        .arg("diagnose")
-        .arg("--baseline")
-        .arg(&baseline)
-        .arg("--json")
-        .arg(&json)
-        .arg(&log)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{err}");
+    let err = hils_fails(&[
+        "diagnose".as_ref(),
+        "--baseline".as_ref(),
+        baseline.as_os_str(),
+        "--json".as_ref(),
+        json.as_os_str(),
+        log.as_os_str(),
+    ]);
     assert!(
         err.contains("ms_as_s.csv") && err.contains("`t_s`"),
         "{err}"
@@ -161,15 +170,12 @@ fn decode_refuses_implausible_records_and_writes_nothing() {
         .join("../fuzz/seeds/decode/regression-implausible-v-ref.log");
     std::fs::copy(&case, &input).unwrap();
     let csv = dir.join("run.csv");
-    let out = Command::new(env!("CARGO_BIN_EXE_hils"))
-        .arg("decode")
-        .arg(&input)
-        .arg("--out")
-        .arg(&csv)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{err}");
+    let err = hils_fails(&[
+        "decode".as_ref(),
+        input.as_os_str(),
+        "--out".as_ref(),
+        csv.as_os_str(),
+    ]);
     assert!(
         err.contains("step 100") && err.contains("`v_ref_mps` = 1549"),
         "{err}"
