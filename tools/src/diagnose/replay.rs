@@ -344,6 +344,42 @@ pub fn bin_width(dt_s: f64) -> f64 {
     (2.0 * dt_s).max(0.02)
 }
 
+/// Per-bin sums of a channel's finite samples: values, sample times and counts.
+struct BinSums {
+    sum: Vec<f64>,
+    t_sum: Vec<f64>,
+    count: Vec<u32>,
+}
+
+impl BinSums {
+    /// Sums the finite samples `x[i]` (at times `t[i]`) into `n_bins` bins by `bin_of(t)`.
+    fn new(t: &[f64], x: &[f64], n_bins: usize, bin_of: impl Fn(f64) -> usize) -> Self {
+        let mut sums = BinSums {
+            sum: vec![0.0; n_bins],
+            t_sum: vec![0.0; n_bins],
+            count: vec![0; n_bins],
+        };
+        for (&ti, &xi) in t.iter().zip(x) {
+            if xi.is_finite() {
+                let b = bin_of(ti);
+                sums.sum[b] += xi;
+                sums.t_sum[b] += ti;
+                sums.count[b] += 1;
+            }
+        }
+        sums
+    }
+
+    /// Mean of bin `b`; NaN where it holds no sample.
+    fn mean(&self, b: usize) -> f64 {
+        if self.count[b] > 0 {
+            self.sum[b] / self.count[b] as f64
+        } else {
+            f64::NAN
+        }
+    }
+}
+
 impl Prepared {
     /// Prepares a run for replays at plant step `dt` with the baseline parameters
     /// (`rail` from the file's metadata, else the baseline's scenario rail).
@@ -431,19 +467,8 @@ impl Prepared {
         let bin_time: Vec<f64> = (0..n_bins).map(|b| (b as f64 + 0.5) * bin_s).collect();
 
         let bin_means = |x: &[f64]| -> Vec<f64> {
-            let mut s = vec![0.0; n_bins];
-            let mut c = vec![0u32; n_bins];
-            for i in 0..n {
-                if x[i].is_finite() {
-                    let b = bin_of(t[i]);
-                    s[b] += x[i];
-                    c[b] += 1;
-                }
-            }
-            s.iter()
-                .zip(&c)
-                .map(|(s, &c)| if c > 0 { s / c as f64 } else { f64::NAN })
-                .collect()
+            let sums = BinSums::new(&t[..n], x, n_bins, bin_of);
+            (0..n_bins).map(|b| sums.mean(b)).collect()
         };
         let v_bin = bin_means(&log.v_ref_mps);
         let wheel_speed: [Vec<f64>; WHEELSETS] =
@@ -472,17 +497,11 @@ impl Prepared {
             } else {
                 (0.0, 0.0)
             };
-            let mut sum = vec![0.0; n_bins];
-            let mut tsum = vec![0.0; n_bins];
-            let mut cnt = vec![0u32; n_bins];
-            for i in 0..n {
-                if x[i].is_finite() {
-                    let b = bin_of(t[i]);
-                    sum[b] += x[i];
-                    tsum[b] += t[i];
-                    cnt[b] += 1;
-                }
-            }
+            let BinSums {
+                sum,
+                t_sum: tsum,
+                count: cnt,
+            } = BinSums::new(&t[..n], x, n_bins, bin_of);
             // A brake force at standstill is static friction (any value up to the limit
             // holds the wheel): compared only while the wheelset turns.
             let turning = |b: usize| match quantity {
