@@ -46,6 +46,16 @@ pub const ALL: [Effect; 11] = [
     Effect::SensorGainPressure,
 ];
 
+/// Start values of one factor (n e^(-m x) + 1) of paper Eq (2): the baseline's own (n, m)
+/// where the baseline is variable and both are positive, else `fallback`.
+fn eq2_factor_start(variable: bool, baseline: (f64, f64), fallback: (f64, f64)) -> (f64, f64) {
+    if variable && baseline.0 > 0.0 && baseline.1 > 0.0 {
+        baseline
+    } else {
+        fallback
+    }
+}
+
 impl Effect {
     /// The spec's name.
     pub fn name(self) -> &'static str {
@@ -101,22 +111,14 @@ impl Effect {
         let variable = f.model == FrictionModel::Variable;
         match self {
             Effect::FrictionSpeed => {
-                let (n, m) = if variable && f.n_v > 0.0 && f.m_v > 0.0 {
-                    (f.n_v, f.m_v)
-                } else {
-                    (0.1, 0.1)
-                };
+                let (n, m) = eq2_factor_start(variable, (f.n_v, f.m_v), (0.1, 0.1));
                 vec![
                     ("n_v", ParamSpec::new(n, 0.05, 0.0, 3.0)),
                     ("m_v", ParamSpec::new(m, 0.05, 0.0, 2.0)),
                 ]
             }
             Effect::FrictionTemperature => {
-                let (n, m) = if variable && f.n_t > 0.0 && f.m_t > 0.0 {
-                    (f.n_t, f.m_t)
-                } else {
-                    (0.1, 0.01)
-                };
+                let (n, m) = eq2_factor_start(variable, (f.n_t, f.m_t), (0.1, 0.01));
                 vec![
                     ("n_t", ParamSpec::new(n, 0.05, 0.0, 3.0)),
                     ("m_t", ParamSpec::new(m, 0.005, 0.0, 0.5)),
