@@ -330,6 +330,36 @@ fn t_series(run: &Prepared, y: &[f64], scale: f64) -> Vec<(f64, f64)> {
 }
 
 /// The localisation list as the report's lead: one line per link of the signal chain.
+/// Adds a measured channel and the baseline's and the extended model's replays of it, in
+/// that order (palette 7, 1, 2; the baseline dashed, the extended model in `extended`).
+fn add_measured_and_models(c: &mut Chart, points: [Vec<(f64, f64)>; 3], extended: Style) {
+    let looks = [
+        ("measured", Style::Solid, 7),
+        ("baseline", Style::Dashed, 1),
+        ("extended", extended, 2),
+    ];
+    for ((name, style, color), p) in looks.into_iter().zip(points) {
+        c.series.push(Series::new(name, p, style, color));
+    }
+}
+
+/// Saves a chart as `path`, links it in the report with `alt` text and `caption` after it,
+/// and lists the file.
+fn embed_chart(
+    c: &Chart,
+    path: PathBuf,
+    alt: &str,
+    caption: &str,
+    md: &mut String,
+    files: &mut Vec<PathBuf>,
+) -> Result<()> {
+    c.save_svg(&path)?;
+    let name = path.file_name().unwrap().to_string_lossy();
+    let _ = writeln!(md, "![{alt}]({name}){caption}\n");
+    files.push(path);
+    Ok(())
+}
+
 fn localisation_table(links: &[super::links::LinkCheck]) -> String {
     let mut md = String::from(
         "## Where along the signal chain\n\n| link | channels | baseline error (x noise) | extended error | explained | note |\n|---|---|---|---|---|---|\n",
@@ -483,32 +513,14 @@ pub fn write(dir: &Path, out: &Outcome) -> Result<Vec<PathBuf>> {
             "time, s",
             "v_ref, km/h",
         );
-        c.series.push(Series::new(
-            "measured",
-            t_series(run, &run.v_bin, KMH_PER_MPS),
-            Style::Solid,
-            7,
-        ));
-        c.series.push(Series::new(
-            "baseline",
-            t_series(run, &base.v_bin, KMH_PER_MPS),
-            Style::Dashed,
-            1,
-        ));
-        c.series.push(Series::new(
-            "extended",
-            t_series(run, &ext.v_bin, KMH_PER_MPS),
+        let kmh = |y: &[f64]| t_series(run, y, KMH_PER_MPS);
+        add_measured_and_models(
+            &mut c,
+            [kmh(&run.v_bin), kmh(&base.v_bin), kmh(&ext.v_bin)],
             Style::Dotted,
-            2,
-        ));
-        let f = dir.join(format!("{tag}v_ref.svg"));
-        c.save_svg(&f)?;
-        let _ = writeln!(
-            md,
-            "![vehicle speed]({})\n",
-            f.file_name().unwrap().to_string_lossy()
         );
-        files.push(f);
+        let f = dir.join(format!("{tag}v_ref.svg"));
+        embed_chart(&c, f, "vehicle speed", "", &mut md, &mut files)?;
 
         // Speed errors.
         let mut c = Chart::new(
@@ -535,13 +547,7 @@ pub fn write(dir: &Path, out: &Outcome) -> Result<Vec<PathBuf>> {
             2,
         ));
         let f = dir.join(format!("{tag}speed_error.svg"));
-        c.save_svg(&f)?;
-        let _ = writeln!(
-            md,
-            "![speed error]({})\n",
-            f.file_name().unwrap().to_string_lossy()
-        );
-        files.push(f);
+        embed_chart(&c, f, "speed error", "", &mut md, &mut files)?;
 
         // Wheel speeds (slides).
         for j in 0..WHEELSETS {
@@ -556,33 +562,18 @@ pub fn write(dir: &Path, out: &Outcome) -> Result<Vec<PathBuf>> {
                 Style::Dotted,
                 6,
             ));
-            c.series.push(Series::new(
-                "measured",
-                t_series(run, &run.wheel_bin[j], KMH_PER_MPS),
+            add_measured_and_models(
+                &mut c,
+                [
+                    kmh(&run.wheel_bin[j]),
+                    kmh(&base.wheel_bin[j]),
+                    kmh(&ext.wheel_bin[j]),
+                ],
                 Style::Solid,
-                7,
-            ));
-            c.series.push(Series::new(
-                "baseline",
-                t_series(run, &base.wheel_bin[j], KMH_PER_MPS),
-                Style::Dashed,
-                1,
-            ));
-            c.series.push(Series::new(
-                "extended",
-                t_series(run, &ext.wheel_bin[j], KMH_PER_MPS),
-                Style::Solid,
-                2,
-            ));
-            let f = dir.join(format!("{tag}wheel{}.svg", j + 1));
-            c.save_svg(&f)?;
-            let _ = writeln!(
-                md,
-                "![wheelset {}]({})\n",
-                j + 1,
-                f.file_name().unwrap().to_string_lossy()
             );
-            files.push(f);
+            let f = dir.join(format!("{tag}wheel{}.svg", j + 1));
+            let alt = format!("wheelset {}", j + 1);
+            embed_chart(&c, f, &alt, "", &mut md, &mut files)?;
         }
 
         // Residuals against the variables.
@@ -610,19 +601,14 @@ pub fn write(dir: &Path, out: &Outcome) -> Result<Vec<PathBuf>> {
                     1,
                 ));
                 let f = dir.join(format!("{tag}residual_vs_{}.svg", name.replace(' ', "_")));
-                c.save_svg(&f)?;
                 let r = a
                     .correlations
                     .iter()
                     .find(|(n, _)| n == name)
                     .map(|x| x.1)
                     .unwrap_or(f64::NAN);
-                let _ = writeln!(
-                    md,
-                    "![vs {name}]({}) (r = {r:.2})\n",
-                    f.file_name().unwrap().to_string_lossy()
-                );
-                files.push(f);
+                let (alt, caption) = (format!("vs {name}"), format!(" (r = {r:.2})"));
+                embed_chart(&c, f, &alt, &caption, &mut md, &mut files)?;
             }
         }
 
@@ -644,13 +630,7 @@ pub fn write(dir: &Path, out: &Outcome) -> Result<Vec<PathBuf>> {
             ));
         }
         let f = dir.join(format!("{tag}mu_d.svg"));
-        c.save_svg(&f)?;
-        let _ = writeln!(
-            md,
-            "![mu_d]({})\n",
-            f.file_name().unwrap().to_string_lossy()
-        );
-        files.push(f);
+        embed_chart(&c, f, "mu_d", "", &mut md, &mut files)?;
 
         // Other logged quantities: the channel of each group with the largest baseline error.
         for group in [
@@ -675,32 +655,20 @@ pub fn write(dir: &Path, out: &Outcome) -> Result<Vec<PathBuf>> {
             let pts = |v: &[f64]| -> Vec<(f64, f64)> {
                 ch.times.iter().zip(v).map(|(t, y)| (*t, *y)).collect()
             };
-            c.series
-                .push(Series::new("measured", pts(&ch.measured), Style::Solid, 7));
-            c.series.push(Series::new(
-                "baseline",
-                pts(&base.predicted[ci]),
-                Style::Dashed,
-                1,
-            ));
-            c.series.push(Series::new(
-                "extended",
-                pts(&ext.predicted[ci]),
+            add_measured_and_models(
+                &mut c,
+                [
+                    pts(&ch.measured),
+                    pts(&base.predicted[ci]),
+                    pts(&ext.predicted[ci]),
+                ],
                 Style::Solid,
-                2,
-            ));
+            );
             let f = dir.join(format!(
                 "{tag}{}.svg",
                 ch.quantity.label().replace([' ', '*'], "_")
             ));
-            c.save_svg(&f)?;
-            let _ = writeln!(
-                md,
-                "![{}]({})\n",
-                ch.quantity.label(),
-                f.file_name().unwrap().to_string_lossy()
-            );
-            files.push(f);
+            embed_chart(&c, f, &ch.quantity.label(), "", &mut md, &mut files)?;
         }
     }
     if !r.notes.is_empty() {
