@@ -38,6 +38,7 @@ pub struct ContactForce<F> {
 }
 
 impl<F: Real> Polach<F> {
+    /// Polach's contact with the `[contact]` geometry and the parameter set of `rail` (paper Eqs (9)-(12)).
     pub fn new(contact: &ContactParams, rail: Rail) -> Self {
         Self::with_set(contact, &contact.set(rail))
     }

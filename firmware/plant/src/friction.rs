@@ -21,6 +21,7 @@ pub struct DiscPadFriction<F> {
 }
 
 impl<F: Real> DiscPadFriction<F> {
+    /// The disc-pad friction law of `[friction]` (paper Eq (2), Table 1).
     pub fn new(p: &FrictionParams) -> Self {
         Self {
             variable: p.model == FrictionModel::Variable,

@@ -88,6 +88,7 @@ impl Flags {
     /// The state became non-finite; the plant was put at rest (safe state).
     pub const NUMERIC_FAULT: u32 = 0x2000;
 
+    /// Whether any bit of `mask` (one of the constants above) is set.
     pub fn contains(self, mask: u32) -> bool {
         self.0 & mask != 0
     }
@@ -187,6 +188,7 @@ pub struct Outputs<F> {
     pub carbody_accel: F,
     /// Carbody pitch, rad (positive nose up).
     pub carbody_pitch: F,
+    /// Per wheelset, 1-4 (wheelset 1 leads).
     pub wheelsets: [WheelsetOutput<F>; WHEELSETS],
     /// Power dissipated in all suspension dampers, W.
     pub damper_power: F,
@@ -199,6 +201,7 @@ pub struct Outputs<F> {
 /// Energies of the vehicle, J (for the energy balance test).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Energy {
+    /// Translational and rotational kinetic energy of all bodies.
     pub kinetic: f64,
     /// Spring energy about the static equilibrium (gravity included).
     pub potential: f64,

@@ -14,6 +14,7 @@ pub struct DiscThermal<F> {
 }
 
 impl<F: Real> DiscThermal<F> {
+    /// The disc heat balance of `[thermal]` (paper Eqs (3)-(6)).
     pub fn new(p: &ThermalParams) -> Self {
         Self {
             heat_partition: F::of(p.heat_partition),
