@@ -20,6 +20,7 @@ pub struct Caliper<F> {
 }
 
 impl<F: Real> Caliper<F> {
+    /// The caliper of one wheelset with the `[brake]` parameters (paper Eq (1)).
     pub fn new(p: &BrakeParams) -> Self {
         let pressure_limit = 1.5 * p.supply_pressure;
         let clamp_force_limit =

@@ -35,6 +35,7 @@ compile_error!("the features math-libm and math-micromath exclude each other");
 #[cfg(not(feature = "math-micromath"))]
 mod f32_impl {
     #[inline(always)]
+    /// e^x in f32 (paper Eqs (2), (12)).
     pub fn exp(x: f32) -> f32 {
         #[cfg(feature = "math-libm")]
         {
@@ -46,14 +47,17 @@ mod f32_impl {
         }
     }
     #[inline(always)]
+    /// Natural logarithm in f32.
     pub fn ln(x: f32) -> f32 {
         libm::logf(x)
     }
     #[inline(always)]
+    /// Arc tangent in f32, rad (paper Eq (9)).
     pub fn atan(x: f32) -> f32 {
         libm::atanf(x)
     }
     #[inline(always)]
+    /// atan(x)/x in f32 (1 at 0): paper Eq (9)'s bracket without a division by the creepage.
     pub fn atan_over_x(x: f32) -> f32 {
         #[cfg(feature = "math-libm")]
         {
@@ -65,6 +69,7 @@ mod f32_impl {
         }
     }
     #[inline(always)]
+    /// Square root in f32.
     pub fn sqrt(x: f32) -> f32 {
         libm::sqrtf(x)
     }
@@ -122,23 +127,28 @@ fn quotient<F: crate::real::Real>(x: F, atan_x: F) -> F {
 }
 
 #[inline(always)]
+/// atan(x)/x in f64 (1 at 0): paper Eq (9)'s bracket without a division by the creepage.
 pub fn atan_over_x_f64(x: f64) -> f64 {
     quotient(x, libm::atan(x))
 }
 
 #[inline(always)]
+/// e^x in f64 (paper Eqs (2), (12)).
 pub fn exp_f64(x: f64) -> f64 {
     libm::exp(x)
 }
 #[inline(always)]
+/// Natural logarithm in f64.
 pub fn ln_f64(x: f64) -> f64 {
     libm::log(x)
 }
 #[inline(always)]
+/// Arc tangent in f64, rad (paper Eq (9)).
 pub fn atan_f64(x: f64) -> f64 {
     libm::atan(x)
 }
 #[inline(always)]
+/// Square root in f64.
 pub fn sqrt_f64(x: f64) -> f64 {
     libm::sqrt(x)
 }

@@ -22,18 +22,27 @@ pub trait Real:
     + MulAssign
     + 'static
 {
+    /// 0.
     const ZERO: Self;
+    /// 1.
     const ONE: Self;
     /// Converts a parameter or constant (rounding to nearest).
     fn of(x: f64) -> Self;
+    /// The value as f64 (exact: every f32 is an f64).
     fn to_f64(self) -> f64;
+    /// e^self (paper Eqs (2), (12)).
     fn exp(self) -> Self;
+    /// Natural logarithm.
     fn ln(self) -> Self;
+    /// Arc tangent, rad (paper Eq (9)).
     fn atan(self) -> Self;
     /// atan(x)/x (1 at 0), Eq (9)'s bracket without a division by the creepage.
     fn atan_over_x(self) -> Self;
+    /// Square root.
     fn sqrt(self) -> Self;
+    /// Neither NaN nor infinite.
     fn is_finite(self) -> bool;
+    /// Not a number.
     fn is_nan(self) -> bool;
 
     /// |x| (clears the sign bit).

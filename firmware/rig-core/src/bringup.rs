@@ -17,6 +17,7 @@ pub const SYSCLK_HZ: u32 = 170_000_000;
 pub const CAL_VREF_MV: u32 = 3000;
 /// Temperatures of TS_CAL1 and TS_CAL2, degC.
 pub const TS_CAL1_DEGC: f32 = 30.0;
+/// Temperature of TS_CAL2, degC.
 pub const TS_CAL2_DEGC: f32 = 130.0;
 
 /// The NUCLEO's 3.3 V supply +-5 % (what VDDA from VREFINT must show), mV.
@@ -52,7 +53,9 @@ pub struct ClockReadback {
     pub pll_from_hse: bool,
     /// Dividers and multiplier as values (M 1..16, N 8..127, R 2/4/6/8).
     pub pll_m: u32,
+    /// PLL multiplier N (8..127).
     pub pll_n: u32,
+    /// PLL divider R of the system clock (2, 4, 6 or 8).
     pub pll_r: u32,
     /// AHB prescaler as a divider.
     pub ahb_div: u32,
@@ -66,9 +69,13 @@ pub struct ClockReadback {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ClockFault {
+    /// The external crystal (HSE) did not become ready.
     HseNotReady,
+    /// The PLL did not lock.
     PllNotReady,
+    /// The system clock is not switched to the PLL.
     SysclkNotPll,
+    /// The PLL does not run from the HSE.
     PllNotFromHse,
     /// SYSCLK from the PLL settings, Hz.
     WrongFrequency(u32),
@@ -137,8 +144,11 @@ pub fn period_matches(
 /// The factory calibration values of the ADC (system memory).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct AdcFactoryCal {
+    /// VREFINT_CAL: internal reference reading at [`CAL_VREF_MV`], ADC counts.
     pub vrefint_cal: u16,
+    /// TS_CAL1: temperature sensor reading at [`TS_CAL1_DEGC`], ADC counts.
     pub ts_cal1: u16,
+    /// TS_CAL2: temperature sensor reading at [`TS_CAL2_DEGC`], ADC counts.
     pub ts_cal2: u16,
 }
 
@@ -190,9 +200,13 @@ pub fn pulse_test_registers(
 /// A pulse train measured by input capture: the counts between successive rising edges.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub struct PulseCapture {
+    /// Periods captured.
     pub periods: u32,
+    /// Sum of the periods, timer counts.
     pub total_counts: u64,
+    /// Shortest period, timer counts.
     pub min_counts: u32,
+    /// Longest period, timer counts.
     pub max_counts: u32,
     last: Option<u16>,
 }

@@ -26,6 +26,7 @@
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum BusMode {
     #[default]
+    /// Both error counters at most 127: on the bus normally.
     ErrorActive,
     /// An error counter is above 127.
     ErrorPassive,
@@ -36,8 +37,11 @@ pub enum BusMode {
 /// A poll of the controller.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub struct BusStatus {
+    /// Error state.
     pub mode: BusMode,
+    /// Transmit error counter (TEC).
     pub tx_errors: u8,
+    /// Receive error counter (REC).
     pub rx_errors: u8,
 }
 
@@ -45,10 +49,13 @@ pub struct BusStatus {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum BusEvent {
+    /// An error counter went above 127.
     EnteredErrorPassive,
+    /// The controller left the bus (TEC above 255).
     WentBusOff,
     /// Back to error active (from passive or bus-off), with the bus-off time if it was off, ms.
     Recovered {
+        /// Time spent bus-off, ms (0 if it was only error passive).
         bus_off_ms: u32,
     },
 }
@@ -57,6 +64,7 @@ pub enum BusEvent {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum BusAction {
+    /// Nothing to do.
     None,
     /// Re-initialise and restart the controller (it stayed bus-off too long).
     Restart,
@@ -92,10 +100,12 @@ impl BusMonitor {
     /// Delay of the first restart after a bus-off, ms (one poll).
     pub const BACKOFF_FIRST_MS: u32 = 10;
 
+    /// A monitor of a controller that is error active, no fault seen.
     pub fn new() -> Self {
         Self::default()
     }
 
+    /// The error state of the last poll.
     pub fn mode(&self) -> BusMode {
         self.mode
     }

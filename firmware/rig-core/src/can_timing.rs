@@ -37,9 +37,13 @@ pub const MIN_TQ_PER_BIT: u32 = 8;
 /// Field limits of the controller's nominal bit timing register.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct BitTimingLimits {
+    /// Largest bit-rate prescaler.
     pub prescaler_max: u32,
+    /// Largest time segment 1 (propagation and phase 1), time quanta.
     pub tseg1_max: u32,
+    /// Largest time segment 2 (phase 2), time quanta.
     pub tseg2_max: u32,
+    /// Largest synchronisation jump width, time quanta.
     pub sjw_max: u32,
 }
 

@@ -29,6 +29,7 @@ pub const TICKS_PER_MS: u32 = STEP_RATE_HZ / 1000;
 /// A frame with the step tick it was made at.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct QueuedFrame<F> {
+    /// The frame.
     pub frame: F,
     /// The step tick (0.1 ms, wrapping) the frame was queued at.
     pub tick: u32,
@@ -81,7 +82,9 @@ pub fn is_stale_behind(
 /// Frames leaving the controller's buffers, since the last call.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct TxOutcome {
+    /// Frames that went out on the bus.
     pub sent: u32,
+    /// Frames whose transmission request ended without a transmission (cancelled).
     pub dropped: u32,
 }
 
@@ -104,6 +107,7 @@ impl<const N: usize> Default for TxSlots<N> {
 }
 
 impl<const N: usize> TxSlots<N> {
+    /// All slots empty.
     pub const fn new() -> Self {
         Self { slots: [None; N] }
     }

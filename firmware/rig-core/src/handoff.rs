@@ -54,7 +54,9 @@ impl SlotState {
 /// A slot the builder claimed: its index and whether it holds an old value to drop.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Claim {
+    /// Index of the slot.
     pub slot: usize,
+    /// The slot holds a retired value the builder must drop before writing.
     pub holds_old_value: bool,
 }
 
@@ -70,6 +72,7 @@ impl<const N: usize> Default for SlotStates<N> {
 }
 
 impl<const N: usize> SlotStates<N> {
+    /// All slots free.
     pub const fn new() -> Self {
         Self {
             states: [const { AtomicU8::new(SlotState::Free as u8) }; N],

@@ -12,8 +12,11 @@ use crate::telemetry::{RunHeader, TelemetryRecord};
 /// What the step hands to the logging task.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum TelemetryEvent {
+    /// A run started: its `tlm1-start` header.
     Header(RunHeader),
+    /// One telemetry record (`tlm1` line).
     Record(TelemetryRecord),
+    /// The run ended at `step` in state `state` (a `RigState` code): the `tlm1-end` line.
     End { step: u32, state: u8 },
 }
 

@@ -35,6 +35,7 @@ pub struct PulseRegisters {
 }
 
 impl PulseRegisters {
+    /// Whether the output is silent (no pulses: CCR 0).
     pub fn is_silent(&self) -> bool {
         self.ccr == 0
     }

@@ -116,6 +116,7 @@ impl Default for CostRun {
 }
 
 impl CostRun {
+    /// A rig on the Nucleo board with a mock board, before the first tick.
     pub fn new() -> Self {
         Self {
             rig: Rig::new(RigConfig::nucleo_g474re()),
@@ -152,6 +153,7 @@ impl CostRun {
         }
     }
 
+    /// The rig, for its state and counters.
     pub fn rig(&self) -> &Rig {
         &self.rig
     }

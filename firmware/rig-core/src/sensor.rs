@@ -98,6 +98,7 @@ impl SensorKind {
 /// Linear calibration: value = (counts - offset_counts) x gain.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SensorCalibration {
+    /// ADC reading of a zero value, counts.
     pub offset_counts: f32,
     /// N or Pa per count.
     pub gain: f32,
@@ -106,10 +107,13 @@ pub struct SensorCalibration {
 /// Plausibility limits of a channel.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SensorLimits {
+    /// Below this the wire is open, ADC counts.
     pub open_below_counts: f32,
+    /// Above this the wire is shorted to the supply, ADC counts.
     pub short_above_counts: f32,
     /// Plausible physical range (N or Pa).
     pub min_value: f32,
+    /// Highest plausible value (N or Pa).
     pub max_value: f32,
     /// Steps with an identical oversampled sum that mean "stuck" (0 = check off).
     pub stuck_steps: u32,
@@ -179,8 +183,11 @@ pub struct Reading {
 /// One brake-input channel.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SensorChannel {
+    /// What the channel measures (load cell or pressure transducer).
     pub kind: SensorKind,
+    /// Counts to N or Pa.
     pub calibration: SensorCalibration,
+    /// Plausibility limits.
     pub limits: SensorLimits,
     inject: Option<InjectedFault>,
     frozen_sum: u32,
@@ -196,6 +203,7 @@ pub struct SensorChannel {
 }
 
 impl SensorChannel {
+    /// A channel of `kind` with its default calibration and limits, no fault.
     pub fn new(kind: SensorKind) -> Self {
         Self {
             kind,
@@ -311,6 +319,7 @@ impl SensorChannel {
         self.inject = fault;
     }
 
+    /// The fault injected into this channel, if any.
     pub fn injected(&self) -> Option<InjectedFault> {
         self.inject
     }
@@ -330,6 +339,7 @@ impl SensorChannel {
         Ok(())
     }
 
+    /// Sets the gain, N or Pa per count; refuses zero, NaN and inf.
     pub fn set_gain(&mut self, gain: f32) -> Result<(), CalibrationError> {
         if !(gain.is_finite() && gain != 0.0) {
             return Err(CalibrationError::BadValue);
@@ -338,6 +348,7 @@ impl SensorChannel {
         Ok(())
     }
 
+    /// Sets the zero reading, counts; refuses values outside the ADC's range.
     pub fn set_offset(&mut self, offset_counts: f32) -> Result<(), CalibrationError> {
         if !(offset_counts >= 0.0 && offset_counts <= ADC_MAX_COUNTS as f32) {
             return Err(CalibrationError::BadValue);

@@ -18,15 +18,20 @@
 /// Statistics of a window of steps, CPU cycles.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct WindowStats {
+    /// Longest step of the window, CPU cycles.
     pub max_cycles: u32,
+    /// Mean step of the window (rounded), CPU cycles.
     pub mean_cycles: u32,
+    /// Steps in the window.
     pub steps: u32,
 }
 
 /// What one step's timing says.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct StepVerdict {
+    /// How long the step took, CPU cycles.
     pub duration_cycles: u32,
+    /// The step took longer than its period.
     pub overrun: bool,
     /// Ticks lost before this step.
     pub missed_ticks: u32,
