@@ -61,9 +61,13 @@ pub const WHEEL_SPEED_MAX_KMH: f32 = WHEEL_SPEED_RAW_MAX as f32 * WHEEL_SPEED_RE
 /// without a HAL, and the tests).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ClassicFrame {
+    /// Standard or extended identifier.
     pub id: Id,
+    /// Data bytes; the first `len` are used.
     pub data: [u8; 8],
+    /// Data length code, 0-8 bytes.
     pub len: u8,
+    /// A remote frame (requests data, carries none).
     pub remote: bool,
 }
 
@@ -121,7 +125,12 @@ pub enum DecodeError {
     /// Data length other than 8.
     WrongLength(u8),
     /// Checksum mismatch (expected, received).
-    Checksum { expected: u8, received: u8 },
+    Checksum {
+        /// The checksum computed from the frame.
+        expected: u8,
+        /// The checksum the frame carries.
+        received: u8,
+    },
     /// Command opcode not defined.
     UnknownOpcode(u8),
     /// A field holds a value outside its defined range (names the field).
@@ -558,7 +567,9 @@ pub enum Opcode {
 pub struct WheelSpeedFrame {
     /// 0: wheelsets 1 and 2 (0x100); 1: wheelsets 3 and 4 (0x101).
     pub pair: usize,
+    /// Circumferential speeds r omega of the pair's two wheelsets, km/h (`None`: not available).
     pub speeds_kmh: [Option<f32>; 2],
+    /// Alive counter of the cycle (the same in both frames of a cycle).
     pub counter: u8,
 }
 
@@ -593,6 +604,7 @@ impl WheelSpeedFrame {
         ID_WHEEL_SPEEDS.get(self.pair).copied()
     }
 
+    /// The frame's bytes (`None` for a pair other than 0 or 1 or a frame type that cannot hold them).
     pub fn encode<F: Frame>(&self) -> Option<F> {
         let id = self.id()?;
         let mut data = [0u8; 8];
@@ -666,8 +678,11 @@ pub enum RigMode {
 #[repr(u8)]
 pub enum CommandResult {
     #[default]
+    /// No command received yet.
     None,
+    /// The last command was accepted.
     Accepted,
+    /// The last command was rejected (see [`crate::rig::CommandError`]).
     Rejected,
 }
 
@@ -678,15 +693,20 @@ pub struct StatusFrame {
     pub vehicle_speed_kmh: f32,
     /// Deceleration (-a_x), m/s^2: signed 16 bits at 0.001 m/s^2.
     pub deceleration_mps2: f32,
+    /// State of the rig.
     pub state: RigState,
+    /// Mode of the current (or last) run.
     pub mode: RigMode,
+    /// Result of the last command.
     pub command_result: CommandResult,
     /// Low 16 bits of [`crate::rig::Faults`].
     pub faults: u16,
+    /// Alive counter, 0-15.
     pub counter: u8,
 }
 
 impl StatusFrame {
+    /// The frame's bytes (`None` if the frame type cannot hold them).
     pub fn encode<F: Frame>(&self) -> Option<F> {
         let mut d = [0u8; 8];
         status::VEHICLE_SPEED.put(&mut d, self.vehicle_speed_kmh);
@@ -698,6 +718,7 @@ impl StatusFrame {
         seal(ID_STATUS, d, self.counter)
     }
 
+    /// Reads a `RIG_STATUS` frame; refuses a wrong identifier, length or raw value.
     pub fn decode<F: Frame>(frame: &F) -> Result<Self, DecodeError> {
         let (d, counter) = open(frame, ID_STATUS)?;
         Ok(Self {
@@ -732,6 +753,7 @@ pub struct DiagFrame {
 }
 
 impl DiagFrame {
+    /// The frame's bytes (`None` if the frame type cannot hold them).
     pub fn encode<F: Frame>(&self) -> Option<F> {
         let mut d = [0u8; 8];
         diag::STEP_MAX.put(&mut d, self.step_max_us);
@@ -744,6 +766,7 @@ impl DiagFrame {
         F::new(StandardId::new(ID_DIAG)?, &d)
     }
 
+    /// Reads a `RIG_DIAG` frame; refuses a wrong identifier, length or raw value.
     pub fn decode<F: Frame>(frame: &F) -> Result<Self, DecodeError> {
         let d = data_of(frame, ID_DIAG)?;
         let mut sensor_faults = [None; 4];
@@ -768,10 +791,13 @@ impl DiagFrame {
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum BrakeCommand {
+    /// Release the brakes.
     Release,
+    /// Emergency brake (the paper's EB).
     Emergency,
     /// Service brake for a deceleration, m/s^2 (0.001 m/s^2 per bit, 0-10).
     Service {
+        /// Demanded deceleration, m/s^2.
         deceleration_mps2: f32,
     },
 }
@@ -819,10 +845,15 @@ pub enum Command {
     /// accepts 0-655.34, the wheel-speed frames' range). `emergency`: the self-test's
     /// simulated brake unit gets the EB command at t = 0 (the paper's scenario).
     Start {
+        /// Self-test (simulated brake unit) or rig (measured brake inputs).
         mode: RigMode,
+        /// Rail condition: the Polach set (paper Table 2 wet, `[contact.dry]`).
         rail: Rail,
+        /// Disc-pad friction law (paper Eq (2) or constant mu_d0).
         friction: FrictionModel,
+        /// The simulated brake unit gets the EB command at t = 0.
         emergency: bool,
+        /// Initial speed, km/h.
         initial_speed_kmh: f32,
     },
     /// Opcode 2: stop the run (outputs to the safe state).
@@ -831,11 +862,18 @@ pub enum Command {
     Brake(BrakeCommand),
     /// Opcode 4: inject (or with `None` remove) a sensor fault on channel 0-3.
     InjectFault {
+        /// Sensor channel, 0-3.
         channel: u8,
+        /// The fault to inject (`None`: remove the injected fault).
         fault: Option<InjectedFault>,
     },
     /// Opcode 5: calibrate channel 0-3 (only while no run is active).
-    Calibrate { channel: u8, action: Calibration },
+    Calibrate {
+        /// Sensor channel, 0-3.
+        channel: u8,
+        /// What to calibrate.
+        action: Calibration,
+    },
     /// Opcode 6: clear latched faults whose cause is gone.
     ClearFaults,
     /// Opcode 7: configuration (only while no run is active).
@@ -876,7 +914,9 @@ impl Command {
 /// `RIG_COMMAND` frame: a command and its alive counter.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CommandFrame {
+    /// The command.
     pub command: Command,
+    /// Alive counter, 0-15: the same counter as the last command is refused as a repeat.
     pub counter: u8,
 }
 
