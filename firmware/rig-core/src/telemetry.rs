@@ -83,7 +83,9 @@ pub const WSP_KNOWN: u8 = 0x80;
 pub struct TelemetryRecord {
     /// Plant steps since the run started (t = step x step time).
     pub step: u32,
+    /// State of the rig ([`RigState`] code).
     pub state: u8,
+    /// Mode of the run ([`RigMode`] code).
     pub mode: u8,
     /// Brake command in force ([`crate::can::BrakeCommand::code`]).
     pub cmd: u8,
@@ -109,9 +111,11 @@ pub struct TelemetryRecord {
     pub a_x: f32,
     /// Longest and mean step since the last record, CPU cycles.
     pub step_max_cycles: u32,
+    /// Mean step since the last record, CPU cycles.
     pub step_mean_cycles: u32,
     /// Overruns and missed ticks since the run started.
     pub overruns: u32,
+    /// Ticks lost since the run started.
     pub missed_ticks: u32,
     /// [`crate::rig::Faults`] bits.
     pub faults: u32,
@@ -124,11 +128,13 @@ pub struct TelemetryRecord {
 /// The header of a run.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
 pub struct RunHeader {
+    /// Mode of the run ([`RigMode`] code).
     pub mode: u8,
     /// 0 wet, 1 dry.
     pub rail: u8,
     /// 0 variable (Eq 2), 1 constant mu_d0.
     pub friction: u8,
+    /// Initial speed, km/h.
     pub initial_speed_kmh: f32,
     /// Plant step, ns (100 000).
     pub step_ns: u32,
@@ -136,6 +142,7 @@ pub struct RunHeader {
     pub divider: u32,
     /// CPU clock, Hz (for the cycle counts).
     pub cpu_hz: u32,
+    /// Teeth of the simulated speed-sensor wheel.
     pub teeth: u16,
     /// Bit j set: channel j is a pressure transducer (else a load cell).
     pub pressure_channels: u8,
@@ -144,20 +151,41 @@ pub struct RunHeader {
 /// A parsed telemetry line.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Line {
+    /// A `tlm1-start` line.
     Header(RunHeader),
+    /// A `tlm1` record line.
     Record(TelemetryRecord),
-    End { step: u32, state: u8 },
+    /// A `tlm1-end` line.
+    End {
+        /// Plant steps of the run.
+        step: u32,
+        /// Final state ([`RigState`] code).
+        state: u8,
+    },
 }
 
 /// Why a telemetry line could not be parsed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ParseError {
     /// Fewer or more fields than the tag has (found).
-    FieldCount { expected: usize, found: usize },
+    FieldCount {
+        /// Fields the tag has.
+        expected: usize,
+        /// Fields the line has.
+        found: usize,
+    },
     /// Field `index` (0-based, named in [`FIELDS`] for records) is not a number of its type.
-    BadField { index: usize },
+    BadField {
+        /// 0-based field index.
+        index: usize,
+    },
     /// The record's CRC-32 does not match its values (corrupted on the way).
-    Crc { computed: u32, received: u32 },
+    Crc {
+        /// CRC-32 computed from the values.
+        computed: u32,
+        /// CRC-32 the line carries.
+        received: u32,
+    },
 }
 
 impl core::fmt::Display for ParseError {
@@ -346,9 +374,11 @@ impl TelemetryRecord {
         !crc32_update(c, &self.seq.to_le_bytes())
     }
 
+    /// The state as a [`RigState`] (`None` for an unknown code).
     pub fn rig_state(&self) -> Option<RigState> {
         RigState::from_raw(self.state)
     }
+    /// The mode as a [`RigMode`] (`None` for an unknown code).
     pub fn rig_mode(&self) -> Option<RigMode> {
         RigMode::from_raw(self.mode)
     }
