@@ -134,6 +134,7 @@ impl Faults {
     /// Bits 16-19 (telemetry only): sensor channel 1-4 has a pending (not yet latched) condition.
     pub const SENSOR_PENDING: u32 = 0x000F_0000;
 
+    /// Whether any bit of `mask` (one of the constants above) is set.
     pub fn contains(self, mask: u32) -> bool {
         self.0 & mask != 0
     }
@@ -186,6 +187,7 @@ pub enum CommandError {
         /// [`StartRequest::seq`] of the request it was built for.
         seq: u32,
     },
+    /// The calibration command was refused.
     Calibration(CalibrationError),
 }
 
@@ -205,10 +207,15 @@ pub struct StartRequest {
     /// Which `Start` this is (counts the rig's start requests, wrapping): the build comes
     /// back with it ([`Built::seq`]) and is installed only under the same request.
     pub seq: u32,
+    /// Self-test or rig mode.
     pub mode: RigMode,
+    /// Rail condition.
     pub rail: Rail,
+    /// Disc-pad friction law.
     pub friction: FrictionModel,
+    /// The simulated brake unit gets the EB command at t = 0.
     pub emergency: bool,
+    /// Initial speed, km/h.
     pub initial_speed_kmh: f32,
 }
 
@@ -320,6 +327,7 @@ impl StartRequest {
 /// simulation ([`SimStore`]).
 pub struct Rig<S: SimStore = Simulation> {
     config: RigConfig,
+    /// The four brake-input channels (ADC, calibration, plausibility).
     pub sensors: [SensorChannel; CHANNELS],
     sim: S,
     /// The store is lent to the builder (a request was handed out, no build came back).
@@ -337,6 +345,7 @@ pub struct Rig<S: SimStore = Simulation> {
     run_steps: u32,
     sticky: u32,
     bus_flags: u32,
+    /// Bus-off events since power-up (saturates at 255; `RIG_DIAG` carries up to 15).
     pub bus_off_count: u8,
     last_command_counter: Option<u8>,
     last_result: CommandResult,
@@ -445,6 +454,7 @@ impl<S: SimStore> Rig<S> {
         }
     }
 
+    /// State of the rig.
     pub fn state(&self) -> RigState {
         self.state
     }
@@ -457,12 +467,15 @@ impl<S: SimStore> Rig<S> {
     fn sim_mut(&mut self) -> Option<&mut Sim> {
         (!self.sim_lent).then(|| &mut self.sim.sim_mut().0)
     }
+    /// Mode of the current (or last) run.
     pub fn mode(&self) -> RigMode {
         self.mode
     }
+    /// The board configuration.
     pub fn config(&self) -> &RigConfig {
         &self.config
     }
+    /// Step timing of the current (or last) run.
     pub fn timing(&self) -> &StepTiming {
         &self.timing
     }
