@@ -17,7 +17,12 @@ pub enum TelemetryEvent {
     /// One telemetry record (`tlm1` line).
     Record(TelemetryRecord),
     /// The run ended at `step` in state `state` (a `RigState` code): the `tlm1-end` line.
-    End { step: u32, state: u8 },
+    End {
+        /// Plant steps of the run.
+        step: u32,
+        /// Final state (a `RigState` code).
+        state: u8,
+    },
 }
 
 impl TelemetryEvent {
