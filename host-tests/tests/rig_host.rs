@@ -268,7 +268,7 @@ fn session_ended_by(faults: SimFaults) -> (Session<SimBoard>, Alarm) {
 
 #[test]
 fn bus_off_and_a_stuck_alive_counter_end_the_session() {
-    let (s, e) = session_ended_by(SimFaults {
+    let (_, e) = session_ended_by(SimFaults {
         bus_off_at_s: Some(0.3),
         ..Default::default()
     });
