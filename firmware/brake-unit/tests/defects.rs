@@ -2,8 +2,7 @@
 
 mod common;
 
-use hils_brake_unit::{BrakeDemand, BrakeUnit, UnitConfig, Valve};
-use hils_plant::Params;
+use hils_brake_unit::{BrakeDemand, Valve};
 
 /// Wheelset 4 slides and then recovers fast; wheelsets 1-3 decelerate normally at 1 m/s^2
 /// with 0.5 m/s of creep (below the 0.9 m/s deficit threshold at 15 m/s, above its half).
@@ -45,10 +44,7 @@ fn another_wheels_recovery_does_not_vent_a_normally_braking_wheel() {
 /// cylinder lag.
 #[test]
 fn cylinder_pressure_reaches_the_demand_in_f32() {
-    let p = Params::default();
-    let mut config = UnitConfig::new(1e-4);
-    config.params.ep_valve = false;
-    let mut unit = BrakeUnit::<f32>::new(&p, &config).unwrap();
+    let mut unit = common::relay_only_unit::<f32>();
     unit.set_demand(BrakeDemand::Emergency);
     let target = unit.eb_pressure();
     let speeds = [40.0f32; 4];

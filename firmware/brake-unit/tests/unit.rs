@@ -3,17 +3,13 @@
 
 mod common;
 
-use hils_brake_unit::{BrakeDemand, BrakeUnit, UnitConfig, Valve};
-use hils_plant::Params;
+use hils_brake_unit::{BrakeDemand, Valve};
 
 #[test]
 fn cylinder_follows_the_demand_after_the_dead_time_with_the_fill_lag() {
-    let p = Params::default();
     // The relay valve and cylinder alone: the demand acts without the EP valve's PI loop
     // (tested in ep_unit.rs), whose 30 ms pilot lag would add to the lags checked here.
-    let mut config = UnitConfig::new(1e-4);
-    config.params.ep_valve = false;
-    let mut unit = BrakeUnit::<f64>::new(&p, &config).unwrap();
+    let mut unit = common::relay_only_unit::<f64>();
     let speeds = [40.0; 4];
     unit.set_demand(BrakeDemand::Emergency);
     let p_eb = unit.eb_pressure();

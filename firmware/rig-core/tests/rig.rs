@@ -118,6 +118,16 @@ fn paper_self_test_started(friction: FrictionModel) -> (Rig, MockBoard) {
     (rig, MockBoard::new())
 }
 
+/// A rig on the Nucleo board with four load cells reading 3 kN, a rig-mode run at 60 km/h
+/// started (command 1).
+fn rig_run_started_at_3_kn() -> (Rig, MockBoard) {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut io = MockBoard::new();
+    io.adc_counts = Some([load_cell_counts(3000.0); 4]);
+    command(&mut rig, 1, rig_start(60.0)).unwrap();
+    (rig, io)
+}
+
 /// A rig-mode start (measured brake inputs) on the wet rail with Eq (2), no EB.
 fn rig_start(initial_speed_kmh: f32) -> Command {
     Command::Start {
@@ -492,10 +502,7 @@ fn each_plausibility_fault_stops_a_rig_run_and_self_test_only_reports() {
 
 #[test]
 fn stale_adc_stops_a_rig_run_after_ten_ticks() {
-    let mut rig = Rig::new(RigConfig::nucleo_g474re());
-    let mut io = MockBoard::new();
-    io.adc_counts = Some([load_cell_counts(3000.0); 4]);
-    command(&mut rig, 1, rig_start(60.0)).unwrap();
+    let (mut rig, mut io) = rig_run_started_at_3_kn();
     for _ in 0..100 {
         rig.step(&mut io);
     }
@@ -693,10 +700,7 @@ fn a_stalled_dma_in_self_test_is_adc_stale_not_four_stuck_sensors() {
 
 #[test]
 fn stale_adc_fault_is_not_cleared_while_the_adc_is_stale() {
-    let mut rig = Rig::new(RigConfig::nucleo_g474re());
-    let mut io = MockBoard::new();
-    io.adc_counts = Some([load_cell_counts(3000.0); 4]);
-    command(&mut rig, 1, rig_start(60.0)).unwrap();
+    let (mut rig, mut io) = rig_run_started_at_3_kn();
     rig.step(&mut io);
     io.adc_counts = None;
     for _ in 0..20 {

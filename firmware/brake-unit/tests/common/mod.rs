@@ -7,8 +7,18 @@ use hils_plant::{Params, Real, STEP_S};
 pub const DT: f64 = STEP_S;
 
 /// A brake unit with the reference parameters at the 10 kHz step.
+#[allow(dead_code)] // not every test file uses it
 pub fn reference_unit<F: Real>() -> BrakeUnit<F> {
     BrakeUnit::<F>::new(&Params::default(), &UnitConfig::new(DT)).unwrap()
+}
+
+/// [`reference_unit`] without the EP valve: the demand acts directly on the relay valve
+/// and cylinder (their lags alone, without the EP valve's PI loop and pilot lag).
+#[allow(dead_code)] // not every test file isolates the cylinder
+pub fn relay_only_unit<F: Real>() -> BrakeUnit<F> {
+    let mut config = UnitConfig::new(DT);
+    config.params.ep_valve = false;
+    BrakeUnit::<F>::new(&Params::default(), &config).unwrap()
 }
 
 /// [`reference_unit`] with the emergency brake demanded.
