@@ -35,26 +35,21 @@ pub async fn run(spawner: Spawner, p: Peripherals) {
     let rig_config = RigConfig::nucleo_g474re();
     let silent = rig_config.pulse_timer.silent();
 
-    let ws1 = PulseOut::new(
-        Timer::new(p.TIM1),
-        PwmPin::new(p.PA8, OutputType::PushPull),
-        &silent,
-    );
-    let ws2 = PulseOut::new(
-        Timer::new(p.TIM4),
-        PwmPin::new(p.PB6, OutputType::PushPull),
-        &silent,
-    );
-    let ws3 = PulseOut::new(
-        Timer::new(p.TIM8),
-        PwmPin::new(p.PC6, OutputType::PushPull),
-        &silent,
-    );
-    let ws4 = PulseOut::new(
-        Timer::new(p.TIM20),
-        PwmPin::new(p.PB2, OutputType::PushPull),
-        &silent,
-    );
+    // Wheelsets 1-4: a timer and its channel-1 pin each (push-pull), silent until the
+    // first step (each timer and pin is its own type, hence a macro).
+    macro_rules! pulse_out {
+        ($timer:expr, $pin:expr) => {
+            PulseOut::new(
+                Timer::new($timer),
+                PwmPin::new($pin, OutputType::PushPull),
+                &silent,
+            )
+        };
+    }
+    let ws1 = pulse_out!(p.TIM1, p.PA8);
+    let ws2 = pulse_out!(p.TIM4, p.PB6);
+    let ws3 = pulse_out!(p.TIM8, p.PC6);
+    let ws4 = pulse_out!(p.TIM20, p.PB2);
 
     // ADC1: 16 ranks triggered by TIM3_CC4, circular DMA.
     let adc = Adc::new(p.ADC1, AdcConfig::default());

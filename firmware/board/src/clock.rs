@@ -113,23 +113,20 @@ pub enum ResetCause {
 
 pub fn take_reset_cause() -> ResetCause {
     let csr = pac::RCC.csr().read();
-    let cause = if csr.iwdgrstf() {
-        ResetCause::IndependentWatchdog
-    } else if csr.wwdgrstf() {
-        ResetCause::WindowWatchdog
-    } else if csr.sftrstf() {
-        ResetCause::Software
-    } else if csr.borrstf() {
-        ResetCause::PowerOnOrBrownOut
-    } else if csr.lpwrrstf() {
-        ResetCause::LowPower
-    } else if csr.oblrstf() {
-        ResetCause::OptionByteLoad
-    } else if csr.pinrstf() {
-        ResetCause::Pin
-    } else {
-        ResetCause::Unknown
-    };
+    // In priority order: a watchdog or software reset also pulls the reset pin.
+    let flags = [
+        (csr.iwdgrstf(), ResetCause::IndependentWatchdog),
+        (csr.wwdgrstf(), ResetCause::WindowWatchdog),
+        (csr.sftrstf(), ResetCause::Software),
+        (csr.borrstf(), ResetCause::PowerOnOrBrownOut),
+        (csr.lpwrrstf(), ResetCause::LowPower),
+        (csr.oblrstf(), ResetCause::OptionByteLoad),
+        (csr.pinrstf(), ResetCause::Pin),
+    ];
+    let cause = flags
+        .into_iter()
+        .find_map(|(set, cause)| set.then_some(cause))
+        .unwrap_or(ResetCause::Unknown);
     pac::RCC.csr().modify(|w| w.set_rmvf(true));
     cause
 }

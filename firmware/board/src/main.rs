@@ -17,6 +17,8 @@
 //! * [`app`]: the rig application; `bringup` (feature): the first-flash self-test.
 #![no_std]
 #![no_main]
+// A binary: `missing_docs` (denied by the workspace) is for the no_std library crates.
+#![allow(missing_docs)]
 // The bring-up image uses the configuration code but not the application's tasks.
 #![cfg_attr(feature = "bringup", allow(dead_code))]
 
