@@ -47,11 +47,25 @@ pub enum FrictionModel {
 
 /// One table per section: each key's type, valid range `[min, max]` (where it has one) and
 /// default, written once. It makes the struct (with serde's `deny_unknown_fields`), its
-/// `DEFAULT` and `Default` (equal to `spec/reference-parameters.toml`) and `check_ranges`, whose error
-/// names the file's key `section.key`.
+/// `DEFAULT` and `Default` (equal to `spec/reference-parameters.toml`) and, for a section
+/// of the file (`Name "section" { .. }`), `check_ranges`, whose error names the file's key
+/// `section.key`.
 macro_rules! section {
     ($(#[$m:meta])* $name:ident $key:literal {
         $($(#[$fm:meta])* $field:ident : $ty:ty $([$min:expr, $max:expr])? = $val:expr),* $(,)?
+    }) => {
+        section!($(#[$m])* $name { $($(#[$fm])* $field: $ty = $val),* });
+        impl $name {
+            /// Checks each key of this section against its valid range (NaN and inf are out
+            /// of range); the error names the first key that fails.
+            pub fn check_ranges(&self) -> Result<(), ParamError> {
+                $($(check(concat!($key, ".", stringify!($field)), f64::from(self.$field), $min, $max)?;)?)*
+                Ok(())
+            }
+        }
+    };
+    ($(#[$m:meta])* $name:ident {
+        $($(#[$fm:meta])* $field:ident : $ty:ty = $val:expr),* $(,)?
     }) => {
         $(#[$m])*
         #[derive(Clone, Copy, Debug, PartialEq)]
@@ -61,15 +75,8 @@ macro_rules! section {
             fn default() -> Self { Self::DEFAULT }
         }
         impl $name {
-            /// The reference file's values of this section.
+            /// The reference file's values.
             pub const DEFAULT: Self = Self { $($field: $val),* };
-
-            /// Checks each key of this section against its valid range (NaN and inf are out
-            /// of range); the error names the first key that fails.
-            pub fn check_ranges(&self) -> Result<(), ParamError> {
-                $($(check(concat!($key, ".", stringify!($field)), f64::from(self.$field), $min, $max)?;)?)*
-                Ok(())
-            }
         }
     };
 }
@@ -317,7 +324,7 @@ section!(
     /// discs, the track). The brake unit and the scenario own their own sections
     /// (`hils_brake_unit::BrakeUnitParams`, `hils_sil::ScenarioParams`); the whole file is
     /// `hils_sil::ParamFile`.
-    Params "" {
+    Params {
         /// `[vehicle]`.
         vehicle: VehicleParams = VehicleParams::DEFAULT,
         /// `[suspension]`.
