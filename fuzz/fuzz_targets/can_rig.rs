@@ -56,22 +56,15 @@ fn frame(b: &mut Bytes) -> ClassicFrame {
 
 /// Decodes with every decoder; what decodes re-encodes to the same payload.
 fn decoders(f: &ClassicFrame) {
-    if let Ok(w) = WheelSpeedFrame::decode(f) {
-        let again: ClassicFrame = w.encode().expect("re-encode");
-        assert_eq!(WheelSpeedFrame::decode(&again), Ok(w));
+    macro_rules! round_trip {
+        ($($frame:ident),*) => {$(
+            if let Ok(x) = $frame::decode(f) {
+                let again: ClassicFrame = x.encode().expect("re-encode");
+                assert_eq!($frame::decode(&again), Ok(x));
+            }
+        )*};
     }
-    if let Ok(s) = StatusFrame::decode(f) {
-        let again: ClassicFrame = s.encode().expect("re-encode");
-        assert_eq!(StatusFrame::decode(&again), Ok(s));
-    }
-    if let Ok(d) = DiagFrame::decode(f) {
-        let again: ClassicFrame = d.encode().expect("re-encode");
-        assert_eq!(DiagFrame::decode(&again), Ok(d));
-    }
-    if let Ok(c) = CommandFrame::decode(f) {
-        let again: ClassicFrame = c.encode().expect("re-encode");
-        assert_eq!(CommandFrame::decode(&again), Ok(c));
-    }
+    round_trip!(WheelSpeedFrame, StatusFrame, DiagFrame, CommandFrame);
 }
 
 fn check_safe_state(rig: &Rig, io: &FuzzIo) {
