@@ -35,7 +35,7 @@ compile_error!("the features math-libm and math-micromath exclude each other");
 #[cfg(not(feature = "math-micromath"))]
 mod f32_impl {
     #[inline(always)]
-    /// e^x in f32 (paper Eqs (2), (12)).
+    /// e^x in f32 (paper Eqs (2), (11)).
     pub fn exp(x: f32) -> f32 {
         #[cfg(feature = "math-libm")]
         {
@@ -133,7 +133,7 @@ pub fn atan_over_x_f64(x: f64) -> f64 {
 }
 
 #[inline(always)]
-/// e^x in f64 (paper Eqs (2), (12)).
+/// e^x in f64 (paper Eqs (2), (11)).
 pub fn exp_f64(x: f64) -> f64 {
     libm::exp(x)
 }

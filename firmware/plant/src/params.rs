@@ -102,7 +102,7 @@ section!(
         wheelset_mass: f64 [50.0, 1e4] = 850.0,
         /// Wheelset spin inertia about its axle, kg m^2 (paper Table 3, Eq (7)).
         wheelset_spin_inertia: f64 [1.0, 1e4] = 280.0,
-        /// Wheel rolling radius r, m (paper text: diameter 0.86 m).
+        /// Wheel rolling radius r, m (paper text: diameter 0.86 m; Eqs (7), (12)).
         wheel_radius: f64 [0.05, 2.0] = 0.43,
         /// Distance between the bogie centres, m (paper Table 3: +-7 m).
         bogie_base: f64 [0.5, 100.0] = 14.0,
@@ -152,15 +152,15 @@ section!(
     /// dry-rail values.
     AdhesionSet "contact.dry" {
         /// k_A, reduction of the initial slope of the adhesion curve in the adhesion area
-        /// (paper Eq (10)).
+        /// (paper Eq (9)).
         k_a: f64 [1e-3, 100.0] = 1.00,
-        /// k_S, reduction factor in the slip area (paper Eq (10)).
+        /// k_S, reduction factor in the slip area (paper Eq (9)).
         k_s: f64 [1e-3, 100.0] = 0.40,
-        /// mu_0, maximum friction coefficient at zero slip velocity (paper Eq (12)).
+        /// mu_0, maximum friction coefficient at zero slip velocity (paper Eq (11)).
         mu_0: f64 [1e-3, 2.0] = 0.55,
-        /// A = mu_inf / mu_0, friction at infinite over zero slip velocity (paper Eq (12)).
+        /// A = mu_inf / mu_0, friction at infinite over zero slip velocity (paper Eq (11)).
         a_ratio: f64 [0.0, 1.0] = 0.40,
-        /// B, exponential friction decrease with slip velocity, s/m (paper Eq (12)).
+        /// B, exponential friction decrease with slip velocity, s/m (paper Eq (11)).
         b_exp: f64 [0.0, 100.0] = 0.60,
     }
 );
@@ -173,23 +173,23 @@ impl AdhesionSet {
 section!(
     /// `[contact]`: the wet set (paper Table 2), contact geometry, and `[contact.dry]`.
     ContactParams "contact" {
-        /// Wet-rail k_A (paper Table 2, Eq (10)).
+        /// Wet-rail k_A (paper Table 2, Eq (9)).
         k_a: f64 [1e-3, 100.0] = 0.30,
-        /// Wet-rail k_S (paper Table 2, Eq (10)).
+        /// Wet-rail k_S (paper Table 2, Eq (9)).
         k_s: f64 [1e-3, 100.0] = 0.10,
-        /// Wet-rail mu_0 (paper Table 2, Eq (12)).
+        /// Wet-rail mu_0 (paper Table 2, Eq (11)).
         mu_0: f64 [1e-3, 2.0] = 0.21,
-        /// Wet-rail A = mu_inf / mu_0 (paper Table 2, Eq (12)).
+        /// Wet-rail A = mu_inf / mu_0 (paper Table 2, Eq (11)).
         a_ratio: f64 [0.0, 1.0] = 0.40,
-        /// Wet-rail B, s/m (paper Table 2, Eq (12)).
+        /// Wet-rail B, s/m (paper Table 2, Eq (11)).
         b_exp: f64 [0.0, 100.0] = 0.20,
-        /// Contact ellipse half-axis a (longitudinal), m (paper Eq (11)).
+        /// Contact ellipse half-axis a (longitudinal), m (paper Eq (10)).
         semi_axis_a: f64 [1e-5, 0.1] = 6.0e-3,
-        /// Contact ellipse half-axis b (lateral), m (paper Eq (11)).
+        /// Contact ellipse half-axis b (lateral), m (paper Eq (10)).
         semi_axis_b: f64 [1e-5, 0.1] = 4.5e-3,
-        /// C, tangential contact stiffness per unit area, N/m^3 (paper Eq (11)).
+        /// C, tangential contact stiffness per unit area, N/m^3 (paper Eq (10)).
         shear_stiffness_c: f64 [1e9, 1e17] = 4.3e13,
-        /// Speed floor of the creepage s = (v - r w) / max(|v|, floor), m/s (paper Eq (9)).
+        /// Speed floor of the creepage s = (v - r w) / max(|v|, floor), m/s (paper Eq (12)).
         creep_speed_floor: f64 [1e-3, 10.0] = 0.1,
         /// `[contact.dry]`: the dry-rail set.
         dry: AdhesionSet = AdhesionSet::DRY,
@@ -284,13 +284,13 @@ section!(
 section!(
     /// `[thermal]`: paper Eqs (3)-(6), lumped disc energy balance per wheelset.
     ThermalParams "thermal" {
-        /// sigma_d, share of the braking power that heats the disc (paper Eq (3)).
+        /// sigma_d, share of the braking power that heats the disc (paper Eq (4)).
         heat_partition: f64 [0.0, 1.0] = 0.9,
-        /// m_disc, effective heated disc mass per wheelset, kg (paper Eq (3)).
+        /// m_disc, effective heated disc mass per wheelset, kg (paper Eq (6)).
         disc_mass: f64 [1.0, 1e4] = 80.0,
-        /// c_p, specific heat of the disc, J/(kg K) (paper Eq (3)).
+        /// c_p, specific heat of the disc, J/(kg K) (paper Eq (6)).
         specific_heat: f64 [10.0, 1e5] = 460.0,
-        /// alpha, conduction to the axle, W/K (paper Eq (4)).
+        /// alpha, conduction to the axle, W/K (paper Eq (5)).
         alpha: f64 [0.0, 1e6] = 50.0,
         /// beta, convection, W/(K (m/s)^0.8), with the wheel speed v_w = r omega (paper Eq (5)).
         beta: f64 [0.0, 1e6] = 10.0,

@@ -30,7 +30,7 @@ pub trait Real:
     fn of(x: f64) -> Self;
     /// The value as f64 (exact: every f32 is an f64).
     fn to_f64(self) -> f64;
-    /// e^self (paper Eqs (2), (12)).
+    /// e^self (paper Eqs (2), (11)).
     fn exp(self) -> Self;
     /// Natural logarithm.
     fn ln(self) -> Self;
