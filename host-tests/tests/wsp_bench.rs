@@ -415,6 +415,17 @@ fn degraded_adhesion_section_is_optional_and_checked() {
         format!("{err}").contains("degraded_adhesion.recovered_mu_ratio"),
         "{err}"
     );
+    // The conditioning ring (128 cells) must span the vehicle's 16.5 m from the first to
+    // the last wheelset with 8 cells to spare: 0.1375 m at least; 0.1 m cells (12.8 m)
+    // would let the trailing wheelsets' cells collide with the leading ones'.
+    let short = section.replace("cell_length_m = 0.5", "cell_length_m = 0.1");
+    let err = parse_params(&(reference.clone() + &short), "short").unwrap_err();
+    assert!(
+        format!("{err}").contains("degraded_adhesion.cell_length_m"),
+        "{err}"
+    );
+    let enough = section.replace("cell_length_m = 0.5", "cell_length_m = 0.14");
+    assert!(parse_params(&(reference.clone() + &enough), "enough").is_ok());
     let unknown = section.replace("enabled", "enable");
     assert!(parse_params(&(reference + &unknown), "unknown").is_err());
 }
