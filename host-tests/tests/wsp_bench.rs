@@ -429,3 +429,31 @@ fn degraded_adhesion_section_is_optional_and_checked() {
     let unknown = section.replace("enabled", "enable");
     assert!(parse_params(&(reference + &unknown), "unknown").is_err());
 }
+
+#[test]
+fn air_is_counted_on_the_valve_as_it_acts() {
+    // The command vents 0.50-1.00 s; the cylinder feels it 50 ms later and falls from 300
+    // to 100 kPa over 0.55-1.05 s. All 200 kPa leave through the dump valve: counted on the
+    // acting valve (the command misses the last 50 ms, a quarter of the drop).
+    let p = Params::default();
+    let adhesion = AvailableAdhesion::new(&p, &ContactSets::default());
+    let track = Track::uniform(Surface::Dry);
+    let mut t = hand_made_trace();
+    for k in 0..t.t_s.len() {
+        let time = t.t_s[k];
+        t.venting[2][k] = (0.5..1.0).contains(&time);
+        t.p_cyl_pa[2][k] = 300e3 - 200e3 * ((time - 0.55) / 0.5).clamp(0.0, 1.0);
+        for j in 0..4 {
+            let acting = t.venting[j][k.saturating_sub(50)] && k >= 50;
+            t.acting_vent[j].push(acting);
+        }
+    }
+    let c = Criteria::default();
+    let v = judge("acting", &t, &allowed(&adhesion, &track, 1.0), &c);
+    let air = c.channel_volume_l * 200e3 / 101_325.0;
+    assert!(
+        (v.air_consumption_l / air - 1.0).abs() < 0.01,
+        "{} vs {air}",
+        v.air_consumption_l
+    );
+}

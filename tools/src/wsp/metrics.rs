@@ -45,6 +45,9 @@ pub struct Trace {
     pub p_cyl_pa: [Vec<f64>; 4],
     /// WSP vent command per wheelset.
     pub venting: [Vec<bool>; 4],
+    /// Whether each wheelset's dump valve vents the cylinder, as it acts (the command of one
+    /// dead time ago; empty when not logged: the command is used).
+    pub acting_vent: [Vec<bool>; 4],
     /// WSP hold command per wheelset (empty when not logged).
     pub holding: [Vec<bool>; 4],
     /// Friction factor of each wheelset's contact (degraded adhesion that recovers; empty
@@ -335,14 +338,20 @@ fn timer_actions_of(trace: &Trace, j: usize, timer_s: f64) -> u32 {
     actions
 }
 
-/// Free air vented from wheelset `j`'s channel, litres at atmospheric pressure.
+/// Free air vented from wheelset `j`'s channel, litres at atmospheric pressure: pressure
+/// falls while the dump valve vents as it acts (else as commanded).
 fn air_of(trace: &Trace, j: usize, channel_volume_l: f64) -> f64 {
     let p = &trace.p_cyl_pa[j];
     if p.len() != trace.t_s.len() {
         return 0.0;
     }
+    let vents = if trace.acting_vent[j].len() == p.len() {
+        &trace.acting_vent[j]
+    } else {
+        &trace.venting[j]
+    };
     (1..p.len())
-        .filter(|&k| trace.venting[j].get(k).copied().unwrap_or(false) && p[k] < p[k - 1])
+        .filter(|&k| vents.get(k).copied().unwrap_or(false) && p[k] < p[k - 1])
         .map(|k| channel_volume_l * (p[k - 1] - p[k]) / P_ATM_PA)
         .sum()
 }

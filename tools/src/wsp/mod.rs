@@ -83,6 +83,7 @@ pub fn simulate(run: &Run) -> Result<(Trace, Vec<[Surface; 4]>)> {
         let done = rule.observe(steps, out.vehicle_speed);
         if steps % RECORD_EVERY == 0 || done {
             let u = sim.unit_outputs();
+            let acting = sim.unit.acting_valves();
             trace.t_s.push(steps as f64 * dt);
             trace.v_mps.push(out.vehicle_speed as f64);
             trace.x_m.push(out.distance as f64);
@@ -91,6 +92,7 @@ pub fn simulate(run: &Run) -> Result<(Trace, Vec<[Surface; 4]>)> {
                 trace.p_cyl_pa[j].push(u.cylinder_pressure[j] as f64);
                 trace.venting[j].push(u.valves[j] == Valve::Vent);
                 trace.holding[j].push(u.valves[j] == Valve::Hold);
+                trace.acting_vent[j].push(acting[j] == Valve::Vent);
                 trace.mu_factor[j].push(sim.plant.track().contact(j).1 as f64);
             }
             surfaces.push(sim.plant.track().surfaces());
