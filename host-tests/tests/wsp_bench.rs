@@ -222,13 +222,23 @@ fn metrics_of_a_hand_made_trace() {
     );
 }
 
+/// Judges `t` on a dry rail, 1 m/s^2 demand, default criteria.
+fn judge_on_dry(t: &Trace) -> hils::wsp::metrics::Verdict {
+    let p = Params::default();
+    let adhesion = AvailableAdhesion::new(&p, &ContactSets::default());
+    let track = Track::uniform(Surface::Dry);
+    judge(
+        "dry",
+        t,
+        &allowed(&adhesion, &track, 1.0),
+        &Criteria::default(),
+    )
+}
+
 #[test]
 fn utilisation_counts_speed_rises() {
     // A trace that loses 1 m/s^2 but gains 5 m/s for 1 s in the middle (speed signal
     // jump): the speed actually lost is v(start) - v(end), rises included.
-    let p = Params::default();
-    let adhesion = AvailableAdhesion::new(&p, &ContactSets::default());
-    let track = Track::uniform(Surface::Dry);
     let mut t = hand_made_trace();
     for k in 0..t.v_mps.len() {
         if (10.0..11.0).contains(&t.t_s[k]) {
@@ -237,12 +247,7 @@ fn utilisation_counts_speed_rises() {
             t.v_mps[k] = (t.v_mps[k] + 5.0).max(0.0);
         }
     }
-    let v = judge(
-        "rise",
-        &t,
-        &allowed(&adhesion, &track, 1.0),
-        &Criteria::default(),
-    );
+    let v = judge_on_dry(&t);
     // The window runs from the response (0.55 s) to the trace's end (20 s, at 5 m/s, no
     // stop): lost 19.45 - 5 = 14.45 m/s over 19.45 s of 1 m/s^2 (dropping the rise would
     // count 19.45 m/s lost instead).
@@ -435,9 +440,6 @@ fn air_is_counted_on_the_valve_as_it_acts() {
     // The command vents 0.50-1.00 s; the cylinder feels it 50 ms later and falls from 300
     // to 100 kPa over 0.55-1.05 s. All 200 kPa leave through the dump valve: counted on the
     // acting valve (the command misses the last 50 ms, a quarter of the drop).
-    let p = Params::default();
-    let adhesion = AvailableAdhesion::new(&p, &ContactSets::default());
-    let track = Track::uniform(Surface::Dry);
     let mut t = hand_made_trace();
     for k in 0..t.t_s.len() {
         let time = t.t_s[k];
@@ -448,9 +450,8 @@ fn air_is_counted_on_the_valve_as_it_acts() {
             t.acting_vent[j].push(acting);
         }
     }
-    let c = Criteria::default();
-    let v = judge("acting", &t, &allowed(&adhesion, &track, 1.0), &c);
-    let air = c.channel_volume_l * 200e3 / 101_325.0;
+    let v = judge_on_dry(&t);
+    let air = Criteria::default().channel_volume_l * 200e3 / 101_325.0;
     assert!(
         (v.air_consumption_l / air - 1.0).abs() < 0.01,
         "{} vs {air}",
