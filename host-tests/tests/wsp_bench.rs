@@ -60,6 +60,11 @@ fn allowed_distance_matches_the_closed_form_when_the_demand_limits() {
 /// Peak of F/Q over creepage of `surface` at `v`, found by golden-section search (an
 /// independent check of the bench's grid table).
 fn peak_adhesion(p: &Params, surface: Surface, v: f64) -> f64 {
+    peak_of(p, surface, v).0
+}
+
+/// Peak of F/Q over creepage and the creepage of the peak (golden-section search).
+fn peak_of(p: &Params, surface: Surface, v: f64) -> (f64, f64) {
     let sets = ContactSets::default();
     let polach = Polach::<f64>::with_set(&p.contact, &sets.set(&p.contact, surface));
     let q = p.total_mass() * p.vehicle.g / 4.0;
@@ -70,7 +75,7 @@ fn peak_adhesion(p: &Params, surface: Surface, v: f64) -> f64 {
         let (a, b) = (hi - r * (hi - lo), lo + r * (hi - lo));
         if f(a) < f(b) { lo = a } else { hi = b }
     }
-    f(0.5 * (lo + hi))
+    (f(0.5 * (lo + hi)), 0.5 * (lo + hi))
 }
 
 #[test]
@@ -457,4 +462,47 @@ fn air_is_counted_on_the_valve_as_it_acts() {
         "{} vs {air}",
         v.air_consumption_l
     );
+}
+
+#[test]
+fn slide_onset_is_creep_beyond_the_adhesion_peak() {
+    // Low rail, 20 m/s: from 2 s wheelset 1 creeps at 1.3 times the creepage of the curve's
+    // peak (sliding: beyond the peak), wheelset 2 at 0.7 times (before the peak: no slide).
+    // Both deficits are below the unit's own max(0.8 m/s, 6 % v) threshold, so the bench's onset
+    // is independent of them.
+    let p = Params::default();
+    let adhesion = AvailableAdhesion::new(&p, &ContactSets::default());
+    let track = Track::uniform(Surface::Low);
+    let (_, s_peak) = peak_of(&p, Surface::Low, 20.0);
+    assert!(
+        1.3 * s_peak * 20.0 < (0.06f64 * 20.0).max(0.8),
+        "peak creep {s_peak}"
+    );
+    let mut t = Trace::default();
+    for k in 0..4000 {
+        let time = k as f64 * 1e-3;
+        t.t_s.push(time);
+        t.v_mps.push(20.0);
+        t.x_m.push(20.0 * time);
+        for j in 0..4 {
+            let creep = match j {
+                0 if time >= 2.0 => 1.3 * s_peak,
+                1 if time >= 2.0 => 0.7 * s_peak,
+                _ => 0.0,
+            };
+            t.wheel_mps[j].push(20.0 * (1.0 - creep));
+        }
+    }
+    let v = judge(
+        "creep",
+        &t,
+        &allowed(&adhesion, &track, 1.0),
+        &Criteria::default(),
+    );
+    assert!(
+        (v.slide_onset_s[0].expect("slides") - 2.0).abs() < 2e-3,
+        "{:?}",
+        v.slide_onset_s
+    );
+    assert_eq!(v.slide_onset_s[1..], [None, None, None]);
 }

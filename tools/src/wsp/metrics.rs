@@ -19,7 +19,8 @@
 //! * **Locks**: a wheelset is locked while its speed is below `lock_speed_ratio` of the
 //!   vehicle speed (v > `min_speed_mps`); longest lock per wheelset, number of locks.
 //! * **WSP timer actions**: continuous vents of `wsp_timer_s` or longer.
-//! * **Slide onsets**: first time a wheelset's deficit exceeds max(0.8 m/s, 6 % v).
+//! * **Slide onsets**: first time a wheelset's creepage exceeds the creepage at which the
+//!   adhesion under it peaks (beyond the peak of the curve the wheel slides).
 
 use hils_plant::contact::Polach;
 use hils_plant::track::ContactSets;
@@ -80,35 +81,53 @@ impl Trace {
     }
 }
 
-/// Available adhesion of each surface as a function of speed (1 m/s grid).
+/// Available adhesion of each surface as a function of speed (1 m/s grid): the peak of
+/// F/Q over creepage and the creepage where it peaks.
 pub struct AvailableAdhesion {
     table: [Vec<f64>; 4],
+    peak_creep: [Vec<f64>; 4],
 }
 
 impl AvailableAdhesion {
     pub fn new(params: &Params, sets: &ContactSets) -> Self {
         let q = params.total_mass() * params.vehicle.g / 4.0;
-        let table = Surface::ALL.map(|s| {
+        let peaks = Surface::ALL.map(|s| {
             let polach = Polach::<f64>::with_set(&params.contact, &sets.set(&params.contact, s));
             (0..=120)
                 .map(|v| {
                     let v = (v as f64).max(0.5);
                     (1..400)
-                        .map(|i| polach.adhesion_coefficient(i as f64 * 5e-4, v, q))
-                        .fold(0.0, f64::max)
+                        .map(|i| {
+                            let creep = i as f64 * 5e-4;
+                            (polach.adhesion_coefficient(creep, v, q), creep)
+                        })
+                        .fold((0.0, 0.0), |m, c| if c.0 > m.0 { c } else { m })
                 })
-                .collect()
+                .collect::<Vec<(f64, f64)>>()
         });
-        Self { table }
+        Self {
+            table: peaks.clone().map(|p| p.iter().map(|c| c.0).collect()),
+            peak_creep: peaks.map(|p| p.iter().map(|c| c.1).collect()),
+        }
     }
 
-    /// Peak adhesion coefficient of `surface` at speed `v` (m/s).
-    pub fn at(&self, surface: Surface, v: f64) -> f64 {
-        let t = &self.table[surface as usize];
+    /// Linear interpolation of a 1 m/s table at `v`.
+    fn interpolate(t: &[f64], v: f64) -> f64 {
         let x = v.clamp(0.0, (t.len() - 1) as f64);
         let i = (x.floor() as usize).min(t.len() - 2);
         let f = x - i as f64;
         t[i] * (1.0 - f) + t[i + 1] * f
+    }
+
+    /// Peak adhesion coefficient of `surface` at speed `v` (m/s).
+    pub fn at(&self, surface: Surface, v: f64) -> f64 {
+        Self::interpolate(&self.table[surface as usize], v)
+    }
+
+    /// Creepage at which the adhesion of `surface` peaks at speed `v` (m/s): beyond it a
+    /// wheel slides (less force for more creep).
+    pub fn peak_creep(&self, surface: Surface, v: f64) -> f64 {
+        Self::interpolate(&self.peak_creep[surface as usize], v)
     }
 
     /// Mean available adhesion of the four wheelsets with the leading one at `x` (m).
@@ -288,8 +307,15 @@ pub struct Criterion {
 }
 
 /// Longest lock, lock count and slide onset of wheelset `j` (a lock still on at the end
-/// counts to the last sample).
-fn locks_of(trace: &Trace, j: usize, c: &Criteria) -> (f64, u32, Option<f64>) {
+/// counts to the last sample). The slide onset is the first time the wheelset's creepage
+/// (v - w) / v exceeds the creepage at which the adhesion under it peaks (independent of
+/// the unit's own slide thresholds).
+fn locks_of(
+    trace: &Trace,
+    j: usize,
+    allowed: &AllowedStop,
+    c: &Criteria,
+) -> (f64, u32, Option<f64>) {
     let (mut longest, mut count, mut onset) = (0.0f64, 0u32, None);
     let mut start: Option<f64> = None;
     for k in 1..trace.t_s.len() {
@@ -308,8 +334,11 @@ fn locks_of(trace: &Trace, j: usize, c: &Criteria) -> (f64, u32, Option<f64>) {
             (true, Some(s)) => longest = longest.max(t - s),
             _ => {}
         }
-        if onset.is_none() && active && v - w > (0.06 * v).max(0.8) {
-            onset = Some(t);
+        if onset.is_none() && active {
+            let surface = allowed.track.surface_at(trace.x_m[k] + allowed.offsets[j]);
+            if (v - w) / v > allowed.adhesion.peak_creep(surface, v) {
+                onset = Some(t);
+            }
         }
     }
     (longest, count, onset)
@@ -399,7 +428,7 @@ pub fn judge(name: &str, trace: &Trace, allowed: &AllowedStop, c: &Criteria) -> 
     let mut timer = 0u32;
     let mut air_l = 0.0;
     for j in 0..4 {
-        (max_lock[j], locks[j], onsets[j]) = locks_of(trace, j, c);
+        (max_lock[j], locks[j], onsets[j]) = locks_of(trace, j, allowed, c);
         timer += timer_actions_of(trace, j, c.wsp_timer_s);
         air_l += air_of(trace, j, c.channel_volume_l);
     }
