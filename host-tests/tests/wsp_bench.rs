@@ -351,18 +351,39 @@ fn default_programme_no_stop_beats_the_adhesion() {
     let runs = programme.runs(&ParamFile::default()).unwrap();
     assert!(runs.len() >= 6);
     for run in runs {
-        let name = run.name.clone();
-        let o = hils::wsp::run_one(run, &programme.criteria).unwrap();
-        let v = &o.verdict;
-        let ratio = v.distance_ratio.expect("stops");
-        // The allowed distance is that of a perfect WSP: the simulated one (its brake
-        // response included) cannot stop much shorter, and a working WSP stays close.
-        assert!(ratio > 1.0 && ratio < 2.0, "{name}: ratio {ratio}");
-        assert!(
-            v.adhesion_utilisation > 0.5 && v.adhesion_utilisation < 1.05,
-            "{name}: {}",
-            v.adhesion_utilisation
-        );
+        no_stop_beats_the_adhesion(run, &programme.criteria);
+    }
+}
+
+/// The allowed distance is that of a perfect WSP: the simulated one (its brake response
+/// included) cannot stop shorter, and it cannot use more than all the adhesion.
+fn no_stop_beats_the_adhesion(run: hils::wsp::programme::Run, criteria: &Criteria) {
+    let name = run.name.clone();
+    let o = hils::wsp::run_one(run, criteria).unwrap();
+    let v = &o.verdict;
+    let ratio = v.distance_ratio.expect("stops");
+    assert!(ratio > 1.0 && ratio < 2.0, "{name}: ratio {ratio}");
+    assert!(
+        v.adhesion_utilisation > 0.5 && v.adhesion_utilisation <= 1.0,
+        "{name}: {}",
+        v.adhesion_utilisation
+    );
+}
+
+#[test]
+fn with_rail_cleaning_the_reference_is_the_cleaned_adhesion() {
+    // [degraded_adhesion] on: the sliding wheelsets clean the rail and the stops shorten
+    // (13-28 %). Judged against the uncleaned adhesion the ratios fell below 1 and the
+    // utilisation above 1 (the bench measured the cleaning, not the WSP); against the
+    // adhesion each wheelset actually had (logged friction factors) the WSP still cannot
+    // beat a perfect one.
+    let programme = Programme::load(&programme_path()).unwrap();
+    let mut file = ParamFile::default();
+    file.degraded_adhesion.enabled = true;
+    let runs = programme.runs(&file).unwrap();
+    for name in ["low-eb-120", "very-low-eb-60"] {
+        let run = runs.iter().find(|r| r.name == name).unwrap().clone();
+        no_stop_beats_the_adhesion(run, &programme.criteria);
     }
 }
 
