@@ -4,21 +4,22 @@
 //! * **Stopping distance**: carbody distance from the brake command (t = 0) to standstill.
 //! * **Allowed distance** (in the spirit of CEN/TR 17315, which judges WSP by the stopping
 //!   distance against the one the available adhesion permits): a point-mass stop from the
-//!   same speed in which the brake acts after the unit's response time t_r (dead time + fill
-//!   time constant: the delay of a first-order build-up) and then decelerates at each
-//!   position at min(a_demand, g mu_avail(x) M / M_eff), mu_avail(x) the available
-//!   adhesion (peak of F/Q over creepage, at the current speed) of the surface under each
-//!   wheelset, averaged over the four. Running resistance is left out (the allowed distance
-//!   is that of a perfect WSP on the same rail).
+//!   same speed of a perfect WSP ([`AllowedStop`]): the demand builds up behind the dead
+//!   time as a_d (1 - exp(-(t - t_d)/tau)) and is capped at g mu_avail, mu_avail the mean
+//!   over the wheelsets of the available adhesion (peak of F/Q over creepage at the current
+//!   speed) of the surface under each, times its logged friction factor when the rail
+//!   recovers. Rail forces decelerate the moving mass M, so the cap is g mu (not
+//!   g mu M/M_eff). The plant's Davis resistance and gradient are added.
 //! * **Distance ratio** = stopping / allowed distance; pass if <= `max_distance_ratio`.
-//! * **Adhesion utilisation** = the deceleration achieved over the deceleration the
-//!   available adhesion allows, time-averaged while v > `min_speed_mps` and the brake acts:
-//!   integral(a) / integral(g mu_avail M / M_eff).
+//! * **Adhesion utilisation**: from the equivalent response time t_d + tau to the stop, the
+//!   speed lost over the integral of min(a_demand, g mu_avail) + resistance.
 //! * **Air consumption**: free air vented by the WSP dump valves, litres at atmospheric
-//!   pressure (isothermal): sum over vent samples of V_cyl (p[k-1] - p[k]) / p_atm.
+//!   pressure (isothermal): sum of V_channel (p[k-1] - p[k]) / p_atm while the dump valve
+//!   vents as it acts (else as commanded).
 //! * **Locks**: a wheelset is locked while its speed is below `lock_speed_ratio` of the
 //!   vehicle speed (v > `min_speed_mps`); longest lock per wheelset, number of locks.
-//! * **WSP timer actions**: continuous vents of `wsp_timer_s` or longer.
+//! * **WSP timer actions**: continuous WSP action (vent or hold) of the unit's timer or
+//!   longer, one open at the end of the trace included.
 //! * **Slide onsets**: first time a wheelset's creepage exceeds the creepage at which the
 //!   adhesion under it peaks (beyond the peak of the curve the wheel slides).
 
