@@ -452,6 +452,12 @@ impl<F: Real> BrakeUnit<F> {
         self.eb_pressure
     }
 
+    /// The valve states acting on the cylinders now: the commands of one dead time ago
+    /// (what the cylinder pressures follow; [`UnitOutputs::valves`] are the commands).
+    pub fn acting_valves(&self) -> [Valve; WHEELSETS] {
+        self.acting_valves
+    }
+
     /// Time of each wheelset's first WSP vent command since the unit started, s.
     pub fn first_vent_time(&self) -> [Option<f64>; WHEELSETS] {
         let period = self.cycle_s;

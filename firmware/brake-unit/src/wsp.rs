@@ -35,9 +35,10 @@
 //! **Bounds.** A wheel is *locked* while v_j < `lock_ratio` v_ref. A locked wheel always
 //! vents (no hold), so lock ends as soon as the vented pressure lets the adhesion spin it
 //! up: with the reference brake unit (dead time 50 ms, vent lag 150 ms) a lock lasts well
-//! under 0.4 s (the tests measure it). Continuous venting is limited to `vent_max`
-//! (EN 15595's WSP timer): after it the valve returns to `Apply` and the channel may not
-//! vent for `hold_max`, so that a faulty WSP cannot release a brake indefinitely. Below
+//! under 0.4 s (the tests measure it). Continuous WSP action (vent and hold together: the
+//! brake not applied) is limited to `vent_max` (EN 15595's WSP timer): after it the valve
+//! returns to `Apply` and the channel may not act for `hold_max`, so that a faulty WSP
+//! cannot release a brake indefinitely, not even by cycling vent and hold. Below
 //! `min_speed` the WSP is inhibited (`Apply`).
 
 use hils_plant::Real;
@@ -82,7 +83,7 @@ pub struct WspTuning {
     pub caught_up_accel: f64,
     /// A wheel below this share of the reference speed is locked.
     pub lock_ratio: f64,
-    /// Longest continuous vent, s (EN 15595 WSP timer).
+    /// Longest continuous WSP action (vent and hold), s (EN 15595 WSP timer).
     pub vent_max: f64,
     /// Longest hold, s.
     pub hold_max: f64,
@@ -232,6 +233,9 @@ pub struct WspChannel<F> {
     initialised: bool,
     /// Cycles spent in the current valve state.
     cycles_in_state: u32,
+    /// Cycles of continuous WSP action (vent or hold: the brake not applied), for the WSP
+    /// timer; 0 while the valve applies.
+    released_cycles: u32,
     /// Cycles left during which the channel may not vent (after the vent timer expired).
     inhibit_cycles: u32,
 }
@@ -259,6 +263,13 @@ impl<F: Real> WspChannel<F> {
         let next = if !(v_ref > k.min_speed) || self.inhibit_cycles > 0 {
             self.inhibit_cycles = self.inhibit_cycles.saturating_sub(1);
             Valve::Apply
+        } else if self.valve != Valve::Apply && self.released_cycles >= k.vent_max_cycles {
+            // WSP timer: vent and hold together have kept the brake off for `vent_max`
+            // (a Vent -> Hold -> Vent cycle does not restart it). Give the brake back and do
+            // not act again for `hold_max`, so a slide that never clears cannot keep the
+            // brake off.
+            self.inhibit_cycles = k.hold_max_cycles;
+            Valve::Apply
         } else {
             match self.valve {
                 Valve::Apply => {
@@ -269,12 +280,7 @@ impl<F: Real> WspChannel<F> {
                     }
                 }
                 Valve::Vent => {
-                    if self.cycles_in_state >= k.vent_max_cycles {
-                        // WSP timer: give the brake back, and do not vent again for
-                        // `hold_max`, so a slide that never clears cannot keep the brake off.
-                        self.inhibit_cycles = k.hold_max_cycles;
-                        Valve::Apply
-                    } else if self.accel > k.recover_accel && !locked {
+                    if self.accel > k.recover_accel && !locked {
                         Valve::Hold
                     } else {
                         Valve::Vent
@@ -298,6 +304,11 @@ impl<F: Real> WspChannel<F> {
                     }
                 }
             }
+        };
+        self.released_cycles = if next == Valve::Apply {
+            0
+        } else {
+            self.released_cycles.saturating_add(1)
         };
         if next == self.valve {
             self.cycles_in_state = self.cycles_in_state.saturating_add(1);

@@ -58,3 +58,50 @@ fn cylinder_pressure_reaches_the_demand_in_f32() {
         "gap {gap} Pa at {target} Pa"
     );
 }
+
+/// Review of issue 13: the WSP timer counted only one continuous vent, so a channel that
+/// cycles Vent -> Hold -> Vent (a wheel that spins up, then locks again) kept the brake off
+/// indefinitely. The timer exists so that WSP action, vent or hold, cannot release the
+/// brake for longer than `vent_max`: after it the channel applies and stays applied for
+/// `hold_max`.
+#[test]
+fn vent_hold_cycles_cannot_keep_the_brake_off_past_the_wsp_timer() {
+    use hils_brake_unit::wsp::{ReferenceSpeed, WspChannel, WspConstants};
+    let tuning = hils_brake_unit::WspTuning::default();
+    let dt = 1e-3;
+    let k = WspConstants::<f64>::new(&tuning, dt);
+    let mut reference = ReferenceSpeed::default();
+    let mut channel = WspChannel::default();
+    let (mut first_action, mut first_apply_after, mut states) = (None, None, [0u32; 3]);
+    for cycle in 0..10_000 {
+        let t = cycle as f64 * dt;
+        // Vehicle at 30 m/s (the other wheels); this wheel: 0.55 s periods of spinning up
+        // from 16 to 18 m/s (not locked, accelerating: hold) then 50 ms locked at 10 m/s
+        // (vent).
+        let phase = t % 0.55;
+        let v = if phase < 0.5 {
+            16.0 + 4.0 * phase
+        } else {
+            10.0
+        };
+        reference.update(&k, &[30.0, v, 30.0, 30.0]);
+        let valve = channel.update(&k, v, &reference);
+        states[valve as usize] += 1;
+        match (valve, first_action, first_apply_after) {
+            (Valve::Apply, Some(_), None) => first_apply_after = Some(t),
+            (Valve::Vent | Valve::Hold, None, _) => first_action = Some(t),
+            _ => {}
+        }
+    }
+    // The channel does cycle vent and hold (the case of the defect) ...
+    assert!(states[1] > 1000 && states[2] > 100, "{states:?}");
+    // ... and the timer gives the brake back vent_max after the first action.
+    let (start, apply) = (
+        first_action.unwrap(),
+        first_apply_after.expect("never applied"),
+    );
+    assert!(
+        (apply - start - tuning.vent_max).abs() < 2.0 * dt,
+        "applied {apply} s after action from {start} s"
+    );
+}

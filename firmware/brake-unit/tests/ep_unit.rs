@@ -122,3 +122,41 @@ fn wsp_reapplies_in_pulses() {
         "{steps_flat} {steps_rising}"
     );
 }
+
+/// Cycles until the pilot stays within `tol` Pa of `low` after rising to `high` and
+/// settling there (a reversal of the valve's motion).
+fn settling_after_reversal(compensate: bool, high: f64, low: f64, tol: f64) -> (usize, f64) {
+    let mut params = BrakeUnitParams::default();
+    params.ep_hysteresis_compensation = compensate;
+    let k = EpConstants::<f64>::new(&params, 1e-3, 500e3);
+    let mut ep = EpValve::default();
+    for _ in 0..5000 {
+        ep.update(&k, high);
+    }
+    let before = ep.pilot();
+    let mut last_out = 0;
+    for n in 0..20_000 {
+        if (ep.update(&k, low) - low).abs() > tol {
+            last_out = n + 1;
+        }
+    }
+    (last_out, before)
+}
+
+#[test]
+fn hysteresis_compensation_acts_on_a_reversal() {
+    // Rising to 300 kPa, then falling to 150 kPa: the valve's output must cross its whole
+    // play h (15 kPa) before it moves down. The compensation switches its +h/2 to -h/2 with
+    // the direction, so the pilot settles as fast as on the way up; the plain PI winds its
+    // integral through the play first.
+    for (high, low) in [(300e3, 150e3), (200e3, 190e3)] {
+        let (with, before) = settling_after_reversal(true, high, low, 500.0);
+        let (without, _) = settling_after_reversal(false, high, low, 500.0);
+        assert!(
+            (before - high).abs() < 500.0,
+            "did not settle at {high}: {before}"
+        );
+        assert!(with < 400, "{high} -> {low}: {with} cycles");
+        assert!(without > with, "{high} -> {low}: {without} vs {with}");
+    }
+}

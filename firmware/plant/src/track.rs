@@ -345,7 +345,25 @@ impl DegradedAdhesionParams {
             10.0,
         )
     }
+
+    /// Checks that the conditioning ring spans a vehicle whose wheelsets lie `span_m` (m)
+    /// apart (first to last), with [`RING_MARGIN_CELLS`] cells to spare: below, a trailing
+    /// wheelset's cell would share its slot with a leading one's and reset it (tag
+    /// collision), silently losing the conditioning. The error names the key.
+    pub fn validate_span(&self, span_m: f64) -> Result<(), ParamError> {
+        let shortest = span_m / (CELLS - RING_MARGIN_CELLS) as f64;
+        check(
+            "degraded_adhesion.cell_length_m",
+            self.cell_length_m,
+            shortest.max(0.05),
+            10.0,
+        )
+    }
 }
+
+/// Cells of the conditioning ring beyond the vehicle's span (the leading wheelset may move
+/// a few cells per refresh).
+pub const RING_MARGIN_CELLS: usize = 8;
 
 /// The track as the plant steps it: one Polach model per surface, each wheelset's surface
 /// and its recovery state.

@@ -87,6 +87,9 @@ impl<F: Real> ClosedLoop<F> {
         sets: &ContactSets,
     ) -> Result<(), ParamError> {
         let step_s = file.scenario.paper_eb.step_s;
+        let v = &file.plant.vehicle;
+        file.degraded_adhesion
+            .validate_span(v.bogie_base + v.wheel_base)?;
         let adhesion = TrackAdhesion::new(
             &file.plant.contact,
             sets,

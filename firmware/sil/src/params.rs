@@ -100,6 +100,9 @@ impl ParamFile {
         self.plant.validate()?;
         self.brake_unit.validate()?;
         self.degraded_adhesion.validate()?;
+        let v = &self.plant.vehicle;
+        self.degraded_adhesion
+            .validate_span(v.bogie_base + v.wheel_base)?;
         self.scenario.validate()
     }
 

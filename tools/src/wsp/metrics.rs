@@ -4,22 +4,24 @@
 //! * **Stopping distance**: carbody distance from the brake command (t = 0) to standstill.
 //! * **Allowed distance** (in the spirit of CEN/TR 17315, which judges WSP by the stopping
 //!   distance against the one the available adhesion permits): a point-mass stop from the
-//!   same speed in which the brake acts after the unit's response time t_r (dead time + fill
-//!   time constant: the delay of a first-order build-up) and then decelerates at each
-//!   position at min(a_demand, g mu_avail(x) M / M_eff), mu_avail(x) the available
-//!   adhesion (peak of F/Q over creepage, at the current speed) of the surface under each
-//!   wheelset, averaged over the four. Running resistance is left out (the allowed distance
-//!   is that of a perfect WSP on the same rail).
+//!   same speed of a perfect WSP ([`AllowedStop`]): the demand builds up behind the dead
+//!   time as a_d (1 - exp(-(t - t_d)/tau)) and is capped at g mu_avail, mu_avail the mean
+//!   over the wheelsets of the available adhesion (peak of F/Q over creepage at the current
+//!   speed) of the surface under each, times its logged friction factor when the rail
+//!   recovers. Rail forces decelerate the moving mass M, so the cap is g mu (not
+//!   g mu M/M_eff). The plant's Davis resistance and gradient are added.
 //! * **Distance ratio** = stopping / allowed distance; pass if <= `max_distance_ratio`.
-//! * **Adhesion utilisation** = the deceleration achieved over the deceleration the
-//!   available adhesion allows, time-averaged while v > `min_speed_mps` and the brake acts:
-//!   integral(a) / integral(g mu_avail M / M_eff).
+//! * **Adhesion utilisation**: from the equivalent response time t_d + tau to the stop, the
+//!   speed lost over the integral of min(a_demand, g mu_avail) + resistance.
 //! * **Air consumption**: free air vented by the WSP dump valves, litres at atmospheric
-//!   pressure (isothermal): sum over vent samples of V_cyl (p[k-1] - p[k]) / p_atm.
+//!   pressure (isothermal): sum of V_channel (p[k-1] - p[k]) / p_atm while the dump valve
+//!   vents as it acts (else as commanded).
 //! * **Locks**: a wheelset is locked while its speed is below `lock_speed_ratio` of the
 //!   vehicle speed (v > `min_speed_mps`); longest lock per wheelset, number of locks.
-//! * **WSP timer actions**: continuous vents of `wsp_timer_s` or longer.
-//! * **Slide onsets**: first time a wheelset's deficit exceeds max(0.8 m/s, 6 % v).
+//! * **WSP timer actions**: continuous WSP action (vent or hold) of the unit's timer or
+//!   longer, one open at the end of the trace included.
+//! * **Slide onsets**: first time a wheelset's creepage exceeds the creepage at which the
+//!   adhesion under it peaks (beyond the peak of the curve the wheel slides).
 
 use hils_plant::contact::Polach;
 use hils_plant::track::ContactSets;
@@ -45,40 +47,88 @@ pub struct Trace {
     pub p_cyl_pa: [Vec<f64>; 4],
     /// WSP vent command per wheelset.
     pub venting: [Vec<bool>; 4],
+    /// Whether each wheelset's dump valve vents the cylinder, as it acts (the command of one
+    /// dead time ago; empty when not logged: the command is used).
+    pub acting_vent: [Vec<bool>; 4],
+    /// WSP hold command per wheelset (empty when not logged).
+    pub holding: [Vec<bool>; 4],
+    /// Friction factor of each wheelset's contact (degraded adhesion that recovers; empty
+    /// when not logged, i.e. 1).
+    pub mu_factor: [Vec<f64>; 4],
     /// Resolution of the logged vehicle speed, m/s (0 for a simulated trace): a speed within
     /// it of the stop speed cannot be told from standstill.
     pub speed_resolution_mps: f64,
+    /// Samples of a log whose empty or non-finite cells were interpolated.
+    pub filled_samples: usize,
 }
 
-/// Available adhesion of each surface as a function of speed (1 m/s grid).
+impl Trace {
+    /// The logged friction factors, when every wheelset has one per sample.
+    pub fn mu_factors(&self) -> Option<MuFactors<'_>> {
+        let n = self.x_m.len();
+        self.mu_factor
+            .iter()
+            .all(|f| f.len() == n && n > 0)
+            .then_some(MuFactors {
+                x_m: &self.x_m,
+                factor: &self.mu_factor,
+            })
+    }
+
+    /// Whether wheelset `j`'s WSP acts (vent or hold) at sample `k`.
+    fn released(&self, j: usize, k: usize) -> bool {
+        self.venting[j].get(k).copied().unwrap_or(false)
+            || self.holding[j].get(k).copied().unwrap_or(false)
+    }
+}
+
+/// Available adhesion of each surface as a function of speed (1 m/s grid): the peak of
+/// F/Q over creepage and the creepage where it peaks.
 pub struct AvailableAdhesion {
     table: [Vec<f64>; 4],
+    peak_creep: [Vec<f64>; 4],
 }
 
 impl AvailableAdhesion {
     pub fn new(params: &Params, sets: &ContactSets) -> Self {
         let q = params.total_mass() * params.vehicle.g / 4.0;
-        let table = Surface::ALL.map(|s| {
+        let peaks = Surface::ALL.map(|s| {
             let polach = Polach::<f64>::with_set(&params.contact, &sets.set(&params.contact, s));
             (0..=120)
                 .map(|v| {
                     let v = (v as f64).max(0.5);
                     (1..400)
-                        .map(|i| polach.adhesion_coefficient(i as f64 * 5e-4, v, q))
-                        .fold(0.0, f64::max)
+                        .map(|i| {
+                            let creep = i as f64 * 5e-4;
+                            (polach.adhesion_coefficient(creep, v, q), creep)
+                        })
+                        .fold((0.0, 0.0), |m, c| if c.0 > m.0 { c } else { m })
                 })
-                .collect()
+                .collect::<Vec<(f64, f64)>>()
         });
-        Self { table }
+        Self {
+            table: peaks.clone().map(|p| p.iter().map(|c| c.0).collect()),
+            peak_creep: peaks.map(|p| p.iter().map(|c| c.1).collect()),
+        }
     }
 
-    /// Peak adhesion coefficient of `surface` at speed `v` (m/s).
-    pub fn at(&self, surface: Surface, v: f64) -> f64 {
-        let t = &self.table[surface as usize];
+    /// Linear interpolation of a 1 m/s table at `v`.
+    fn interpolate(t: &[f64], v: f64) -> f64 {
         let x = v.clamp(0.0, (t.len() - 1) as f64);
         let i = (x.floor() as usize).min(t.len() - 2);
         let f = x - i as f64;
         t[i] * (1.0 - f) + t[i + 1] * f
+    }
+
+    /// Peak adhesion coefficient of `surface` at speed `v` (m/s).
+    pub fn at(&self, surface: Surface, v: f64) -> f64 {
+        Self::interpolate(&self.table[surface as usize], v)
+    }
+
+    /// Creepage at which the adhesion of `surface` peaks at speed `v` (m/s): beyond it a
+    /// wheel slides (less force for more creep).
+    pub fn peak_creep(&self, surface: Surface, v: f64) -> f64 {
+        Self::interpolate(&self.peak_creep[surface as usize], v)
     }
 
     /// Mean available adhesion of the four wheelsets with the leading one at `x` (m).
@@ -97,35 +147,131 @@ pub fn wheelset_offsets(p: &Params) -> [f64; 4] {
     [0.0, -w, -b, -b - w]
 }
 
+/// Deceleration of the plant's running resistance and gradient (`[resistance]`,
+/// `[track]`): a(v) = (a + b v + c v^2) / M + g sin(atan(grade)), m/s^2 (the plant puts the
+/// Davis force on the carbody and the gradient on every body; M the moving mass).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Resistance {
+    /// Davis a / M, b / M, c / M (m/s^2, 1/s, 1/m).
+    pub davis_per_kg: [f64; 3],
+    /// g sin(atan(gradient)), m/s^2 (uphill positive).
+    pub g_along_mps2: f64,
+}
+
+impl Resistance {
+    /// The plant's resistance and gradient.
+    pub fn of(p: &Params) -> Self {
+        let m = p.total_mass();
+        let r = &p.resistance;
+        let grade = p.track.gradient_permille / 1000.0;
+        Self {
+            davis_per_kg: [
+                r.davis_a_n / m,
+                r.davis_b_n_per_mps / m,
+                r.davis_c_n_per_mps2 / m,
+            ],
+            g_along_mps2: p.vehicle.g * grade / (1.0 + grade * grade).sqrt(),
+        }
+    }
+
+    /// Deceleration at speed `v` (m/s > 0), m/s^2.
+    pub fn decel(&self, v: f64) -> f64 {
+        let [a, b, c] = self.davis_per_kg;
+        a + b * v + c * v * v + self.g_along_mps2
+    }
+}
+
+/// The friction factor 1 + (R - 1) lambda each wheelset had along the run (degraded
+/// adhesion that recovers), against the carbody distance.
+#[derive(Clone, Copy, Debug)]
+pub struct MuFactors<'a> {
+    pub x_m: &'a [f64],
+    pub factor: &'a [Vec<f64>; 4],
+}
+
+impl MuFactors<'_> {
+    /// Wheelset `j`'s factor when the vehicle was at `x` (the last sample before it).
+    pub fn at(&self, j: usize, x: f64) -> f64 {
+        let k = self.x_m.partition_point(|&xk| xk <= x).saturating_sub(1);
+        self.factor[j].get(k).copied().unwrap_or(1.0)
+    }
+}
+
 /// The stop a perfect WSP would make (module doc).
 pub struct AllowedStop<'a> {
     pub adhesion: &'a AvailableAdhesion,
     pub track: &'a Track,
     pub offsets: [f64; 4],
-    /// M / M_eff (rotating inertia).
-    pub mass_ratio: f64,
     pub g: f64,
+    /// Running resistance and gradient of the plant.
+    pub resistance: Resistance,
     pub demand_mps2: f64,
-    pub response_s: f64,
+    /// Brake response: the demand builds up as a_d (1 - exp(-(t - t_d) / tau)) after the
+    /// dead time t_d, s.
+    pub dead_time_s: f64,
+    /// Build-up time constant tau, s.
+    pub build_up_s: f64,
+    /// The adhesion actually available under each wheelset when the rail recovers
+    /// (degraded adhesion on): the curves' peaks times these factors. None: the rail does
+    /// not recover (factor 1).
+    pub mu_factor: Option<MuFactors<'a>>,
+    /// Whether the rail recovers (`[degraded_adhesion]` on): then the run can be judged
+    /// only with `mu_factor` (the reference would otherwise be the uncleaned adhesion).
+    pub recovers: bool,
 }
 
 impl AllowedStop<'_> {
-    /// Deceleration the adhesion allows at `x`, `v`.
+    /// Deceleration the adhesion allows at `x`, `v`: g times the mean over the wheelsets of
+    /// their available adhesion (rail force decelerates the moving mass M: a = sum mu_j Q_j
+    /// / M = g mean(mu_j) with Q_j = M g / 4).
     pub fn adhesion_decel(&self, x: f64, v: f64) -> f64 {
-        self.g * self.mass_ratio * self.adhesion.under_vehicle(self.track, &self.offsets, x, v)
+        let mu = (0..4)
+            .map(|j| {
+                let f = self.mu_factor.map_or(1.0, |m| m.at(j, x));
+                self.adhesion
+                    .at(self.track.surface_at(x + self.offsets[j]), v)
+                    * f
+            })
+            .sum::<f64>()
+            / 4.0;
+        self.g * mu
     }
 
-    /// Distance from `v0` (m/s), integrated at 1 ms.
+    /// The brake's share of the demand at `t` s after the command (0 before the dead time).
+    pub fn build_up(&self, t: f64) -> f64 {
+        if t <= self.dead_time_s {
+            0.0
+        } else if self.build_up_s <= 0.0 {
+            1.0
+        } else {
+            1.0 - (-(t - self.dead_time_s) / self.build_up_s).exp()
+        }
+    }
+
+    /// Brake deceleration a perfect WSP reaches at `t`, `x`, `v`: the demand as it builds
+    /// up, capped by the adhesion.
+    pub fn brake_decel(&self, t: f64, x: f64, v: f64) -> f64 {
+        (self.demand_mps2 * self.build_up(t)).min(self.adhesion_decel(x, v))
+    }
+
+    /// Equivalent response time t_d + tau (a step of the full demand at it stops in the
+    /// same distance on a demand-limited rail, up to a tau^2 term).
+    pub fn response_s(&self) -> f64 {
+        self.dead_time_s + self.build_up_s
+    }
+
+    /// Distance from `v0` (m/s), integrated at 1 ms (running resistance and gradient
+    /// included).
     pub fn distance(&self, v0: f64) -> f64 {
         let dt = 1e-3;
-        let mut x = v0 * self.response_s;
-        let mut v = v0;
+        let (mut x, mut v, mut t) = (0.0, v0, 0.0);
         while v > 0.0 {
-            let a = self.demand_mps2.min(self.adhesion_decel(x, v));
-            let v_new = (v - a * dt).max(0.0);
+            let a = self.brake_decel(t, x, v) + self.resistance.decel(v);
+            let v_new = (v - a * dt).clamp(0.0, v0.max(v));
             x += 0.5 * (v + v_new) * dt;
             v = v_new;
-            if x > 1e6 {
+            t += dt;
+            if x > 1e6 || t > 3600.0 {
                 break;
             }
         }
@@ -147,6 +293,8 @@ pub struct Verdict {
     pub lock_count: [u32; 4],
     pub wsp_timer_actions: u32,
     pub slide_onset_s: [Option<f64>; 4],
+    /// Samples of a log whose empty or non-finite cells were interpolated.
+    pub filled_samples: usize,
     pub stop_time_s: Option<f64>,
     /// Each criterion and whether it passed.
     pub criteria: Vec<Criterion>,
@@ -157,6 +305,114 @@ pub struct Verdict {
 pub struct Criterion {
     pub criterion: String,
     pub passed: bool,
+}
+
+/// Longest lock, lock count and slide onset of wheelset `j` (a lock still on at the end
+/// counts to the last sample). The slide onset is the first time the wheelset's creepage
+/// (v - w) / v exceeds the creepage at which the adhesion under it peaks (independent of
+/// the unit's own slide thresholds).
+fn locks_of(
+    trace: &Trace,
+    j: usize,
+    allowed: &AllowedStop,
+    c: &Criteria,
+) -> (f64, u32, Option<f64>) {
+    let (mut longest, mut count, mut onset) = (0.0f64, 0u32, None);
+    let mut start: Option<f64> = None;
+    for k in 1..trace.t_s.len() {
+        let (t, v, w) = (trace.t_s[k], trace.v_mps[k], trace.wheel_mps[j][k]);
+        let active = v > c.min_speed_mps;
+        let locked = active && w < c.lock_speed_ratio * v;
+        match (locked, start) {
+            (true, None) => {
+                start = Some(t);
+                count += 1;
+            }
+            (false, Some(s)) => {
+                longest = longest.max(t - s);
+                start = None;
+            }
+            (true, Some(s)) => longest = longest.max(t - s),
+            _ => {}
+        }
+        if onset.is_none() && active {
+            let surface = allowed.track.surface_at(trace.x_m[k] + allowed.offsets[j]);
+            if (v - w) / v > allowed.adhesion.peak_creep(surface, v) {
+                onset = Some(t);
+            }
+        }
+    }
+    (longest, count, onset)
+}
+
+/// WSP timer actions of wheelset `j`: continuous WSP action (vent or hold: the brake is
+/// not applied) of `wsp_timer_s` or longer, an action still on at the end included.
+fn timer_actions_of(trace: &Trace, j: usize, timer_s: f64) -> u32 {
+    let n = trace.t_s.len();
+    let mut actions = 0;
+    let mut start: Option<f64> = None;
+    for k in 0..n {
+        let t = trace.t_s[k];
+        match (trace.released(j, k), start) {
+            (true, None) => start = Some(t),
+            (false, Some(s)) => {
+                actions += u32::from(t - s >= timer_s - 1e-6);
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    if let (Some(s), Some(&end)) = (start, trace.t_s.last()) {
+        actions += u32::from(end - s >= timer_s - 1e-6);
+    }
+    actions
+}
+
+/// Free air vented from wheelset `j`'s channel, litres at atmospheric pressure: pressure
+/// falls while the dump valve vents as it acts (else as commanded).
+fn air_of(trace: &Trace, j: usize, channel_volume_l: f64) -> f64 {
+    let p = &trace.p_cyl_pa[j];
+    if p.len() != trace.t_s.len() {
+        return 0.0;
+    }
+    let vents = if trace.acting_vent[j].len() == p.len() {
+        &trace.acting_vent[j]
+    } else {
+        &trace.venting[j]
+    };
+    (1..p.len())
+        .filter(|&k| vents.get(k).copied().unwrap_or(false) && p[k] < p[k - 1])
+        .map(|k| channel_volume_l * (p[k - 1] - p[k]) / P_ATM_PA)
+        .sum()
+}
+
+/// Adhesion utilisation while the brake acts: from the equivalent response time to the
+/// stop (or `min_speed_mps`), the speed lost over what a perfect WSP loses in that time,
+/// v(k0) - v(k1) over the integral of min(a_demand, g mu_avail) + resistance.
+fn utilisation_of(trace: &Trace, allowed: &AllowedStop, stop: Option<usize>, c: &Criteria) -> f64 {
+    let n = trace.t_s.len();
+    let end = stop.unwrap_or(n.saturating_sub(1));
+    let Some(k0) = (0..=end.min(n.saturating_sub(1)))
+        .find(|&k| trace.t_s[k] >= allowed.response_s() && trace.v_mps[k] > c.min_speed_mps)
+    else {
+        return 0.0;
+    };
+    let k1 = (k0..=end)
+        .take_while(|&k| trace.v_mps[k] > c.min_speed_mps)
+        .last()
+        .unwrap_or(k0);
+    let available: f64 = (k0 + 1..=k1)
+        .map(|k| {
+            let (x, v) = (trace.x_m[k], trace.v_mps[k]);
+            let a = allowed.demand_mps2.min(allowed.adhesion_decel(x, v));
+            (a + allowed.resistance.decel(v)) * (trace.t_s[k] - trace.t_s[k - 1])
+        })
+        .sum();
+    if available > 0.0 {
+        (trace.v_mps[k0] - trace.v_mps[k1]) / available
+    } else {
+        0.0
+    }
 }
 
 /// Judges `trace` against the criteria; `allowed` is the perfect-WSP stop of the run.
@@ -172,61 +428,18 @@ pub fn judge(name: &str, trace: &Trace, allowed: &AllowedStop, c: &Criteria) -> 
     let mut onsets = [None; 4];
     let mut timer = 0u32;
     let mut air_l = 0.0;
-    let (mut used, mut available) = (0.0, 0.0);
     for j in 0..4 {
-        let mut lock_start: Option<f64> = None;
-        let mut vent_start: Option<f64> = None;
-        for k in 1..n {
-            let (t, v, w) = (trace.t_s[k], trace.v_mps[k], trace.wheel_mps[j][k]);
-            let active = v > c.min_speed_mps;
-            let locked = active && w < c.lock_speed_ratio * v;
-            match (locked, lock_start) {
-                (true, None) => {
-                    lock_start = Some(t);
-                    locks[j] += 1;
-                }
-                (false, Some(s)) => {
-                    max_lock[j] = max_lock[j].max(t - s);
-                    lock_start = None;
-                }
-                (true, Some(s)) => max_lock[j] = max_lock[j].max(t - s),
-                _ => {}
-            }
-            if onsets[j].is_none() && active && v - w > (0.06 * v).max(0.8) {
-                onsets[j] = Some(t);
-            }
-            let venting = trace.venting[j].get(k).copied().unwrap_or(false);
-            match (venting, vent_start) {
-                (true, None) => vent_start = Some(t),
-                (false, Some(s)) => {
-                    if t - s >= c.wsp_timer_s - 1e-6 {
-                        timer += 1;
-                    }
-                    vent_start = None;
-                }
-                _ => {}
-            }
-            let p = &trace.p_cyl_pa[j];
-            if venting && p.len() == n && p[k] < p[k - 1] {
-                air_l += c.cylinder_volume_l * (p[k - 1] - p[k]) / P_ATM_PA;
-            }
-        }
+        (max_lock[j], locks[j], onsets[j]) = locks_of(trace, j, allowed, c);
+        timer += timer_actions_of(trace, j, c.wsp_timer_s);
+        air_l += air_of(trace, j, c.channel_volume_l);
     }
-    for k in 1..n {
-        let v = trace.v_mps[k];
-        if v > c.min_speed_mps && stop.is_none_or(|s| k <= s) {
-            let dt = trace.t_s[k] - trace.t_s[k - 1];
-            used += (trace.v_mps[k - 1] - v).max(0.0);
-            available += allowed.adhesion_decel(trace.x_m[k], v) * dt;
-        }
-    }
-    let utilisation = if available > 0.0 {
-        used / available
-    } else {
-        0.0
-    };
+    let utilisation = utilisation_of(trace, allowed, stop, c);
     let ratio = stopping.map(|s| s / allowed_m);
     let criteria: Vec<Criterion> = [
+        (
+            "adhesion reference known (degraded adhesion: mu factors logged)".to_string(),
+            !allowed.recovers || allowed.mu_factor.is_some(),
+        ),
         ("stops".to_string(), stop.is_some()),
         (
             format!("distance_ratio <= {}", c.max_distance_ratio),
@@ -259,6 +472,7 @@ pub fn judge(name: &str, trace: &Trace, allowed: &AllowedStop, c: &Criteria) -> 
         max_lock_s: max_lock,
         lock_count: locks,
         wsp_timer_actions: timer,
+        filled_samples: trace.filled_samples,
         slide_onset_s: onsets,
         stop_time_s: stop.map(|k| trace.t_s[k]),
         criteria,

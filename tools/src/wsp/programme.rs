@@ -39,17 +39,26 @@ pub struct Criteria {
     pub max_lock_s: f64,
     /// WSP timer actions allowed per run.
     pub max_wsp_timer_actions: u32,
-    /// Largest free air the WSP may vent in a run, litres (default: what a 150 l brake
-    /// reservoir at 5 bar(g) holds, 150 x 5 / 1.013).
+    /// Largest free air the WSP may vent in a run, litres (default: the usable air of an
+    /// assumed 150 l brake reservoir between the 500 kPa supply and the laden EB cylinder
+    /// pressure, docs/wsp.md).
     pub max_air_consumption_l: f64,
     /// A wheelset is locked while its speed is below this share of the vehicle speed.
     pub lock_speed_ratio: f64,
-    /// Volume of one brake cylinder with its pipe, litres (assumed: 170 mm cylinder).
-    pub cylinder_volume_l: f64,
-    /// WSP timer of the unit under test (continuous vent that counts as a timer action), s.
-    pub wsp_timer_s: f64,
+    /// Piston stroke of a brake cylinder (with its clearance), m (assumed).
+    pub cylinder_stroke_m: f64,
+    /// Pipe volume from the dump valve to the cylinders of one wheelset, litres (assumed).
+    pub pipe_volume_l: f64,
     /// Evaluation stops below this vehicle speed (WSP inhibited), m/s.
     pub min_speed_mps: f64,
+    /// Volume one dump valve vents, litres: n_cyl A_c stroke + pipe, n_cyl = one caliper
+    /// cylinder per two friction faces of `[brake]` ([`Criteria::for_file`]).
+    #[serde(skip)]
+    pub channel_volume_l: f64,
+    /// The WSP timer of the unit under test, s: the simulated unit's `vent_max`
+    /// ([`Criteria::for_file`]); a continuous WSP action this long counts as a timer action.
+    #[serde(skip)]
+    pub wsp_timer_s: f64,
 }
 
 impl Default for Criteria {
@@ -58,12 +67,28 @@ impl Default for Criteria {
             max_distance_ratio: 1.35,
             max_lock_s: 1.0,
             max_wsp_timer_actions: 0,
-            max_air_consumption_l: 740.0,
+            max_air_consumption_l: 214.1,
             lock_speed_ratio: 0.2,
-            cylinder_volume_l: 1.2,
-            wsp_timer_s: 3.0,
+            cylinder_stroke_m: 0.05,
+            pipe_volume_l: 0.5,
             min_speed_mps: 1.4,
+            channel_volume_l: 0.0,
+            wsp_timer_s: 0.0,
         }
+        .for_file(&ParamFile::default())
+    }
+}
+
+impl Criteria {
+    /// The bench constants that follow from the parameter file: the vented volume of a
+    /// channel from `[brake]` and the WSP timer of the unit.
+    pub fn for_file(mut self, file: &ParamFile) -> Self {
+        let b = &file.plant.brake;
+        let cylinders = (b.friction_faces as f64 / 2.0).ceil().max(1.0);
+        self.channel_volume_l =
+            cylinders * b.piston_area * self.cylinder_stroke_m * 1000.0 + self.pipe_volume_l;
+        self.wsp_timer_s = file.unit_config().wsp.vent_max;
+        self
     }
 }
 
@@ -171,8 +196,9 @@ impl Programme {
     pub fn load(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("cannot read programme {}", path.display()))?;
-        let p: Programme = toml::from_str(&text)
+        let mut p: Programme = toml::from_str(&text)
             .map_err(|e| anyhow!("{}: invalid programme: {e}", path.display()))?;
+        p.criteria = p.criteria.for_file(&ParamFile::default());
         if p.run.is_empty() {
             bail!("{}: the programme has no [[run]]", path.display());
         }

@@ -109,14 +109,23 @@ fn run_plots(dir: &Path, o: &Outcome) -> Result<()> {
     pressures.save_svg(&dir.join(format!("{}-pressures.svg", o.run.name)))?;
 
     let mut valves = Chart::new(
-        &format!("{}: WSP vent commands (wheelset j at level j)", o.run.name),
+        &format!("{}: WSP valve commands (wheelset j at level j)", o.run.name),
         "t, s",
-        "wheelset (raised: venting)",
+        "wheelset (+0.3 hold, +0.6 vent)",
     );
     let states: [Vec<f64>; 4] = std::array::from_fn(|j| {
-        o.trace.venting[j]
-            .iter()
-            .map(|&b| j as f64 + 1.0 + if b { 0.6 } else { 0.0 })
+        (0..o.trace.venting[j].len())
+            .map(|k| {
+                let hold = o.trace.holding[j].get(k).copied().unwrap_or(false);
+                let raise = if o.trace.venting[j][k] {
+                    0.6
+                } else if hold {
+                    0.3
+                } else {
+                    0.0
+                };
+                j as f64 + 1.0 + raise
+            })
             .collect()
     });
     valves.series = per_wheelset("valve", t, &states, 1.0);
