@@ -249,6 +249,11 @@ struct Constants<F> {
     davis_c: F,
     resistance_speed_band: F,
     actuator_lag_rate: F,
+    /// Whether the actuator lag acts (rate below 1).
+    actuator_lag: bool,
+    /// Lowest brake inputs taken as noise around zero: -2 % of the limits, Pa and N.
+    pressure_low: F,
+    clamp_force_low: F,
     speed_limit: F,
     polach: Polach<F>,
     friction: DiscPadFriction<F>,
@@ -450,6 +455,7 @@ impl<F: Real> Plant<F> {
         let grad = p.track.gradient_permille / 1000.0;
         let r = v.wheel_radius;
         let lag = p.brake.actuator_lag_s;
+        let caliper = Caliper::new(&p.brake);
         Ok(Constants {
             dt: F::of(dt),
             g_along: F::of(v.g * grad / libm::sqrt(1.0 + grad * grad)),
@@ -489,10 +495,13 @@ impl<F: Real> Plant<F> {
             davis_c: F::of(p.resistance.davis_c_n_per_mps2),
             resistance_speed_band: F::of(0.01),
             actuator_lag_rate: F::of(if lag > 0.0 { (dt / lag).min(1.0) } else { 1.0 }),
+            actuator_lag: lag > 0.0 && dt / lag < 1.0,
+            pressure_low: -F::of(0.02) * caliper.pressure_limit,
+            clamp_force_low: -F::of(0.02) * caliper.clamp_force_limit,
             speed_limit: F::of(140.0),
             polach: Polach::new(&p.contact, rail),
             friction: DiscPadFriction::new(&p.friction),
-            caliper: Caliper::new(&p.brake),
+            caliper,
             thermal: DiscThermal::new(&p.thermal),
             friction_radius: F::of(p.brake.friction_radius),
         })
@@ -572,9 +581,9 @@ impl<F: Real> Plant<F> {
     #[inline(always)]
     fn clamp_force_input(&mut self, j: usize, input: BrakeInput<F>, flags: &mut u32) -> F {
         let cal = &self.k.caliper;
-        let (value, limit) = match input {
-            BrakeInput::CylinderPressure(p) => (p, cal.pressure_limit),
-            BrakeInput::ClampForce(f) => (f, cal.clamp_force_limit),
+        let (value, limit, low) = match input {
+            BrakeInput::CylinderPressure(p) => (p, cal.pressure_limit, self.k.pressure_low),
+            BrakeInput::ClampForce(f) => (f, cal.clamp_force_limit, self.k.clamp_force_low),
         };
         if !value.is_finite() {
             *flags |= Flags::wheelset_bit(Flags::INPUT_NOT_FINITE, j);
@@ -582,7 +591,7 @@ impl<F: Real> Plant<F> {
         }
         // Below zero by more than 2 % of the range, or above the limit: out of range.
         // Small negative readings are sensor noise around zero and clamp silently to 0.
-        if value > limit || value < -F::of(0.02) * limit {
+        if value > limit || value < low {
             *flags |= Flags::wheelset_bit(Flags::INPUT_OUT_OF_RANGE, j);
         }
         let value = value.clamp_to(F::ZERO, limit);
@@ -607,8 +616,13 @@ impl<F: Real> Plant<F> {
             // First-order lag, written from the target so that rate 1 (no lag) gives the
             // target exactly, and kept between the old value and the target: rounding may
             // not overshoot the (clamped) target.
-            let lagged = target - (target - *pad) * (F::ONE - self.k.actuator_lag_rate);
-            *pad = lagged.clamp_to(pad.min(target), pad.max(target));
+            // Without lag (rate 1) that is the target exactly: skipped.
+            if self.k.actuator_lag {
+                let lagged = target - (target - *pad) * (F::ONE - self.k.actuator_lag_rate);
+                *pad = lagged.clamp_to(pad.min(target), pad.max(target));
+            } else {
+                *pad = target;
+            }
             clamp[j] = *pad;
         }
 
@@ -670,20 +684,25 @@ impl<F: Real> Plant<F> {
         } else {
             s.heat_loss[slow] = k.thermal.loss_coefficient(k.r * omega[slow]);
         }
-        // Degraded adhesion along the track (crate::track): one wheelset per step, in turn.
+        // Zones and degraded adhesion along the track (crate::track): one wheelset per
+        // step, in turn; nothing to do on a uniform track with degraded adhesion off.
         let track = &mut self.track;
-        track.step(
-            slow,
-            s.x_c + self.track_offset[slow],
-            v_w[slow],
-            self.out.wheelsets[slow].contact_power,
-            F::of(WHEELSETS as f64) * dt,
-        );
+        if track.active() {
+            track.step(
+                slow,
+                s.x_c + self.track_offset[slow],
+                v_w[slow],
+                self.out.wheelsets[slow].contact_power,
+                F::of(WHEELSETS as f64) * dt,
+            );
+        }
 
         // ---- Wheelsets: contact (Eqs 9-12), friction (Eq 2), brake (Eq 1), spin (Eqs 7-8)
         let mut a_w = [F::ZERO; WHEELSETS];
         let mut brake_torque = [F::ZERO; WHEELSETS];
-        for j in 0..WHEELSETS {
+        // Kept a loop (not unrolled four times): one wheelset's values fit the registers.
+        for j in 0..core::hint::black_box(WHEELSETS) {
+            let j = j & (WHEELSETS - 1);
             let (polach, mu_factor) = track.contact(j);
             let mu = polach.friction_tracked(s.slip[j], &mut s.rail_decay[j]) * mu_factor;
             let contact: ContactForce<F> = polach.evaluate_with_mu(s.slip[j], v_w[j], q[j], mu);
