@@ -281,24 +281,31 @@ struct State<F: Real> {
     vz_b: [F; 2],
     pitch_b: [F; 2],
     pitch_rate_b: [F; 2],
+    /// The wheelsets' state, one record each (laid out for the step's wheelset loop).
+    w: [WheelsetState<F>; WHEELSETS],
+}
+
+/// The state of one wheelset.
+#[derive(Clone, Copy, Debug, Default)]
+struct WheelsetState<F: Real> {
     /// Wheelset x and speed relative to its bogie.
-    dx_w: [F; WHEELSETS],
-    dv_w: [F; WHEELSETS],
+    dx: F,
+    dv: F,
     /// Slip velocity v_w - r omega.
-    slip: [F; WHEELSETS],
-    disc_temp: [F; WHEELSETS],
+    slip: F,
+    disc_temp: F,
     /// Pad force state of the actuator-lag extension.
-    pad_force: [F; WHEELSETS],
-    /// Eq (2) temperature bracket per wheelset (refreshed in turn).
-    temperature_factor: [F; WHEELSETS],
-    /// Eq (5) loss coefficient alpha + beta v_w^0.8 per wheelset, W/K (refreshed in turn).
-    heat_loss: [F; WHEELSETS],
-    /// Last valid brake input (clamp force, N) per wheelset.
-    last_clamp: [F; WHEELSETS],
-    /// e^(-B |w|) of Eq (11) per wheelset, tracked from an exact anchor.
-    rail_decay: [TrackedExp<F>; WHEELSETS],
-    /// e^(-m_v v_d) of Eq (2) per wheelset, tracked from an exact anchor.
-    speed_decay: [TrackedExp<F>; WHEELSETS],
+    pad_force: F,
+    /// Eq (2) temperature bracket (refreshed in turn).
+    temperature_factor: F,
+    /// Eq (5) loss coefficient alpha + beta v_w^0.8, W/K (refreshed in turn).
+    heat_loss: F,
+    /// Last valid brake input (clamp force, N).
+    last_clamp: F,
+    /// e^(-B |w|) of Eq (11), tracked from an exact anchor.
+    rail_decay: TrackedExp<F>,
+    /// e^(-m_v v_d) of Eq (2), tracked from an exact anchor.
+    speed_decay: TrackedExp<F>,
 }
 
 /// The plant: vehicle, contact, brakes, disc heat. `F` = f32 on the target.
@@ -512,13 +519,15 @@ impl<F: Real> Plant<F> {
         let v0 = self.initial_speed;
         self.s = State::default();
         self.s.v_c = v0;
-        self.s.disc_temp = [disc_temp; WHEELSETS];
-        self.s.temperature_factor = [self.k.friction.temperature_factor(disc_temp); WHEELSETS];
-        self.s.heat_loss = [self.k.thermal.loss_coefficient(v0); WHEELSETS];
-        self.s.speed_decay =
-            [self.k
+        for w in self.s.w.iter_mut() {
+            w.disc_temp = disc_temp;
+            w.temperature_factor = self.k.friction.temperature_factor(disc_temp);
+            w.heat_loss = self.k.thermal.loss_coefficient(v0);
+            w.speed_decay = self
+                .k
                 .friction
-                .speed_decay_at(v0 * self.k.inv_r * self.k.friction_radius); WHEELSETS];
+                .speed_decay_at(v0 * self.k.inv_r * self.k.friction_radius);
+        }
         self.out.steps = 0;
         self.out.vehicle_speed = v0;
         self.out.distance = F::ZERO;
@@ -587,7 +596,7 @@ impl<F: Real> Plant<F> {
         };
         if !value.is_finite() {
             *flags |= Flags::wheelset_bit(Flags::INPUT_NOT_FINITE, j);
-            return self.s.last_clamp[j];
+            return self.s.w[j].last_clamp;
         }
         // Below zero by more than 2 % of the range, or above the limit: out of range.
         // Small negative readings are sensor noise around zero and clamp silently to 0.
@@ -599,7 +608,7 @@ impl<F: Real> Plant<F> {
             BrakeInput::CylinderPressure(_) => cal.clamp_force(value).min(cal.clamp_force_limit),
             BrakeInput::ClampForce(_) => value,
         };
-        self.s.last_clamp[j] = clamp;
+        self.s.w[j].last_clamp = clamp;
         clamp
     }
 
@@ -612,7 +621,7 @@ impl<F: Real> Plant<F> {
         let mut clamp = [F::ZERO; WHEELSETS];
         for j in 0..WHEELSETS {
             let target = self.clamp_force_input(j, inputs[j], &mut flags);
-            let pad = &mut self.s.pad_force[j];
+            let pad = &mut self.s.w[j].pad_force;
             // First-order lag, written from the target so that rate 1 (no lag) gives the
             // target exactly, and kept between the old value and the target: rounding may
             // not overshoot the (clamped) target.
@@ -636,8 +645,8 @@ impl<F: Real> Plant<F> {
         let mut v_w = [F::ZERO; WHEELSETS];
         let mut omega = [F::ZERO; WHEELSETS];
         for j in 0..WHEELSETS {
-            v_w[j] = v_b[j / 2] + s.dv_w[j];
-            omega[j] = (v_w[j] - s.slip[j]) * k.inv_r;
+            v_w[j] = v_b[j / 2] + s.w[j].dv;
+            omega[j] = (v_w[j] - s.w[j].slip) * k.inv_r;
         }
 
         // ---- Suspension forces (deviation from the static preloads) ----
@@ -670,8 +679,8 @@ impl<F: Real> Plant<F> {
             let e_rate = s.vz_b[i] + xa * s.pitch_rate_b[i];
             f_pv[j] = -(k.k_pv * e + k.c_pv * e_rate);
             q[j] = k.q_static + f_pv[j];
-            let d = s.dx_w[j] + k.pz_bogie_pl * s.pitch_b[i];
-            let d_rate = s.dv_w[j] + k.pz_bogie_pl * s.pitch_rate_b[i];
+            let d = s.w[j].dx + k.pz_bogie_pl * s.pitch_b[i];
+            let d_rate = s.w[j].dv + k.pz_bogie_pl * s.pitch_rate_b[i];
             f_pl[j] = -(k.k_pl * d + k.c_pl * d_rate);
             damper_power += k.c_pv * e_rate * e_rate + k.c_pl * d_rate * d_rate;
         }
@@ -680,9 +689,9 @@ impl<F: Real> Plant<F> {
         let turn = self.out.steps % (2 * WHEELSETS as u32);
         let slow = (turn % WHEELSETS as u32) as usize;
         if turn < WHEELSETS as u32 {
-            s.temperature_factor[slow] = k.friction.temperature_factor(s.disc_temp[slow]);
+            s.w[slow].temperature_factor = k.friction.temperature_factor(s.w[slow].disc_temp);
         } else {
-            s.heat_loss[slow] = k.thermal.loss_coefficient(k.r * omega[slow]);
+            s.w[slow].heat_loss = k.thermal.loss_coefficient(k.r * omega[slow]);
         }
         // Zones and degraded adhesion along the track (crate::track): one wheelset per
         // step, in turn; nothing to do on a uniform track with degraded adhesion off.
@@ -704,16 +713,16 @@ impl<F: Real> Plant<F> {
         for j in 0..core::hint::black_box(WHEELSETS) {
             let j = j & (WHEELSETS - 1);
             let (polach, mu_factor) = track.contact(j);
-            let mu = polach.friction_tracked(s.slip[j], &mut s.rail_decay[j]) * mu_factor;
-            let contact: ContactForce<F> = polach.evaluate_with_mu(s.slip[j], v_w[j], q[j], mu);
+            let mu = polach.friction_tracked(s.w[j].slip, &mut s.w[j].rail_decay) * mu_factor;
+            let contact: ContactForce<F> = polach.evaluate_with_mu(s.w[j].slip, v_w[j], q[j], mu);
             if !(q[j] > F::ZERO) {
                 flags |= Flags::wheelset_bit(Flags::WHEEL_UNLOADED, j);
             }
             let mu_d = k.friction.mu_d_tracked(
                 omega[j] * k.friction_radius,
-                s.temperature_factor[j],
+                s.w[j].temperature_factor,
                 clamp[j],
-                &mut s.speed_decay[j],
+                &mut s.w[j].speed_decay,
             );
             let torque_kinetic = k.caliper.torque(mu_d, clamp[j]);
 
@@ -727,7 +736,7 @@ impl<F: Real> Plant<F> {
             let a_explicit = f_pl[j] * k.inv_m_w - k.g_along;
             let d = F::ONE + chord * k.dt_spin_compliance;
             let inv_d = F::ONE / d;
-            let u0 = (s.slip[j] + dt * a_explicit) * inv_d;
+            let u0 = (s.w[j].slip + dt * a_explicit) * inv_d;
             let omega0 = omega[j] + chord * u0 * k.dt_r_inv_i_w;
             let g = k.dt_inv_i_w * (F::ONE + chord * k.dt_inv_m_w) * inv_d;
             let limit = g * torque_kinetic;
@@ -761,15 +770,15 @@ impl<F: Real> Plant<F> {
             w.brake_torque = torque;
             w.brake_force = k.caliper.friction_force(mu_d, clamp[j]);
             w.brake_power = torque * half * (omega[j] + omega_new);
-            w.contact_power = force * half * (s.slip[j] + u_new);
-            s.slip[j] = u_new;
+            w.contact_power = force * half * (s.w[j].slip + u_new);
+            s.w[j].slip = u_new;
 
             // Disc heat balance, Eqs (3)-(6) (explicit: time constant of minutes).
             let rate = k
                 .thermal
-                .rate_with(w.brake_power, s.disc_temp[j], s.heat_loss[j]);
-            s.disc_temp[j] += dt * rate;
-            w.disc_temp = s.disc_temp[j];
+                .rate_with(w.brake_power, s.w[j].disc_temp, s.w[j].heat_loss);
+            s.w[j].disc_temp += dt * rate;
+            w.disc_temp = s.w[j].disc_temp;
         }
 
         // ---- Bodies ----
@@ -822,8 +831,8 @@ impl<F: Real> Plant<F> {
             s.pitch_b[i] += s.pitch_rate_b[i] * dt;
         }
         for j in 0..WHEELSETS {
-            s.dv_w[j] += (a_w[j] - a_b[j / 2]) * dt;
-            s.dx_w[j] += s.dv_w[j] * dt;
+            s.w[j].dv += (a_w[j] - a_b[j / 2]) * dt;
+            s.w[j].dx += s.w[j].dv * dt;
         }
 
         // ---- External power (resistance and gradient) for the energy balance ----
@@ -841,7 +850,7 @@ impl<F: Real> Plant<F> {
         // (and a sum of finite values overflows only far beyond any physical state).
         let mut sum = s.v_c + s.pitch_c + s.pitch_b[0] + s.pitch_b[1];
         for j in 0..WHEELSETS {
-            sum += s.slip[j] + s.disc_temp[j];
+            sum += s.w[j].slip + s.w[j].disc_temp;
         }
         let finite = sum.is_finite();
         let out = &mut self.out;
@@ -864,13 +873,13 @@ impl<F: Real> Plant<F> {
     /// Safe state after a numeric fault: vehicle at rest, brakes' effect nil, discs kept
     /// if finite. Outputs show standstill, so a brake controller sees a stopped train.
     fn enter_safe_state(&mut self) {
-        let temps = self.s.disc_temp;
+        let temps = self.s.w.map(|w| w.disc_temp);
         let steps = self.out.steps;
         self.initial_speed = F::ZERO;
         self.reset_state(F::ZERO);
         for j in 0..WHEELSETS {
             if temps[j].is_finite() {
-                self.s.disc_temp[j] = temps[j];
+                self.s.w[j].disc_temp = temps[j];
             }
         }
         self.out.steps = steps;
@@ -896,12 +905,12 @@ impl<F: Real> Plant<F> {
         }
         for j in 0..WHEELSETS {
             let i = j / 2;
-            let v_w = v_c + f(s.dv_b[i]) + f(s.dv_w[j]);
-            let omega = (v_w - f(s.slip[j])) / f(k.r);
+            let v_w = v_c + f(s.dv_b[i]) + f(s.w[j].dv);
+            let omega = (v_w - f(s.w[j].slip)) / f(k.r);
             kinetic += 0.5 * f(k.m_w) * v_w * v_w + 0.5 * f(k.i_w) * omega * omega;
             let xa = f(k.x_axle[j % 2]);
             let e = f(s.z_b[i]) + xa * f(s.pitch_b[i]);
-            let d = f(s.dx_w[j]) + f(k.pz_bogie_pl) * f(s.pitch_b[i]);
+            let d = f(s.w[j].dx) + f(k.pz_bogie_pl) * f(s.pitch_b[i]);
             potential += 0.5 * f(k.k_pv) * e * e + 0.5 * f(k.k_pl) * d * d;
         }
         Energy { kinetic, potential }
