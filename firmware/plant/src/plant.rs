@@ -285,6 +285,23 @@ struct State<F: Real> {
     w: [WheelsetState<F>; WHEELSETS],
 }
 
+/// Values of one wheelset within a step (the step's temporaries, one record per wheelset).
+#[derive(Clone, Copy, Debug, Default)]
+struct WheelsetStep<F> {
+    /// Pad force acting, N per face.
+    clamp: F,
+    v_w: F,
+    omega: F,
+    /// Axle load Q, N.
+    q: F,
+    /// Primary vertical force deviation on the bogie and longitudinal force, N.
+    f_pv: F,
+    f_pl: F,
+    /// Wheelset acceleration, m/s^2, and brake torque, N m.
+    a_w: F,
+    brake_torque: F,
+}
+
 /// The state of one wheelset.
 #[derive(Clone, Copy, Debug, Default)]
 struct WheelsetState<F: Real> {
@@ -615,10 +632,11 @@ impl<F: Real> Plant<F> {
     /// Advances the plant by one fixed step with the brake inputs of the four wheelsets.
     pub fn step(&mut self, inputs: &[BrakeInput<F>; WHEELSETS]) -> &Outputs<F> {
         let mut flags = 0u32;
+        // This step's values of each wheelset, one record each.
+        let mut ws = [WheelsetStep::<F>::default(); WHEELSETS];
         let half = F::of(0.5);
 
         // ---- Pad forces (inputs; optional actuator lag) ----
-        let mut clamp = [F::ZERO; WHEELSETS];
         for j in 0..WHEELSETS {
             let target = self.clamp_force_input(j, inputs[j], &mut flags);
             let pad = &mut self.s.w[j].pad_force;
@@ -632,7 +650,7 @@ impl<F: Real> Plant<F> {
             } else {
                 *pad = target;
             }
-            clamp[j] = *pad;
+            ws[j].clamp = *pad;
         }
 
         let k = &self.k;
@@ -642,11 +660,9 @@ impl<F: Real> Plant<F> {
         // ---- Kinematics ----
         let v_c = s.v_c;
         let v_b = [v_c + s.dv_b[0], v_c + s.dv_b[1]];
-        let mut v_w = [F::ZERO; WHEELSETS];
-        let mut omega = [F::ZERO; WHEELSETS];
         for j in 0..WHEELSETS {
-            v_w[j] = v_b[j / 2] + s.w[j].dv;
-            omega[j] = (v_w[j] - s.w[j].slip) * k.inv_r;
+            ws[j].v_w = v_b[j / 2] + s.w[j].dv;
+            ws[j].omega = (ws[j].v_w - s.w[j].slip) * k.inv_r;
         }
 
         // ---- Suspension forces (deviation from the static preloads) ----
@@ -669,19 +685,16 @@ impl<F: Real> Plant<F> {
         }
         // Primary vertical (force deviation on the bogie, upward) and longitudinal (force on
         // the wheelset), wheelset j in bogie j/2.
-        let mut f_pv = [F::ZERO; WHEELSETS];
-        let mut f_pl = [F::ZERO; WHEELSETS];
-        let mut q = [F::ZERO; WHEELSETS];
         for j in 0..WHEELSETS {
             let i = j / 2;
             let xa = k.x_axle[j % 2];
             let e = s.z_b[i] + xa * s.pitch_b[i];
             let e_rate = s.vz_b[i] + xa * s.pitch_rate_b[i];
-            f_pv[j] = -(k.k_pv * e + k.c_pv * e_rate);
-            q[j] = k.q_static + f_pv[j];
+            ws[j].f_pv = -(k.k_pv * e + k.c_pv * e_rate);
+            ws[j].q = k.q_static + ws[j].f_pv;
             let d = s.w[j].dx + k.pz_bogie_pl * s.pitch_b[i];
             let d_rate = s.w[j].dv + k.pz_bogie_pl * s.pitch_rate_b[i];
-            f_pl[j] = -(k.k_pl * d + k.c_pl * d_rate);
+            ws[j].f_pl = -(k.k_pl * d + k.c_pl * d_rate);
             damper_power += k.c_pv * e_rate * e_rate + k.c_pl * d_rate * d_rate;
         }
 
@@ -691,7 +704,7 @@ impl<F: Real> Plant<F> {
         if turn < WHEELSETS as u32 {
             s.w[slow].temperature_factor = k.friction.temperature_factor(s.w[slow].disc_temp);
         } else {
-            s.w[slow].heat_loss = k.thermal.loss_coefficient(k.r * omega[slow]);
+            s.w[slow].heat_loss = k.thermal.loss_coefficient(k.r * ws[slow].omega);
         }
         // Zones and degraded adhesion along the track (crate::track): one wheelset per
         // step, in turn; nothing to do on a uniform track with degraded adhesion off.
@@ -700,31 +713,30 @@ impl<F: Real> Plant<F> {
             track.step(
                 slow,
                 s.x_c + self.track_offset[slow],
-                v_w[slow],
+                ws[slow].v_w,
                 self.out.wheelsets[slow].contact_power,
                 F::of(WHEELSETS as f64) * dt,
             );
         }
 
         // ---- Wheelsets: contact (Eqs 9-12), friction (Eq 2), brake (Eq 1), spin (Eqs 7-8)
-        let mut a_w = [F::ZERO; WHEELSETS];
-        let mut brake_torque = [F::ZERO; WHEELSETS];
         // Kept a loop (not unrolled four times): one wheelset's values fit the registers.
         for j in 0..core::hint::black_box(WHEELSETS) {
             let j = j & (WHEELSETS - 1);
             let (polach, mu_factor) = track.contact(j);
             let mu = polach.friction_tracked(s.w[j].slip, &mut s.w[j].rail_decay) * mu_factor;
-            let contact: ContactForce<F> = polach.evaluate_with_mu(s.w[j].slip, v_w[j], q[j], mu);
-            if !(q[j] > F::ZERO) {
+            let contact: ContactForce<F> =
+                polach.evaluate_with_mu(s.w[j].slip, ws[j].v_w, ws[j].q, mu);
+            if !(ws[j].q > F::ZERO) {
                 flags |= Flags::wheelset_bit(Flags::WHEEL_UNLOADED, j);
             }
             let mu_d = k.friction.mu_d_tracked(
-                omega[j] * k.friction_radius,
+                ws[j].omega * k.friction_radius,
                 s.w[j].temperature_factor,
-                clamp[j],
+                ws[j].clamp,
                 &mut s.w[j].speed_decay,
             );
-            let torque_kinetic = k.caliper.torque(mu_d, clamp[j]);
+            let torque_kinetic = k.caliper.torque(mu_d, ws[j].clamp);
 
             // Semi-implicit spin/slip update with the brake as a clutch. Unknowns at the
             // new step: u', omega', F' = chord u'. With D = 1 + dt chord (1/m + r^2/I):
@@ -733,11 +745,11 @@ impl<F: Real> Plant<F> {
             // The brake torque T opposes the spin up to the kinetic torque and holds the
             // wheel (omega' = 0) when that suffices.
             let chord = contact.chord;
-            let a_explicit = f_pl[j] * k.inv_m_w - k.g_along;
+            let a_explicit = ws[j].f_pl * k.inv_m_w - k.g_along;
             let d = F::ONE + chord * k.dt_spin_compliance;
             let inv_d = F::ONE / d;
             let u0 = (s.w[j].slip + dt * a_explicit) * inv_d;
-            let omega0 = omega[j] + chord * u0 * k.dt_r_inv_i_w;
+            let omega0 = ws[j].omega + chord * u0 * k.dt_r_inv_i_w;
             let g = k.dt_inv_i_w * (F::ONE + chord * k.dt_inv_m_w) * inv_d;
             let limit = g * torque_kinetic;
             let (torque, omega_new) = if omega0 > limit {
@@ -749,27 +761,27 @@ impl<F: Real> Plant<F> {
             };
             let u_new = u0 + torque * k.dt_r_inv_i_w * inv_d;
             let force = chord * u_new;
-            a_w[j] = a_explicit - force * k.inv_m_w;
-            brake_torque[j] = torque;
+            ws[j].a_w = a_explicit - force * k.inv_m_w;
+            ws[j].brake_torque = torque;
 
             let w = &mut self.out.wheelsets[j];
             w.omega = omega_new;
-            w.speed = v_w[j] + dt * a_w[j];
+            w.speed = ws[j].v_w + dt * ws[j].a_w;
             w.slip_velocity = u_new;
             w.creepage = contact.creepage;
-            w.axle_load = q[j];
+            w.axle_load = ws[j].q;
             w.adhesion_force = force;
-            w.adhesion = if q[j] > F::ZERO {
-                force / q[j]
+            w.adhesion = if ws[j].q > F::ZERO {
+                force / ws[j].q
             } else {
                 F::ZERO
             };
             w.rail_mu = contact.mu;
             w.mu_d = mu_d;
-            w.clamp_force = clamp[j];
+            w.clamp_force = ws[j].clamp;
             w.brake_torque = torque;
-            w.brake_force = k.caliper.friction_force(mu_d, clamp[j]);
-            w.brake_power = torque * half * (omega[j] + omega_new);
+            w.brake_force = k.caliper.friction_force(mu_d, ws[j].clamp);
+            w.brake_power = torque * half * (ws[j].omega + omega_new);
             w.contact_power = force * half * (s.w[j].slip + u_new);
             s.w[j].slip = u_new;
 
@@ -801,16 +813,16 @@ impl<F: Real> Plant<F> {
         let mut alpha_b = [F::ZERO; 2];
         for i in 0..2 {
             let (j0, j1) = (2 * i, 2 * i + 1);
-            a_b[i] = (f_sl[i] - f_pl[j0] - f_pl[j1]) * k.inv_m_b - k.g_along;
-            az_b[i] = (f_pv[j0] + f_pv[j1] - f_sv[i]) * k.inv_m_b;
+            a_b[i] = (f_sl[i] - ws[j0].f_pl - ws[j1].f_pl) * k.inv_m_b - k.g_along;
+            az_b[i] = (ws[j0].f_pv + ws[j1].f_pv - f_sv[i]) * k.inv_m_b;
             // Moments: primary vertical at +-b/2, primary longitudinal (-f_pl on the bogie)
             // at pz_pl, secondary longitudinal at pz_sl, brake reactions -T_b.
-            let m = k.x_axle[0] * f_pv[j0]
-                + k.x_axle[1] * f_pv[j1]
-                + k.pz_bogie_pl * (f_pl[j0] + f_pl[j1])
+            let m = k.x_axle[0] * ws[j0].f_pv
+                + k.x_axle[1] * ws[j1].f_pv
+                + k.pz_bogie_pl * (ws[j0].f_pl + ws[j1].f_pl)
                 - k.pz_bogie_sl * f_sl[i]
-                - brake_torque[j0]
-                - brake_torque[j1];
+                - ws[j0].brake_torque
+                - ws[j1].brake_torque;
             alpha_b[i] = m * k.inv_i_b;
         }
 
@@ -831,7 +843,7 @@ impl<F: Real> Plant<F> {
             s.pitch_b[i] += s.pitch_rate_b[i] * dt;
         }
         for j in 0..WHEELSETS {
-            s.w[j].dv += (a_w[j] - a_b[j / 2]) * dt;
+            s.w[j].dv += (ws[j].a_w - a_b[j / 2]) * dt;
             s.w[j].dx += s.w[j].dv * dt;
         }
 
