@@ -445,22 +445,8 @@ mod emulator {
                     .1;
             });
             let step = sc.steps();
-            // The plant step alone, on an exact replay of the step the loop just took.
-            let inputs = sc
-                .sim
-                .unit_outputs()
-                .cylinder_pressure
-                .map(BrakeInput::CylinderPressure);
-            let ((), step_cost) = timer.measure(|| {
-                replay.step(black_box(&inputs));
-            });
+            let step_cost = replay_cost(host, timer, &sc, &mut replay);
             let cur = *sc.sim.outputs();
-            if *replay.outputs() != cur {
-                host.line(format_args!(
-                    "X friction={name}: the replayed plant step {step} differs"
-                ));
-                fail_exit();
-            }
             // The sub-models, with this step's per-wheelset values.
             let w = |o: &hils_plant::Outputs<f32>, j: usize| o.wheelsets[j];
             let contact_args = [0, 1, 2, 3].map(|j| {
@@ -554,6 +540,33 @@ mod emulator {
         }
     }
 
+    /// Instructions of the plant step alone, on `replay` (a copy of the plant before the step
+    /// the loop just took) with the brake unit's outputs of that step; the replay must give
+    /// the loop's outputs exactly.
+    fn replay_cost(
+        host: &mut Host,
+        timer: &Timer,
+        sc: &EbScenario<f32>,
+        replay: &mut hils_plant::Plant<f32>,
+    ) -> u32 {
+        let inputs = sc
+            .sim
+            .unit_outputs()
+            .cylinder_pressure
+            .map(BrakeInput::CylinderPressure);
+        let ((), cost) = timer.measure(|| {
+            replay.step(black_box(&inputs));
+        });
+        if *replay.outputs() != *sc.sim.outputs() {
+            host.line(format_args!(
+                "X the replayed plant step {} differs",
+                sc.steps()
+            ));
+            fail_exit();
+        }
+        cost
+    }
+
     /// Instructions per plant step with degraded adhesion on, on the low -> dry -> low track
     /// (`programmes/wsp-low-adhesion.toml`'s `low_dry_low`), variable friction: the `D` line.
     fn degraded_cost(host: &mut Host, timer: &Timer) {
@@ -587,18 +600,7 @@ mod emulator {
             let adv = sc.advance(|sim| {
                 sim.step();
             });
-            let inputs = sc
-                .sim
-                .unit_outputs()
-                .cylinder_pressure
-                .map(BrakeInput::CylinderPressure);
-            let ((), cost) = timer.measure(|| {
-                replay.step(black_box(&inputs));
-            });
-            if *replay.outputs() != *sc.sim.outputs() {
-                host.line(format_args!("X degraded: the replayed plant step differs"));
-                fail_exit();
-            }
+            let cost = replay_cost(host, timer, &sc, &mut replay);
             stat.add(cost, sc.steps());
             if adv.done || sc.steps() >= DEGRADED_STEPS {
                 break;
