@@ -603,17 +603,24 @@ impl<F: Real> Plant<F> {
         self.k.q_static
     }
 
-    /// Sanitises one brake input to a pad clamp force (N per face), flagging bad values.
+    /// Sanitises one brake input to a pad clamp force (N per face), flagging bad values;
+    /// `last_clamp` is the wheelset's last valid value.
     #[inline(always)]
-    fn clamp_force_input(&mut self, j: usize, input: BrakeInput<F>, flags: &mut u32) -> F {
-        let cal = &self.k.caliper;
+    fn clamp_force_input(
+        k: &Constants<F>,
+        last_clamp: &mut F,
+        j: usize,
+        input: BrakeInput<F>,
+        flags: &mut u32,
+    ) -> F {
+        let cal = &k.caliper;
         let (value, limit, low) = match input {
-            BrakeInput::CylinderPressure(p) => (p, cal.pressure_limit, self.k.pressure_low),
-            BrakeInput::ClampForce(f) => (f, cal.clamp_force_limit, self.k.clamp_force_low),
+            BrakeInput::CylinderPressure(p) => (p, cal.pressure_limit, k.pressure_low),
+            BrakeInput::ClampForce(f) => (f, cal.clamp_force_limit, k.clamp_force_low),
         };
         if !value.is_finite() {
             *flags |= Flags::wheelset_bit(Flags::INPUT_NOT_FINITE, j);
-            return self.s.w[j].last_clamp;
+            return *last_clamp;
         }
         // Below zero by more than 2 % of the range, or above the limit: out of range.
         // Small negative readings are sensor noise around zero and clamp silently to 0.
@@ -625,45 +632,60 @@ impl<F: Real> Plant<F> {
             BrakeInput::CylinderPressure(_) => cal.clamp_force(value).min(cal.clamp_force_limit),
             BrakeInput::ClampForce(_) => value,
         };
-        self.s.w[j].last_clamp = clamp;
+        *last_clamp = clamp;
         clamp
+    }
+
+    /// The pad force acting on wheelset `j` (N per face): its input through the optional
+    /// actuator lag.
+    #[inline(always)]
+    fn pad_force(
+        k: &Constants<F>,
+        w: &mut WheelsetState<F>,
+        j: usize,
+        input: BrakeInput<F>,
+        flags: &mut u32,
+    ) -> F {
+        let target = Self::clamp_force_input(k, &mut w.last_clamp, j, input, flags);
+        let pad = &mut w.pad_force;
+        // First-order lag, written from the target so that rate 1 (no lag) gives the
+        // target exactly, and kept between the old value and the target: rounding may
+        // not overshoot the (clamped) target. Without lag (rate 1): the target, skipped.
+        if k.actuator_lag {
+            let lagged = target - (target - *pad) * (F::ONE - k.actuator_lag_rate);
+            *pad = lagged.clamp_to(pad.min(target), pad.max(target));
+        } else {
+            *pad = target;
+        }
+        *pad
     }
 
     /// Advances the plant by one fixed step with the brake inputs of the four wheelsets.
     pub fn step(&mut self, inputs: &[BrakeInput<F>; WHEELSETS]) -> &Outputs<F> {
         let mut flags = 0u32;
-        // This step's values of each wheelset, one record each.
-        let mut ws = [WheelsetStep::<F>::default(); WHEELSETS];
         let half = F::of(0.5);
-
-        // ---- Pad forces (inputs; optional actuator lag) ----
-        for j in 0..WHEELSETS {
-            let target = self.clamp_force_input(j, inputs[j], &mut flags);
-            let pad = &mut self.s.w[j].pad_force;
-            // First-order lag, written from the target so that rate 1 (no lag) gives the
-            // target exactly, and kept between the old value and the target: rounding may
-            // not overshoot the (clamped) target.
-            // Without lag (rate 1) that is the target exactly: skipped.
-            if self.k.actuator_lag {
-                let lagged = target - (target - *pad) * (F::ONE - self.k.actuator_lag_rate);
-                *pad = lagged.clamp_to(pad.min(target), pad.max(target));
-            } else {
-                *pad = target;
-            }
-            ws[j].clamp = *pad;
-        }
-
         let k = &self.k;
         let dt = k.dt;
         let s = &mut self.s;
 
-        // ---- Kinematics ----
+        // ---- Pad forces (inputs; optional actuator lag) and kinematics ----
+        // This step's values of each wheelset, one record each (every field set here or
+        // before it is read).
         let v_c = s.v_c;
         let v_b = [v_c + s.dv_b[0], v_c + s.dv_b[1]];
-        for j in 0..WHEELSETS {
-            ws[j].v_w = v_b[j / 2] + s.w[j].dv;
-            ws[j].omega = (ws[j].v_w - s.w[j].slip) * k.inv_r;
-        }
+        let mut ws: [WheelsetStep<F>; WHEELSETS] = core::array::from_fn(|j| {
+            let v_w = v_b[j / 2] + s.w[j].dv;
+            WheelsetStep {
+                clamp: Self::pad_force(k, &mut s.w[j], j, inputs[j], &mut flags),
+                v_w,
+                omega: (v_w - s.w[j].slip) * k.inv_r,
+                q: F::ZERO,
+                f_pv: F::ZERO,
+                f_pl: F::ZERO,
+                a_w: F::ZERO,
+                brake_torque: F::ZERO,
+            }
+        });
 
         // ---- Suspension forces (deviation from the static preloads) ----
         // Secondary vertical, bogie i: extension e = z_c + X_i theta_c - z_b;
