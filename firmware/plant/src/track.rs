@@ -494,7 +494,6 @@ impl<F: Real> TrackAdhesion<F> {
     /// Looks up the surface under wheelset `j` at `x_m` and the interval around `x_m` in which
     /// it stays (between the nearest zone bounds); out of line, run only on a crossing.
     #[inline(never)]
-    #[cold]
     fn locate(&mut self, j: usize, x_m: F) {
         let mut surface = self.track.base;
         let mut lo = F::of(f64::NEG_INFINITY);
