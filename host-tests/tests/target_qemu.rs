@@ -130,8 +130,10 @@ fn cost_figures_are_complete_and_consistent() {
     let v = out.run("variable").expect("variable");
     let c = out.run("constant").expect("constant");
     let mean = |r: &hils::target_cost::TargetRun, p: &str| r.part(p).expect("part").mean;
-    // Eq (2) with the constant mu_d0 skips both exponentials of the variable law.
-    assert!(mean(c, "friction") * 2.0 < mean(v, "friction"));
+    // Eq (2) is one branch-free formula for both models (issue 14: no branch in the wheelset
+    // loop; the constant model's speed factor is exactly 1, its tracked e^0 never leaves the
+    // anchor), but the constant model skips the exponential of the temperature refresh.
+    assert!(mean(c, "friction") < mean(v, "friction"));
     assert!((mean(c, "contact") - mean(v, "contact")).abs() < 0.1 * mean(v, "contact"));
     assert!((mean(c, "thermal") - mean(v, "thermal")).abs() < 0.1 * mean(v, "thermal"));
 }

@@ -10,7 +10,7 @@ use crate::real::Real;
 #[derive(Clone, Copy, Debug)]
 pub struct DiscPadFriction<F> {
     variable: bool,
-    mu_d0: F,
+    /// c mu_d0 (variable model) or mu_d0 (constant).
     c_mu_d0: F,
     n_v: F,
     m_v: F,
@@ -23,12 +23,16 @@ pub struct DiscPadFriction<F> {
 impl<F: Real> DiscPadFriction<F> {
     /// The disc-pad friction law of `[friction]` (paper Eq (2), Table 1).
     pub fn new(p: &FrictionParams) -> Self {
+        let variable = p.model == FrictionModel::Variable;
         Self {
-            variable: p.model == FrictionModel::Variable,
-            mu_d0: F::of(p.mu_d0),
-            c_mu_d0: F::of(p.correction_c * p.mu_d0),
-            n_v: F::of(p.n_v),
-            m_v: F::of(p.m_v),
+            variable,
+            c_mu_d0: F::of(if variable {
+                p.correction_c * p.mu_d0
+            } else {
+                p.mu_d0
+            }),
+            n_v: F::of(if variable { p.n_v } else { 0.0 }),
+            m_v: F::of(if variable { p.m_v } else { 0.0 }),
             n_t: F::of(p.n_t),
             m_t: F::of(p.m_t),
             k_p_per_n: F::of(p.k_p / 1.0e4),
@@ -88,12 +92,11 @@ impl<F: Real> DiscPadFriction<F> {
         temperature_factor: F,
         f_clamp: F,
     ) -> F {
-        let base = if self.variable {
-            let speed_factor = self.n_v * exp(-self.m_v * v_d.abs()) + F::ONE;
-            self.c_mu_d0 * speed_factor * temperature_factor
-        } else {
-            self.mu_d0
-        };
+        // One formula for both models (no branch in the step's wheelset loop): the constant
+        // model has n_v = m_v = 0 and c mu_d0 = mu_d0, so the speed factor is exactly 1 and
+        // (temperature factor 1) the base exactly mu_d0.
+        let speed_factor = self.n_v * exp(-self.m_v * v_d.abs()) + F::ONE;
+        let base = self.c_mu_d0 * speed_factor * temperature_factor;
         base * (F::ONE + self.k_p_per_n * f_clamp)
     }
 }

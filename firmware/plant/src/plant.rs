@@ -252,6 +252,11 @@ struct Constants<F> {
     davis_c: F,
     resistance_speed_band: F,
     actuator_lag_rate: F,
+    /// Whether the actuator lag acts (rate below 1).
+    actuator_lag: bool,
+    /// Lowest brake inputs taken as noise around zero: -2 % of the limits, Pa and N.
+    pressure_low: F,
+    clamp_force_low: F,
     speed_limit: F,
     polach: Polach<F>,
     friction: DiscPadFriction<F>,
@@ -279,24 +284,48 @@ struct State<F: Real> {
     vz_b: [F; 2],
     pitch_b: [F; 2],
     pitch_rate_b: [F; 2],
+    /// The wheelsets' state, one record each (laid out for the step's wheelset loop).
+    w: [WheelsetState<F>; WHEELSETS],
+}
+
+/// Values of one wheelset within a step (the step's temporaries, one record per wheelset).
+#[derive(Clone, Copy, Debug, Default)]
+struct WheelsetStep<F> {
+    /// Pad force acting, N per face.
+    clamp: F,
+    v_w: F,
+    omega: F,
+    /// Axle load Q, N.
+    q: F,
+    /// Primary vertical force deviation on the bogie and longitudinal force, N.
+    f_pv: F,
+    f_pl: F,
+    /// Wheelset acceleration, m/s^2, and brake torque, N m.
+    a_w: F,
+    brake_torque: F,
+}
+
+/// The state of one wheelset.
+#[derive(Clone, Copy, Debug, Default)]
+struct WheelsetState<F: Real> {
     /// Wheelset x and speed relative to its bogie.
-    dx_w: [F; WHEELSETS],
-    dv_w: [F; WHEELSETS],
+    dx: F,
+    dv: F,
     /// Slip velocity v_w - r omega.
-    slip: [F; WHEELSETS],
-    disc_temp: [F; WHEELSETS],
+    slip: F,
+    disc_temp: F,
     /// Pad force state of the actuator-lag extension.
-    pad_force: [F; WHEELSETS],
-    /// Eq (2) temperature bracket per wheelset (refreshed in turn).
-    temperature_factor: [F; WHEELSETS],
-    /// Eq (5) loss coefficient alpha + beta v_w^0.8 per wheelset, W/K (refreshed in turn).
-    heat_loss: [F; WHEELSETS],
-    /// Last valid brake input (clamp force, N) per wheelset.
-    last_clamp: [F; WHEELSETS],
-    /// e^(-B |w|) of Eq (11) per wheelset, tracked from an exact anchor.
-    rail_decay: [TrackedExp<F>; WHEELSETS],
-    /// e^(-m_v v_d) of Eq (2) per wheelset, tracked from an exact anchor.
-    speed_decay: [TrackedExp<F>; WHEELSETS],
+    pad_force: F,
+    /// Eq (2) temperature bracket (refreshed in turn).
+    temperature_factor: F,
+    /// Eq (5) loss coefficient alpha + beta v_w^0.8, W/K (refreshed in turn).
+    heat_loss: F,
+    /// Last valid brake input (clamp force, N).
+    last_clamp: F,
+    /// e^(-B |w|) of Eq (11), tracked from an exact anchor.
+    rail_decay: TrackedExp<F>,
+    /// e^(-m_v v_d) of Eq (2), tracked from an exact anchor.
+    speed_decay: TrackedExp<F>,
 }
 
 /// The plant: vehicle, contact, brakes, disc heat. `F` = f32 on the target.
@@ -453,6 +482,7 @@ impl<F: Real> Plant<F> {
         let grad = p.track.gradient_permille / 1000.0;
         let r = v.wheel_radius;
         let lag = p.brake.actuator_lag_s;
+        let caliper = Caliper::new(&p.brake);
         Ok(Constants {
             dt: F::of(dt),
             g_along: F::of(v.g * grad / libm::sqrt(1.0 + grad * grad)),
@@ -492,10 +522,13 @@ impl<F: Real> Plant<F> {
             davis_c: F::of(p.resistance.davis_c_n_per_mps2),
             resistance_speed_band: F::of(0.01),
             actuator_lag_rate: F::of(if lag > 0.0 { (dt / lag).min(1.0) } else { 1.0 }),
+            actuator_lag: lag > 0.0 && dt / lag < 1.0,
+            pressure_low: -F::of(0.02) * caliper.pressure_limit,
+            clamp_force_low: -F::of(0.02) * caliper.clamp_force_limit,
             speed_limit: F::of(140.0),
             polach: Polach::new(&p.contact, rail),
             friction: DiscPadFriction::new(&p.friction),
-            caliper: Caliper::new(&p.brake),
+            caliper,
             thermal: DiscThermal::new(&p.thermal),
             friction_radius: F::of(p.brake.friction_radius),
         })
@@ -506,13 +539,15 @@ impl<F: Real> Plant<F> {
         let v0 = self.initial_speed;
         self.s = State::default();
         self.s.v_c = v0;
-        self.s.disc_temp = [disc_temp; WHEELSETS];
-        self.s.temperature_factor = [self.k.friction.temperature_factor(disc_temp); WHEELSETS];
-        self.s.heat_loss = [self.k.thermal.loss_coefficient(v0); WHEELSETS];
-        self.s.speed_decay =
-            [self.k
+        for w in self.s.w.iter_mut() {
+            w.disc_temp = disc_temp;
+            w.temperature_factor = self.k.friction.temperature_factor(disc_temp);
+            w.heat_loss = self.k.thermal.loss_coefficient(v0);
+            w.speed_decay = self
+                .k
                 .friction
-                .speed_decay_at(v0 * self.k.inv_r * self.k.friction_radius); WHEELSETS];
+                .speed_decay_at(v0 * self.k.inv_r * self.k.friction_radius);
+        }
         self.out.steps = 0;
         self.out.vehicle_speed = v0;
         self.out.distance = F::ZERO;
@@ -571,21 +606,28 @@ impl<F: Real> Plant<F> {
         self.k.q_static
     }
 
-    /// Sanitises one brake input to a pad clamp force (N per face), flagging bad values.
+    /// Sanitises one brake input to a pad clamp force (N per face), flagging bad values;
+    /// `last_clamp` is the wheelset's last valid value.
     #[inline(always)]
-    fn clamp_force_input(&mut self, j: usize, input: BrakeInput<F>, flags: &mut u32) -> F {
-        let cal = &self.k.caliper;
-        let (value, limit) = match input {
-            BrakeInput::CylinderPressure(p) => (p, cal.pressure_limit),
-            BrakeInput::ClampForce(f) => (f, cal.clamp_force_limit),
+    fn clamp_force_input(
+        k: &Constants<F>,
+        last_clamp: &mut F,
+        j: usize,
+        input: BrakeInput<F>,
+        flags: &mut u32,
+    ) -> F {
+        let cal = &k.caliper;
+        let (value, limit, low) = match input {
+            BrakeInput::CylinderPressure(p) => (p, cal.pressure_limit, k.pressure_low),
+            BrakeInput::ClampForce(f) => (f, cal.clamp_force_limit, k.clamp_force_low),
         };
         if !value.is_finite() {
             *flags |= Flags::wheelset_bit(Flags::INPUT_NOT_FINITE, j);
-            return self.s.last_clamp[j];
+            return *last_clamp;
         }
         // Below zero by more than 2 % of the range, or above the limit: out of range.
         // Small negative readings are sensor noise around zero and clamp silently to 0.
-        if value > limit || value < -F::of(0.02) * limit {
+        if value > limit || value < low {
             *flags |= Flags::wheelset_bit(Flags::INPUT_OUT_OF_RANGE, j);
         }
         let value = value.clamp_to(F::ZERO, limit);
@@ -593,41 +635,60 @@ impl<F: Real> Plant<F> {
             BrakeInput::CylinderPressure(_) => cal.clamp_force(value).min(cal.clamp_force_limit),
             BrakeInput::ClampForce(_) => value,
         };
-        self.s.last_clamp[j] = clamp;
+        *last_clamp = clamp;
         clamp
+    }
+
+    /// The pad force acting on wheelset `j` (N per face): its input through the optional
+    /// actuator lag.
+    #[inline(always)]
+    fn pad_force(
+        k: &Constants<F>,
+        w: &mut WheelsetState<F>,
+        j: usize,
+        input: BrakeInput<F>,
+        flags: &mut u32,
+    ) -> F {
+        let target = Self::clamp_force_input(k, &mut w.last_clamp, j, input, flags);
+        let pad = &mut w.pad_force;
+        // First-order lag, written from the target so that rate 1 (no lag) gives the
+        // target exactly, and kept between the old value and the target: rounding may
+        // not overshoot the (clamped) target. Without lag (rate 1): the target, skipped.
+        if k.actuator_lag {
+            let lagged = target - (target - *pad) * (F::ONE - k.actuator_lag_rate);
+            *pad = lagged.clamp_to(pad.min(target), pad.max(target));
+        } else {
+            *pad = target;
+        }
+        *pad
     }
 
     /// Advances the plant by one fixed step with the brake inputs of the four wheelsets.
     pub fn step(&mut self, inputs: &[BrakeInput<F>; WHEELSETS]) -> &Outputs<F> {
         let mut flags = 0u32;
         let half = F::of(0.5);
-
-        // ---- Pad forces (inputs; optional actuator lag) ----
-        let mut clamp = [F::ZERO; WHEELSETS];
-        for j in 0..WHEELSETS {
-            let target = self.clamp_force_input(j, inputs[j], &mut flags);
-            let pad = &mut self.s.pad_force[j];
-            // First-order lag, written from the target so that rate 1 (no lag) gives the
-            // target exactly, and kept between the old value and the target: rounding may
-            // not overshoot the (clamped) target.
-            let lagged = target - (target - *pad) * (F::ONE - self.k.actuator_lag_rate);
-            *pad = lagged.clamp_to(pad.min(target), pad.max(target));
-            clamp[j] = *pad;
-        }
-
         let k = &self.k;
         let dt = k.dt;
         let s = &mut self.s;
 
-        // ---- Kinematics ----
+        // ---- Pad forces (inputs; optional actuator lag) and kinematics ----
+        // This step's values of each wheelset, one record each (every field set here or
+        // before it is read).
         let v_c = s.v_c;
         let v_b = [v_c + s.dv_b[0], v_c + s.dv_b[1]];
-        let mut v_w = [F::ZERO; WHEELSETS];
-        let mut omega = [F::ZERO; WHEELSETS];
-        for j in 0..WHEELSETS {
-            v_w[j] = v_b[j / 2] + s.dv_w[j];
-            omega[j] = (v_w[j] - s.slip[j]) * k.inv_r;
-        }
+        let mut ws: [WheelsetStep<F>; WHEELSETS] = core::array::from_fn(|j| {
+            let v_w = v_b[j / 2] + s.w[j].dv;
+            WheelsetStep {
+                clamp: Self::pad_force(k, &mut s.w[j], j, inputs[j], &mut flags),
+                v_w,
+                omega: (v_w - s.w[j].slip) * k.inv_r,
+                q: F::ZERO,
+                f_pv: F::ZERO,
+                f_pl: F::ZERO,
+                a_w: F::ZERO,
+                brake_torque: F::ZERO,
+            }
+        });
 
         // ---- Suspension forces (deviation from the static preloads) ----
         // Secondary vertical, bogie i: extension e = z_c + X_i theta_c - z_b;
@@ -649,19 +710,16 @@ impl<F: Real> Plant<F> {
         }
         // Primary vertical (force deviation on the bogie, upward) and longitudinal (force on
         // the wheelset), wheelset j in bogie j/2.
-        let mut f_pv = [F::ZERO; WHEELSETS];
-        let mut f_pl = [F::ZERO; WHEELSETS];
-        let mut q = [F::ZERO; WHEELSETS];
         for j in 0..WHEELSETS {
             let i = j / 2;
             let xa = k.x_axle[j % 2];
             let e = s.z_b[i] + xa * s.pitch_b[i];
             let e_rate = s.vz_b[i] + xa * s.pitch_rate_b[i];
-            f_pv[j] = -(k.k_pv * e + k.c_pv * e_rate);
-            q[j] = k.q_static + f_pv[j];
-            let d = s.dx_w[j] + k.pz_bogie_pl * s.pitch_b[i];
-            let d_rate = s.dv_w[j] + k.pz_bogie_pl * s.pitch_rate_b[i];
-            f_pl[j] = -(k.k_pl * d + k.c_pl * d_rate);
+            ws[j].f_pv = -(k.k_pv * e + k.c_pv * e_rate);
+            ws[j].q = k.q_static + ws[j].f_pv;
+            let d = s.w[j].dx + k.pz_bogie_pl * s.pitch_b[i];
+            let d_rate = s.w[j].dv + k.pz_bogie_pl * s.pitch_rate_b[i];
+            ws[j].f_pl = -(k.k_pl * d + k.c_pl * d_rate);
             damper_power += k.c_pv * e_rate * e_rate + k.c_pl * d_rate * d_rate;
         }
 
@@ -669,37 +727,41 @@ impl<F: Real> Plant<F> {
         let turn = self.out.steps % (2 * WHEELSETS as u32);
         let slow = (turn % WHEELSETS as u32) as usize;
         if turn < WHEELSETS as u32 {
-            s.temperature_factor[slow] = k.friction.temperature_factor(s.disc_temp[slow]);
+            s.w[slow].temperature_factor = k.friction.temperature_factor(s.w[slow].disc_temp);
         } else {
-            s.heat_loss[slow] = k.thermal.loss_coefficient(k.r * omega[slow]);
+            s.w[slow].heat_loss = k.thermal.loss_coefficient(k.r * ws[slow].omega);
         }
-        // Degraded adhesion along the track (crate::track): one wheelset per step, in turn.
+        // Zones and degraded adhesion along the track (crate::track): one wheelset per
+        // step, in turn; nothing to do on a uniform track with degraded adhesion off.
         let track = &mut self.track;
-        track.step(
-            slow,
-            s.x_c + self.track_offset[slow],
-            v_w[slow],
-            self.out.wheelsets[slow].contact_power,
-            F::of(WHEELSETS as f64) * dt,
-        );
+        if track.active() {
+            track.step(
+                slow,
+                s.x_c + self.track_offset[slow],
+                ws[slow].v_w,
+                self.out.wheelsets[slow].contact_power,
+                F::of(WHEELSETS as f64) * dt,
+            );
+        }
 
         // ---- Wheelsets: contact (Eqs 9-12), friction (Eq 2), brake (Eq 1), spin (Eqs 7-8)
-        let mut a_w = [F::ZERO; WHEELSETS];
-        let mut brake_torque = [F::ZERO; WHEELSETS];
-        for j in 0..WHEELSETS {
+        // Kept a loop (not unrolled four times): one wheelset's values fit the registers.
+        for j in 0..core::hint::black_box(WHEELSETS) {
+            let j = j & (WHEELSETS - 1);
             let (polach, mu_factor) = track.contact(j);
-            let mu = polach.friction_tracked(s.slip[j], &mut s.rail_decay[j]) * mu_factor;
-            let contact: ContactForce<F> = polach.evaluate_with_mu(s.slip[j], v_w[j], q[j], mu);
-            if !(q[j] > F::ZERO) {
+            let mu = polach.friction_tracked(s.w[j].slip, &mut s.w[j].rail_decay) * mu_factor;
+            let contact: ContactForce<F> =
+                polach.evaluate_with_mu(s.w[j].slip, ws[j].v_w, ws[j].q, mu);
+            if !(ws[j].q > F::ZERO) {
                 flags |= Flags::wheelset_bit(Flags::WHEEL_UNLOADED, j);
             }
             let mu_d = k.friction.mu_d_tracked(
-                omega[j] * k.friction_radius,
-                s.temperature_factor[j],
-                clamp[j],
-                &mut s.speed_decay[j],
+                ws[j].omega * k.friction_radius,
+                s.w[j].temperature_factor,
+                ws[j].clamp,
+                &mut s.w[j].speed_decay,
             );
-            let torque_kinetic = k.caliper.torque(mu_d, clamp[j]);
+            let torque_kinetic = k.caliper.torque(mu_d, ws[j].clamp);
 
             // Semi-implicit spin/slip update with the brake as a clutch. Unknowns at the
             // new step: u', omega', F' = chord u'. With D = 1 + dt chord (1/m + r^2/I):
@@ -708,11 +770,11 @@ impl<F: Real> Plant<F> {
             // The brake torque T opposes the spin up to the kinetic torque and holds the
             // wheel (omega' = 0) when that suffices.
             let chord = contact.chord;
-            let a_explicit = f_pl[j] * k.inv_m_w - k.g_along;
+            let a_explicit = ws[j].f_pl * k.inv_m_w - k.g_along;
             let d = F::ONE + chord * k.dt_spin_compliance;
             let inv_d = F::ONE / d;
-            let u0 = (s.slip[j] + dt * a_explicit) * inv_d;
-            let omega0 = omega[j] + chord * u0 * k.dt_r_inv_i_w;
+            let u0 = (s.w[j].slip + dt * a_explicit) * inv_d;
+            let omega0 = ws[j].omega + chord * u0 * k.dt_r_inv_i_w;
             let g = k.dt_inv_i_w * (F::ONE + chord * k.dt_inv_m_w) * inv_d;
             let limit = g * torque_kinetic;
             let (torque, omega_new) = if omega0 > limit {
@@ -724,36 +786,36 @@ impl<F: Real> Plant<F> {
             };
             let u_new = u0 + torque * k.dt_r_inv_i_w * inv_d;
             let force = chord * u_new;
-            a_w[j] = a_explicit - force * k.inv_m_w;
-            brake_torque[j] = torque;
+            ws[j].a_w = a_explicit - force * k.inv_m_w;
+            ws[j].brake_torque = torque;
 
             let w = &mut self.out.wheelsets[j];
             w.omega = omega_new;
-            w.speed = v_w[j] + dt * a_w[j];
+            w.speed = ws[j].v_w + dt * ws[j].a_w;
             w.slip_velocity = u_new;
             w.creepage = contact.creepage;
-            w.axle_load = q[j];
+            w.axle_load = ws[j].q;
             w.adhesion_force = force;
-            w.adhesion = if q[j] > F::ZERO {
-                force / q[j]
+            w.adhesion = if ws[j].q > F::ZERO {
+                force / ws[j].q
             } else {
                 F::ZERO
             };
             w.rail_mu = contact.mu;
             w.mu_d = mu_d;
-            w.clamp_force = clamp[j];
+            w.clamp_force = ws[j].clamp;
             w.brake_torque = torque;
-            w.brake_force = k.caliper.friction_force(mu_d, clamp[j]);
-            w.brake_power = torque * half * (omega[j] + omega_new);
-            w.contact_power = force * half * (s.slip[j] + u_new);
-            s.slip[j] = u_new;
+            w.brake_force = k.caliper.friction_force(mu_d, ws[j].clamp);
+            w.brake_power = torque * half * (ws[j].omega + omega_new);
+            w.contact_power = force * half * (s.w[j].slip + u_new);
+            s.w[j].slip = u_new;
 
             // Disc heat balance, Eqs (3)-(6) (explicit: time constant of minutes).
             let rate = k
                 .thermal
-                .rate_with(w.brake_power, s.disc_temp[j], s.heat_loss[j]);
-            s.disc_temp[j] += dt * rate;
-            w.disc_temp = s.disc_temp[j];
+                .rate_with(w.brake_power, s.w[j].disc_temp, s.w[j].heat_loss);
+            s.w[j].disc_temp += dt * rate;
+            w.disc_temp = s.w[j].disc_temp;
         }
 
         // ---- Bodies ----
@@ -776,16 +838,16 @@ impl<F: Real> Plant<F> {
         let mut alpha_b = [F::ZERO; 2];
         for i in 0..2 {
             let (j0, j1) = (2 * i, 2 * i + 1);
-            a_b[i] = (f_sl[i] - f_pl[j0] - f_pl[j1]) * k.inv_m_b - k.g_along;
-            az_b[i] = (f_pv[j0] + f_pv[j1] - f_sv[i]) * k.inv_m_b;
+            a_b[i] = (f_sl[i] - ws[j0].f_pl - ws[j1].f_pl) * k.inv_m_b - k.g_along;
+            az_b[i] = (ws[j0].f_pv + ws[j1].f_pv - f_sv[i]) * k.inv_m_b;
             // Moments: primary vertical at +-b/2, primary longitudinal (-f_pl on the bogie)
             // at pz_pl, secondary longitudinal at pz_sl, brake reactions -T_b.
-            let m = k.x_axle[0] * f_pv[j0]
-                + k.x_axle[1] * f_pv[j1]
-                + k.pz_bogie_pl * (f_pl[j0] + f_pl[j1])
+            let m = k.x_axle[0] * ws[j0].f_pv
+                + k.x_axle[1] * ws[j1].f_pv
+                + k.pz_bogie_pl * (ws[j0].f_pl + ws[j1].f_pl)
                 - k.pz_bogie_sl * f_sl[i]
-                - brake_torque[j0]
-                - brake_torque[j1];
+                - ws[j0].brake_torque
+                - ws[j1].brake_torque;
             alpha_b[i] = m * k.inv_i_b;
         }
 
@@ -806,8 +868,8 @@ impl<F: Real> Plant<F> {
             s.pitch_b[i] += s.pitch_rate_b[i] * dt;
         }
         for j in 0..WHEELSETS {
-            s.dv_w[j] += (a_w[j] - a_b[j / 2]) * dt;
-            s.dx_w[j] += s.dv_w[j] * dt;
+            s.w[j].dv += (ws[j].a_w - a_b[j / 2]) * dt;
+            s.w[j].dx += s.w[j].dv * dt;
         }
 
         // ---- External power (resistance and gradient) for the energy balance ----
@@ -825,7 +887,7 @@ impl<F: Real> Plant<F> {
         // (and a sum of finite values overflows only far beyond any physical state).
         let mut sum = s.v_c + s.pitch_c + s.pitch_b[0] + s.pitch_b[1];
         for j in 0..WHEELSETS {
-            sum += s.slip[j] + s.disc_temp[j];
+            sum += s.w[j].slip + s.w[j].disc_temp;
         }
         let finite = sum.is_finite();
         let out = &mut self.out;
@@ -848,13 +910,13 @@ impl<F: Real> Plant<F> {
     /// Safe state after a numeric fault: vehicle at rest, brakes' effect nil, discs kept
     /// if finite. Outputs show standstill, so a brake controller sees a stopped train.
     fn enter_safe_state(&mut self) {
-        let temps = self.s.disc_temp;
+        let temps = self.s.w.map(|w| w.disc_temp);
         let steps = self.out.steps;
         self.initial_speed = F::ZERO;
         self.reset_state(F::ZERO);
         for j in 0..WHEELSETS {
             if temps[j].is_finite() {
-                self.s.disc_temp[j] = temps[j];
+                self.s.w[j].disc_temp = temps[j];
             }
         }
         self.out.steps = steps;
@@ -880,12 +942,12 @@ impl<F: Real> Plant<F> {
         }
         for j in 0..WHEELSETS {
             let i = j / 2;
-            let v_w = v_c + f(s.dv_b[i]) + f(s.dv_w[j]);
-            let omega = (v_w - f(s.slip[j])) / f(k.r);
+            let v_w = v_c + f(s.dv_b[i]) + f(s.w[j].dv);
+            let omega = (v_w - f(s.w[j].slip)) / f(k.r);
             kinetic += 0.5 * f(k.m_w) * v_w * v_w + 0.5 * f(k.i_w) * omega * omega;
             let xa = f(k.x_axle[j % 2]);
             let e = f(s.z_b[i]) + xa * f(s.pitch_b[i]);
-            let d = f(s.dx_w[j]) + f(k.pz_bogie_pl) * f(s.pitch_b[i]);
+            let d = f(s.w[j].dx) + f(k.pz_bogie_pl) * f(s.pitch_b[i]);
             potential += 0.5 * f(k.k_pv) * e * e + 0.5 * f(k.k_pl) * d * d;
         }
         Energy { kinetic, potential }

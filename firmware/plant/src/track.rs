@@ -374,8 +374,17 @@ pub struct TrackAdhesion<F: Real> {
     starts: [F; MAX_ZONES],
     ends: [F; MAX_ZONES],
     polach: [Polach<F>; 4],
+    /// Whether the step has anything to do: zones to cross or degraded adhesion on (a
+    /// uniform track without it costs the plant's step one flag test).
+    active: bool,
     /// Surface under each wheelset (refreshed in turn).
     surface: [Surface; crate::WHEELSETS],
+    /// The contact model of each wheelset's surface (a copy: no lookup in the step).
+    wheel_polach: [Polach<F>; crate::WHEELSETS],
+    /// Positions between which each wheelset's surface cannot change, `[lo, hi)`, m: the
+    /// zones are looked up again only when a wheelset leaves its interval.
+    lo: [F; crate::WHEELSETS],
+    hi: [F; crate::WHEELSETS],
     /// Friction factor 1 + (R - 1) lambda of each wheelset (exactly 1 when off).
     mu_factor: [F; crate::WHEELSETS],
     degraded: Option<Recovery<F>>,
@@ -438,12 +447,24 @@ impl<F: Real> TrackAdhesion<F> {
             starts[i] = F::of(z.start_m);
             ends[i] = F::of(z.end_m);
         }
+        // A uniform track: every position lies in (-inf, inf); with zones, an empty interval
+        // makes the first refresh of each wheelset look its surface up.
+        let uniform = track.count == 0;
+        let (lo, hi) = if uniform {
+            (F::of(f64::NEG_INFINITY), F::of(f64::INFINITY))
+        } else {
+            (F::of(f64::INFINITY), F::of(f64::NEG_INFINITY))
+        };
         Ok(Self {
             track,
             starts,
             ends,
+            active: !uniform || recovery.is_some(),
+            wheel_polach: [polach[base as usize]; crate::WHEELSETS],
             polach,
             surface: [base; crate::WHEELSETS],
+            lo: [lo; crate::WHEELSETS],
+            hi: [hi; crate::WHEELSETS],
             mu_factor: [F::ONE; crate::WHEELSETS],
             degraded: recovery,
         })
@@ -457,10 +478,14 @@ impl<F: Real> TrackAdhesion<F> {
     /// The contact model under wheelset `j` (0-based) and its friction factor.
     #[inline(always)]
     pub fn contact(&self, j: usize) -> (&Polach<F>, F) {
-        (
-            &self.polach[self.surface[j & 3] as usize & 3],
-            self.mu_factor[j & 3],
-        )
+        (&self.wheel_polach[j & 3], self.mu_factor[j & 3])
+    }
+
+    /// Whether [`Self::step`] has anything to do: the track has zones or degraded adhesion
+    /// is on (false: the plant skips the call).
+    #[inline(always)]
+    pub fn active(&self) -> bool {
+        self.active
     }
 
     /// The surface under each wheelset.
@@ -484,19 +509,48 @@ impl<F: Real> TrackAdhesion<F> {
         }
     }
 
+    /// Looks up the surface under wheelset `j` at `x_m` and the interval around `x_m` in which
+    /// it stays (between the nearest zone bounds); out of line, run only on a crossing.
+    #[inline(never)]
+    fn locate(&mut self, j: usize, x_m: F) {
+        let mut surface = self.track.base;
+        let mut lo = F::of(f64::NEG_INFINITY);
+        let mut hi = F::of(f64::INFINITY);
+        for i in 0..self.track.count {
+            let (start, end) = (self.starts[i], self.ends[i]);
+            if x_m >= start && x_m < end {
+                surface = self.track.zones[i].surface;
+            }
+            for bound in [start, end] {
+                if bound <= x_m {
+                    lo = lo.max(bound);
+                } else if bound < hi {
+                    hi = bound;
+                }
+            }
+        }
+        if x_m.is_nan() {
+            // Looked up again at the next refresh.
+            (lo, hi) = (F::of(f64::INFINITY), F::of(f64::NEG_INFINITY));
+        }
+        self.surface[j] = surface;
+        self.wheel_polach[j] = self.polach[surface as usize & 3];
+        self.lo[j] = lo;
+        self.hi[j] = hi;
+    }
+
     /// Refreshes wheelset `j` at track position `x_m` (m) with its speed (m/s) and the
     /// power dissipated in its contact (W), `elapsed_s` since its last refresh. Kept out of
     /// line (the plant's wheelset loop stays as it was); named `step` so the board places it in
     /// CCM SRAM with the plant's step (firmware/board/ccm.x).
     #[inline(never)]
     pub fn step(&mut self, j: usize, x_m: F, speed: F, contact_power: F, elapsed_s: F) {
-        let mut surface = self.track.base;
-        for i in 0..self.track.count {
-            if x_m >= self.starts[i] && x_m < self.ends[i] {
-                surface = self.track.zones[i].surface;
-            }
+        let j = j & 3;
+        // NaN leaves every interval: looked up (base surface) as before.
+        if !(x_m >= self.lo[j] && x_m < self.hi[j]) {
+            self.locate(j, x_m);
         }
-        self.surface[j] = surface;
+        let surface = self.surface[j];
         let Some(r) = self.degraded.as_mut() else {
             return;
         };

@@ -11,6 +11,10 @@
 //! * `C friction=F part=P n= sum= max= max_step= p50= p99=`: instructions per step of a part
 //!   (see [`hils_sil::trace::PARTS`]);
 //! * `E friction=F steps= stop_step= rows=`: the run ended;
+//! * `D part=step track=low_dry_low n= sum= max= max_step= p50= p99=`: instructions per plant
+//!   step with the degraded-adhesion model on ([`hils_plant::track`]), variable friction, on
+//!   the low -> dry -> low track of `programmes/wsp-low-adhesion.toml` (the first
+//!   [`DEGRADED_STEPS`] steps of the EB: both zone changes under every wheelset);
 //! * `G part=rig_step n= sum= max= max_tick= rejected=`: instructions per tick of the rig's
 //!   step (`Rig::step` with the tick's command, mock board) over the cost sequence
 //!   ([`hils_rig_core::script::CostRun`]);
@@ -52,7 +56,8 @@ mod emulator {
     use hils_plant::friction::DiscPadFriction;
     use hils_plant::math::TrackedExp;
     use hils_plant::thermal::DiscThermal;
-    use hils_plant::{BrakeInput, FrictionModel, WHEELSETS};
+    use hils_plant::track::ContactSets;
+    use hils_plant::{BrakeInput, FrictionModel, Surface, Track, WHEELSETS, Zone};
     use hils_sil::trace::{LINE_LEN, PARTS, RECORD_EVERY};
     use hils_sil::{EbScenario, ParamFile, TraceRow};
 
@@ -62,6 +67,8 @@ mod emulator {
     const SYST_MASK: u32 = 0x00FF_FFFF;
     /// Instructions per iteration of the counting spin loop in [`edge_counting`].
     const SPIN_INSTRUCTIONS: u32 = 4;
+    /// Steps of the degraded-adhesion run (20 s: past both zone bounds at 120 m and 220 m).
+    const DEGRADED_STEPS: u32 = 200_000;
     /// Histogram bin width, instructions.
     const BIN: u32 = 8;
     const BINS: usize = 1024;
@@ -438,22 +445,8 @@ mod emulator {
                     .1;
             });
             let step = sc.steps();
-            // The plant step alone, on an exact replay of the step the loop just took.
-            let inputs = sc
-                .sim
-                .unit_outputs()
-                .cylinder_pressure
-                .map(BrakeInput::CylinderPressure);
-            let ((), step_cost) = timer.measure(|| {
-                replay.step(black_box(&inputs));
-            });
+            let step_cost = replay_cost(host, timer, &sc, &mut replay);
             let cur = *sc.sim.outputs();
-            if *replay.outputs() != cur {
-                host.line(format_args!(
-                    "X friction={name}: the replayed plant step {step} differs"
-                ));
-                fail_exit();
-            }
             // The sub-models, with this step's per-wheelset values.
             let w = |o: &hils_plant::Outputs<f32>, j: usize| o.wheelsets[j];
             let contact_args = [0, 1, 2, 3].map(|j| {
@@ -547,6 +540,83 @@ mod emulator {
         }
     }
 
+    /// Instructions of the plant step alone, on `replay` (a copy of the plant before the step
+    /// the loop just took) with the brake unit's outputs of that step; the replay must give
+    /// the loop's outputs exactly.
+    fn replay_cost(
+        host: &mut Host,
+        timer: &Timer,
+        sc: &EbScenario<f32>,
+        replay: &mut hils_plant::Plant<f32>,
+    ) -> u32 {
+        let inputs = sc
+            .sim
+            .unit_outputs()
+            .cylinder_pressure
+            .map(BrakeInput::CylinderPressure);
+        let ((), cost) = timer.measure(|| {
+            replay.step(black_box(&inputs));
+        });
+        if *replay.outputs() != *sc.sim.outputs() {
+            host.line(format_args!(
+                "X the replayed plant step {} differs",
+                sc.steps()
+            ));
+            fail_exit();
+        }
+        cost
+    }
+
+    /// Instructions per plant step with degraded adhesion on, on the low -> dry -> low track
+    /// (`programmes/wsp-low-adhesion.toml`'s `low_dry_low`), variable friction: the `D` line.
+    fn degraded_cost(host: &mut Host, timer: &Timer) {
+        let mut file = ParamFile::default();
+        file.plant.friction.model = FrictionModel::Variable;
+        file.degraded_adhesion.enabled = true;
+        let zones = [Zone {
+            start_m: 120.0,
+            end_m: 220.0,
+            surface: Surface::Dry,
+        }];
+        let Ok(track) = Track::new(Surface::Low, &zones) else {
+            host.line(format_args!("X degraded: bad track"));
+            fail_exit();
+        };
+        let Ok(mut sc) = EbScenario::<f32>::new(&file, RECORD_EVERY) else {
+            host.line(format_args!("X degraded: cannot build the closed loop"));
+            fail_exit();
+        };
+        if sc
+            .sim
+            .set_track(&file, track, &ContactSets::default())
+            .is_err()
+        {
+            host.line(format_args!("X degraded: cannot set the track"));
+            fail_exit();
+        }
+        let mut stat = Stat::new();
+        loop {
+            let mut replay = sc.sim.plant.clone();
+            let adv = sc.advance(|sim| {
+                sim.step();
+            });
+            let cost = replay_cost(host, timer, &sc, &mut replay);
+            stat.add(cost, sc.steps());
+            if adv.done || sc.steps() >= DEGRADED_STEPS {
+                break;
+            }
+        }
+        host.line(format_args!(
+            "D part=step track=low_dry_low n={} sum={} max={} max_step={} p50={} p99={}",
+            stat.n,
+            stat.sum,
+            stat.max,
+            stat.max_step,
+            stat.quantile(500),
+            stat.quantile(990)
+        ));
+    }
+
     /// Instructions of each tick of the rig's cost sequence: the command and the step, as
     /// the board's step interrupt runs them; the build of a requested run happens between
     /// ticks (thread mode on the board) and is not counted.
@@ -603,6 +673,7 @@ mod emulator {
         for friction in [FrictionModel::Variable, FrictionModel::Constant] {
             run(&mut host, &timer, friction);
         }
+        degraded_cost(&mut host, &timer);
         rig_cost(&mut host, &timer);
         debug::exit(debug::EXIT_SUCCESS);
         loop {

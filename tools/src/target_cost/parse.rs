@@ -1,4 +1,4 @@
-//! Stage 3: parse what the emulator printed (`H`, `K`, `F`, `B`, `R`, `C`, `E`, `G`, `X` lines;
+//! Stage 3: parse what the emulator printed (`H`, `K`, `F`, `B`, `R`, `C`, `E`, `D`, `G`, `X` lines;
 //! see `firmware/qemu/src/main.rs`).
 
 use anyhow::{Result, anyhow, bail};
@@ -79,6 +79,9 @@ pub struct EmulatorOutput {
     pub runs: Vec<TargetRun>,
     /// The rig's step over its cost sequence.
     pub rig: Option<RigStepCost>,
+    /// The plant step with degraded adhesion on, on a non-uniform track (a `D` line): the
+    /// track's name and the cost.
+    pub degraded: Option<(String, PartCost)>,
 }
 
 impl EmulatorOutput {
@@ -155,6 +158,10 @@ impl Parser {
             }
             "E" => self.end_run(line, &at)?,
             "G" => self.out.rig = Some(rig_step_cost(line)?),
+            "D" => {
+                let (_, cost) = part_cost(line)?;
+                self.out.degraded = Some((kv(line, "track")?.to_string(), cost));
+            }
             "X" => bail!(
                 "the emulated target reported an error: {}",
                 &line[1..].trim()

@@ -82,6 +82,29 @@ fn costs(s: &mut String, c: &TargetCost) {
         c.instructions_max,
         met(c.instructions_max <= c.target_max)
     );
+    match &c.degraded {
+        Some(d) => {
+            let _ = writeln!(
+                s,
+                "  degraded adhesion on, track {} (variable friction, first {} steps of the EB): \
+                 mean {:.0} max {} p99 {}; {:+.1} % over the paper EB's mean (target <= +{:.0} %: {})",
+                d.track,
+                d.steps,
+                d.instructions_mean,
+                d.instructions_max,
+                d.instructions_p99,
+                d.increase_percent,
+                d.target_increase_percent,
+                met(d.within_target)
+            );
+        }
+        None => {
+            let _ = writeln!(
+                s,
+                "  degraded adhesion on: not measured by this emulator binary"
+            );
+        }
+    }
 }
 
 /// Estimated cycles per step (CCM SRAM and flash) with the model stated.
