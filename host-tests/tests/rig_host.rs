@@ -220,8 +220,10 @@ fn eb_run_over_the_bus_matches_sil_and_its_log_is_diagnosed() {
     hils::diagnose::main(hils::diagnose::DiagnoseArgs {
         baseline: PathBuf::from(env!("CARGO_MANIFEST_DIR"))
             .join("../../shared/spec/reference-parameters.toml"),
-        json: Some(json.clone()),
-        report: None,
+        out: hils::outputs::Outputs {
+            json: Some(json.clone()),
+            report: None,
+        },
         step_s: hils::diagnose::replay::REPLAY_STEP_S,
         files: vec![csv],
     })

@@ -21,16 +21,19 @@ pub enum Command {
     /// Host speed of the plant (steps per second, f32 and f64; real-time factor at 10 kHz);
     /// `--reader FILE`: time and peak memory of reading a measured file.
     Bench(crate::bench::BenchArgs),
-    /// Fit Eq (2) to brake-dynamometer friction tests.
+    /// Fit Eq (2) to brake-dynamometer friction tests (`--json`: the fitted parameters;
+    /// `--report`: plots like the paper's Fig 2).
     FitFriction(crate::fit_friction::FitFrictionArgs),
-    /// Diagnose measured runs against a baseline parameter file.
+    /// Diagnose measured runs against a baseline parameter file (`--json`: the diagnosis JSON
+    /// of spec/diagnosis.md; `--report`: report.md with plots).
     Diagnose(crate::diagnose::DiagnoseArgs),
     /// Instructions per plant step on the emulated Cortex-M4F.
     TargetCost(crate::target_cost::TargetCostArgs),
     /// Turn a captured defmt telemetry log into a run-log CSV.
     Decode(crate::decode::DecodeArgs),
     /// WSP test bench: a programme of low-adhesion runs in SIL (or a captured rig log),
-    /// judged against the stopping distance the adhesion allows.
+    /// judged against the stopping distance the adhesion allows (`--json`: the per-run
+    /// results; `--report`: summary table and per-run plots).
     WspTest(crate::wsp::WspTestArgs),
     /// Operate the rig board over CAN (or `--interface sim`): start, stop, brake, inject,
     /// calibrate, status, watch, record, session scripts, programmes.

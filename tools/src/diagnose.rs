@@ -51,7 +51,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use clap::Args;
 use hils_plant::{Params, Rail};
 use nalgebra::DMatrix;
@@ -69,12 +69,9 @@ pub struct DiagnoseArgs {
     /// Baseline parameter file (reference-parameters.toml or a variant).
     #[arg(long)]
     pub baseline: PathBuf,
-    /// Write the diagnosis JSON (spec/diagnosis.md) to this file.
-    #[arg(long)]
-    pub json: Option<PathBuf>,
-    /// Write a report (report.md with SVG plots) into this directory.
-    #[arg(long)]
-    pub report: Option<PathBuf>,
+    /// `--json`: the diagnosis JSON (spec/diagnosis.md); `--report`: report.md with SVG plots.
+    #[command(flatten)]
+    pub out: crate::outputs::Outputs,
     /// Replay step, s (default 1 ms; the plant's semi-implicit contact keeps it accurate,
     /// see docs/diagnosis.md).
     #[arg(long, default_value_t = replay::REPLAY_STEP_S, value_parser = crate::cli::step_s)]
@@ -1642,22 +1639,12 @@ pub fn main(args: DiagnoseArgs) -> Result<()> {
     let name = args.baseline.display().to_string();
     let out = diagnose(&baseline.plant, &name, &logs, args.step_s)?;
     print_summary(&out);
-    if let Some(path) = &args.json {
-        write_json(path, &out.report)?;
-        println!("wrote {}", path.display());
-    }
-    if let Some(dir) = &args.report {
-        let files = report::write(dir, &out)?;
-        for f in files {
-            println!("wrote {}", f.display());
-        }
-    }
-    Ok(())
+    args.out.write_json(&out.report)?;
+    args.out.write_report(|dir| report::write(dir, &out))
 }
 
 pub fn write_json(path: &Path, report: &Report) -> Result<()> {
-    std::fs::write(path, serde_json::to_string_pretty(report)? + "\n")
-        .with_context(|| format!("cannot write {}", path.display()))
+    crate::outputs::write_json_file(path, report)
 }
 
 fn print_summary(out: &Outcome) {

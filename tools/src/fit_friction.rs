@@ -31,12 +31,9 @@ use crate::plots::{Chart, Series, Style};
 /// Arguments of `hils fit-friction`.
 #[derive(Args, Debug, Clone)]
 pub struct FitFrictionArgs {
-    /// Write the fitted parameters as JSON to this file.
-    #[arg(long)]
-    pub json: Option<PathBuf>,
-    /// Write plots like the paper's Fig 2 (and report.md) into this directory.
-    #[arg(long)]
-    pub report: Option<PathBuf>,
+    /// `--json`: the fitted parameters; `--report`: plots like the paper's Fig 2 and report.md.
+    #[command(flatten)]
+    pub out: crate::outputs::Outputs,
     /// Parameter file whose `friction.correction_c` is used (default: the reference values).
     #[arg(long)]
     pub params: Option<PathBuf>,
@@ -286,18 +283,9 @@ pub fn main(args: FitFrictionArgs) -> Result<()> {
     fit.skipped_rows = tests.iter().map(|t| t.skipped).sum();
     fit.files = args.files.iter().map(|f| f.display().to_string()).collect();
     print_fit(&fit);
-    if let Some(path) = &args.json {
-        std::fs::write(path, serde_json::to_string_pretty(&fit)? + "\n")
-            .with_context(|| format!("cannot write {}", path.display()))?;
-        println!("wrote {}", path.display());
-    }
-    if let Some(dir) = &args.report {
-        let files = write_report(dir, &fit, &v, &t, &mu)?;
-        for f in files {
-            println!("wrote {}", f.display());
-        }
-    }
-    Ok(())
+    args.out.write_json(&fit)?;
+    args.out
+        .write_report(|dir| write_report(dir, &fit, &v, &t, &mu))
 }
 
 /// All files' points together.

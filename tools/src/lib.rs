@@ -13,6 +13,7 @@ pub mod decode;
 pub mod diagnose;
 pub mod fit_friction;
 pub mod measured;
+pub mod outputs;
 pub mod params_file;
 pub mod plots;
 pub mod rig;

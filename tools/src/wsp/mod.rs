@@ -11,7 +11,7 @@ pub mod report;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{Context, Result, anyhow, bail};
+use anyhow::{Result, anyhow, bail};
 use clap::Args;
 use hils_brake_unit::{BrakeDemand, Valve};
 use hils_plant::{Surface, WHEELSETS};
@@ -34,12 +34,9 @@ pub struct WspTestArgs {
     /// Parameter file (default: built-in values, equal to the reference file).
     #[arg(long)]
     pub params: Option<PathBuf>,
-    /// Write the per-run results as JSON here.
-    #[arg(long)]
-    pub json: Option<PathBuf>,
-    /// Write the report (summary table, per-run plots) into this directory.
-    #[arg(long)]
-    pub report: Option<PathBuf>,
+    /// `--json`: the per-run results; `--report`: the summary table and per-run plots.
+    #[command(flatten)]
+    pub out: crate::outputs::Outputs,
     /// Judge a captured rig run log instead of simulating (its `# run: NAME` metadata or
     /// `--run` names the programme's run whose track and criteria apply).
     #[arg(long)]
@@ -348,10 +345,7 @@ pub fn main(args: WspTestArgs) -> Result<()> {
             .ok_or_else(|| anyhow!("the programme has no run `{name}`"))?;
         let verdict = judge_trace(run, trace, &criteria).verdict;
         print_table(&[&verdict]);
-        if let Some(out) = &args.json {
-            write_json(out, &[&verdict])?;
-        }
-        return Ok(());
+        return args.out.write_json(&[&verdict]);
     }
     let started = Instant::now();
     let bar = ProgressBar::new(runs.len() as u64).with_style(
@@ -376,17 +370,9 @@ pub fn main(args: WspTestArgs) -> Result<()> {
         verdicts.len(),
         rayon::current_num_threads()
     );
-    if let Some(out) = &args.json {
-        write_json(out, &verdicts)?;
-    }
-    if let Some(dir) = &args.report {
+    args.out.write_json(&verdicts)?;
+    args.out.write_report(|dir| {
         report::write(dir, &outcomes, &criteria)?;
-        println!("report: {}", dir.join("report.md").display());
-    }
-    Ok(())
-}
-
-fn write_json(path: &std::path::Path, verdicts: &[&Verdict]) -> Result<()> {
-    let text = serde_json::to_string_pretty(verdicts)?;
-    std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
+        Ok(vec![dir.join("report.md")])
+    })
 }
