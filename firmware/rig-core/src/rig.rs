@@ -40,15 +40,20 @@
 
 use embedded_can::Frame;
 use hils_brake_unit::BrakeDemand;
-use hils_plant::{BrakeInput, Flags, FrictionModel, Outputs, Params, Plant, Rail};
+use hils_plant::params::VehicleParams;
+use hils_plant::track::{ContactSets, MAX_ZONES, TrackError};
+use hils_plant::{
+    BrakeInput, DegradedAdhesionParams, Flags, FrictionModel, Outputs, Params, Plant, Rail, STEP_S,
+    Surface, Track, TrackAdhesion, Zone,
+};
 use hils_sil::scenario::at_standstill;
 use hils_sil::{ClosedLoop, LoopError};
 
 use crate::Code;
 use crate::can::{
     BrakeCommand, Calibration, Command, CommandFrame, CommandResult, ConfigItem, DecodeError,
-    DiagFrame, RigMode, RigState, StatusFrame, WHEEL_SPEED_MAX_KMH, WheelSpeedFrame, friction_code,
-    rail_code,
+    DiagFrame, RigMode, RigState, StatusFrame, TrackCommand, VehicleKey, WHEEL_SPEED_MAX_KMH,
+    WheelSpeedFrame, friction_code, rail_code,
 };
 use crate::hw::{RigIo, TelemetryEvent};
 use crate::pulse::{PulseRegisters, PulseTimer, wheel_frequency_hz};
@@ -180,6 +185,16 @@ pub enum CommandError {
     SensorFaults,
     /// The plant or brake unit refused the parameters.
     Build(LoopError),
+    /// A `Start` on the kept track, but no track is kept (commit one first).
+    NoTrack,
+    /// A track commit whose zone `index` (0-based) was not received since the last commit
+    /// or clear.
+    TrackIncomplete {
+        index: u8,
+    },
+    /// A track zone or commit refused: zone index or count above 16, a zone empty, out of
+    /// order or overlapping ([`TrackError`]).
+    Track(TrackError),
     /// A build came back for a start request that is no longer pending (stopped, or
     /// superseded by a later `Start`): not installed, counted ([`Rig::stale_builds`]).
     StaleBuild {
@@ -210,6 +225,10 @@ pub struct StartRequest {
     pub friction: FrictionModel,
     pub emergency: bool,
     pub initial_speed_kmh: f32,
+    /// The run's track (`None`: `rail` everywhere), copied from the rig's kept track.
+    pub track: Option<Track>,
+    /// The run's vehicle (the default one, or as set by `Vehicle` commands).
+    pub vehicle: VehicleParams,
 }
 
 /// The simulation of a run, built by [`StartRequest::build`] outside the step.
@@ -296,14 +315,35 @@ impl StartRequest {
     pub fn build_simulation(&self) -> Result<Simulation, CommandError> {
         let mut params = Params::default();
         params.friction.model = self.friction;
+        params.vehicle = self.vehicle;
         let v0 = self.initial_speed_kmh / KMH_PER_MPS;
-        let sim = match self.mode {
-            RigMode::Rig => Sim::Rig(
-                Plant::new(&params, self.rail, v0)
-                    .map_err(|e| CommandError::Build(LoopError::Params(e)))?,
+        let params_error = |e| CommandError::Build(LoopError::Params(e));
+        let adhesion = match self.track {
+            Some(track) => Some(
+                TrackAdhesion::<f32>::new(
+                    &params.contact,
+                    &ContactSets::default(),
+                    track,
+                    &DegradedAdhesionParams::default(),
+                    STEP_S,
+                )
+                .map_err(params_error)?,
             ),
+            None => None,
+        };
+        let sim = match self.mode {
+            RigMode::Rig => {
+                let mut plant = Plant::new(&params, self.rail, v0).map_err(params_error)?;
+                if let Some(a) = adhesion {
+                    plant.set_track(a);
+                }
+                Sim::Rig(plant)
+            }
             RigMode::SelfTest => {
                 let mut c = ClosedLoop::new(&params, self.rail, v0).map_err(CommandError::Build)?;
+                if let Some(a) = adhesion {
+                    c.plant.set_track(a);
+                }
                 c.set_demand(if self.emergency {
                     BrakeDemand::Emergency
                 } else {
@@ -367,6 +407,13 @@ pub struct Rig<S: SimStore = Simulation> {
     start_seq: u32,
     /// Builds that came back for a request no longer pending (not installed).
     stale_builds: u32,
+    /// Track zones received since the last commit or clear, and which (bit i: zone i).
+    zones: [Zone; MAX_ZONES],
+    zones_received: u16,
+    /// The track committed (`Start` with `track` runs on it).
+    track: Option<Track>,
+    /// The vehicle of the following runs.
+    vehicle: VehicleParams,
 }
 
 impl Rig<Simulation> {
@@ -442,7 +489,65 @@ impl<S: SimStore> Rig<S> {
             state_before_start: RigState::Idle,
             start_seq: 0,
             stale_builds: 0,
+            zones: [Zone::default(); MAX_ZONES],
+            zones_received: 0,
+            track: None,
+            vehicle: VehicleParams::default(),
         }
+    }
+
+    /// The track kept by the last commit (None: cleared or never committed).
+    pub fn track(&self) -> Option<&Track> {
+        self.track.as_ref()
+    }
+
+    /// The vehicle of the following runs.
+    pub fn vehicle(&self) -> &VehicleParams {
+        &self.vehicle
+    }
+
+    /// `TrackZone`: keeps zone `index` for the next commit.
+    fn track_zone(&mut self, index: u8, zone: Zone) -> Result<(), CommandError> {
+        let slot = self
+            .zones
+            .get_mut(index as usize)
+            .ok_or(CommandError::Track(TrackError::TooManyZones))?;
+        *slot = zone;
+        self.zones_received |= 1 << index;
+        Ok(())
+    }
+
+    /// `Track`: commit checks the zones received (all of 0..n, ordered, disjoint, not
+    /// empty) and keeps the track; clear forgets it. A refused commit keeps the last track.
+    fn track_command(&mut self, command: TrackCommand) -> Result<(), CommandError> {
+        let TrackCommand::Commit { base, zones } = command else {
+            self.track = None;
+            self.zones_received = 0;
+            return Ok(());
+        };
+        let n = zones as usize;
+        if n > MAX_ZONES {
+            return Err(CommandError::Track(TrackError::TooManyZones));
+        }
+        if let Some(index) = (0..n).find(|&i| self.zones_received & (1 << i) == 0) {
+            return Err(CommandError::TrackIncomplete { index: index as u8 });
+        }
+        let track = Track::new(base, &self.zones[..n]).map_err(CommandError::Track)?;
+        self.track = Some(track);
+        self.zones_received = 0;
+        Ok(())
+    }
+
+    /// `Vehicle`: one value of the following runs' vehicle (checked when a run is built).
+    fn vehicle_command(&mut self, key: VehicleKey, value: f32) -> Result<(), CommandError> {
+        if self.busy() {
+            return Err(CommandError::NotNow(self.state));
+        }
+        match key {
+            VehicleKey::Default => self.vehicle = VehicleParams::default(),
+            key => key.apply(&mut self.vehicle, value),
+        }
+        Ok(())
     }
 
     pub fn state(&self) -> RigState {
@@ -485,6 +590,15 @@ impl<S: SimStore> Rig<S> {
             Sim::None => None,
             Sim::Rig(p) => Some(p.outputs()),
             Sim::SelfTest(c) => Some(c.outputs()),
+        }
+    }
+
+    /// The surface under each wheelset (None without a run).
+    pub fn surfaces(&self) -> Option<[Surface; WHEELSETS]> {
+        match self.sim()? {
+            Sim::None => None,
+            Sim::Rig(p) => Some(p.track().surfaces()),
+            Sim::SelfTest(c) => Some(c.plant.track().surfaces()),
         }
     }
 
@@ -593,10 +707,14 @@ impl<S: SimStore> Rig<S> {
             friction,
             emergency,
             initial_speed_kmh,
+            track,
         } = command
         else {
             return Ok(());
         };
+        if track && self.track.is_none() {
+            return Err(CommandError::NoTrack);
+        }
         if self.busy() {
             return Err(CommandError::NotNow(self.state));
         }
@@ -618,6 +736,8 @@ impl<S: SimStore> Rig<S> {
             friction,
             emergency,
             initial_speed_kmh,
+            track: if track { self.track } else { None },
+            vehicle: self.vehicle,
         });
         self.start_request_new = true;
         self.state_before_start = self.state;
@@ -725,13 +845,7 @@ impl<S: SimStore> Rig<S> {
             },
             Command::Brake(b) => {
                 if let Some(Sim::SelfTest(c)) = self.sim_mut() {
-                    c.set_demand(match b {
-                        BrakeCommand::Release => BrakeDemand::Release,
-                        BrakeCommand::Emergency => BrakeDemand::Emergency,
-                        BrakeCommand::Service { deceleration_mps2 } => {
-                            BrakeDemand::Service { deceleration_mps2 }
-                        }
-                    });
+                    c.set_demand(b.demand());
                 }
                 // In rig mode the brake controller gets its command from the train lines;
                 // the command is kept as the run log's `cmd` marker.
@@ -790,6 +904,9 @@ impl<S: SimStore> Rig<S> {
                 }
                 Ok(())
             }
+            Command::TrackZone { index, zone } => self.track_zone(index, zone),
+            Command::Track(t) => self.track_command(t),
+            Command::Vehicle { key, value } => self.vehicle_command(key, value),
         }
     }
 
