@@ -656,17 +656,29 @@ impl VehicleKey {
         VehicleKey::WheelRadius,
     ];
 
-    /// Sets this key of `v` (nothing for `Default`).
-    pub fn apply(self, v: &mut hils_plant::params::VehicleParams, value: f32) {
-        let slot = match self {
+    /// This key's field of `v` (None for `Default`).
+    pub fn field(self, v: &mut hils_plant::params::VehicleParams) -> Option<&mut f64> {
+        Some(match self {
             VehicleKey::CarbodyMass => &mut v.carbody_mass,
             VehicleKey::CarbodyPitchInertia => &mut v.carbody_pitch_inertia,
             VehicleKey::BogieMass => &mut v.bogie_mass,
             VehicleKey::WheelsetMass => &mut v.wheelset_mass,
             VehicleKey::WheelRadius => &mut v.wheel_radius,
-            VehicleKey::Default => return,
-        };
-        *slot = value as f64;
+            VehicleKey::Default => return None,
+        })
+    }
+
+    /// Sets this key of `v` (nothing for `Default`).
+    pub fn apply(self, v: &mut hils_plant::params::VehicleParams, value: f32) {
+        if let Some(slot) = self.field(v) {
+            *slot = value as f64;
+        }
+    }
+
+    /// This key's value in `v` (0 for `Default`).
+    pub fn value(self, v: &hils_plant::params::VehicleParams) -> f64 {
+        let mut copy = *v;
+        self.field(&mut copy).map_or(0.0, |x| *x)
     }
 }
 
