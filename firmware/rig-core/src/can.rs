@@ -682,6 +682,44 @@ impl VehicleKey {
     }
 }
 
+/// A zone as `TrackZone` carries it: bounds in steps of 0.1 m (decimetres), so that the
+/// board checks and keeps zones without floating point in its step (the plant's
+/// [`Zone`] is built from it outside the step, [`ZoneFrame::zone`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct ZoneFrame {
+    /// Start, 0.1 m.
+    pub start_dm: u32,
+    /// End (exclusive), 0.1 m.
+    pub end_dm: u32,
+    pub surface: Surface,
+}
+
+impl ZoneFrame {
+    /// The frame of a zone: `None` when a bound is outside 0-[`ZONE_MAX_M`] or off the
+    /// 0.1 m grid (by more than 1e-6 m): nothing is rounded silently.
+    pub fn of(zone: &Zone) -> Option<Self> {
+        let dm = |x: f64| {
+            let steps = x / ZONE_RESOLUTION_M;
+            let r = (steps + 0.5) as u32; // in range: not negative
+            (zone_in_range(x) && (steps - r as f64).abs() <= 1e-5).then_some(r)
+        };
+        Some(Self {
+            start_dm: dm(zone.start_m)?,
+            end_dm: dm(zone.end_m)?,
+            surface: zone.surface,
+        })
+    }
+
+    /// The plant's zone.
+    pub fn zone(&self) -> Zone {
+        Zone {
+            start_m: self.start_dm as f64 * ZONE_RESOLUTION_M,
+            end_m: self.end_dm as f64 * ZONE_RESOLUTION_M,
+            surface: self.surface,
+        }
+    }
+}
+
 /// `Track` command: forget the kept track, or check and keep the zones received.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum TrackCommand {
@@ -1003,7 +1041,7 @@ pub enum Command {
     /// Opcode 7: configuration (only while no run is active).
     Configure(ConfigItem),
     /// Opcode 8: zone `index` of the next track (kept by [`Command::Track`] commit).
-    TrackZone { index: u8, zone: Zone },
+    TrackZone { index: u8, zone: ZoneFrame },
     /// Opcode 9: commit or clear the track.
     Track(TrackCommand),
     /// Opcode 10: one `[vehicle]` value of the following runs (only while no run is active).
@@ -1129,8 +1167,8 @@ impl CommandFrame {
             Command::TrackZone { index, zone } => {
                 ZONE_INDEX.put_raw(&mut d, index as u64);
                 ZONE_SURFACE.put_raw(&mut d, surface_code(zone.surface) as u64);
-                ZONE_START.put_raw(&mut d, zone_raw(zone.start_m) as u64);
-                ZONE_END.put_raw(&mut d, zone_raw(zone.end_m) as u64);
+                ZONE_START.put_raw(&mut d, zone.start_dm as u64);
+                ZONE_END.put_raw(&mut d, zone.end_dm as u64);
             }
             Command::Track(TrackCommand::Clear) => {}
             Command::Track(TrackCommand::Commit { base, zones }) => {
@@ -1210,18 +1248,6 @@ fn decode_start(d: &[u8; 8]) -> Result<Command, DecodeError> {
     })
 }
 
-/// Raw `ZoneStart`/`ZoneEnd` of a position: to the nearest 0.1 m, limited to the signal's
-/// range (the host refuses positions outside it before sending: [`zone_in_range`]).
-pub fn zone_raw(x_m: f64) -> u32 {
-    let max = command::ZONE_START.max_raw();
-    let r = x_m / ZONE_RESOLUTION_M + 0.5;
-    if r >= 0.0 {
-        if r < max as f64 { r as u32 } else { max }
-    } else {
-        0
-    }
-}
-
 /// Whether a position fits `ZoneStart`/`ZoneEnd` (0 to [`ZONE_MAX_M`]).
 pub fn zone_in_range(x_m: f64) -> bool {
     (0.0..=ZONE_MAX_M).contains(&x_m)
@@ -1234,12 +1260,11 @@ fn decode_surface(d: &[u8; 8], signal: Signal) -> Result<Surface, DecodeError> {
 
 fn decode_zone(d: &[u8; 8]) -> Result<Command, DecodeError> {
     use command::*;
-    let at = |s: Signal| s.get_raw(d) as f64 * ZONE_RESOLUTION_M;
     Ok(Command::TrackZone {
         index: ZONE_INDEX.get_raw(d) as u8,
-        zone: Zone {
-            start_m: at(ZONE_START),
-            end_m: at(ZONE_END),
+        zone: ZoneFrame {
+            start_dm: ZONE_START.get_raw(d) as u32,
+            end_dm: ZONE_END.get_raw(d) as u32,
             surface: decode_surface(d, ZONE_SURFACE)?,
         },
     })
@@ -1494,11 +1519,12 @@ mod tests {
             Command::Brake(BrakeCommand::ServiceStep { step: 7 }),
             Command::TrackZone {
                 index: 15,
-                zone: Zone {
+                zone: ZoneFrame::of(&Zone {
                     start_m: 120.0,
                     end_m: 100_000.0,
                     surface: Surface::VeryLow,
-                },
+                })
+                .unwrap(),
             },
             Command::Track(TrackCommand::Commit {
                 base: Surface::Low,

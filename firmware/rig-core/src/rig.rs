@@ -53,7 +53,7 @@ use crate::Code;
 use crate::can::{
     BrakeCommand, Calibration, Command, CommandFrame, CommandResult, ConfigItem, DecodeError,
     DiagFrame, RigMode, RigState, StatusFrame, TrackCommand, VehicleKey, WHEEL_SPEED_MAX_KMH,
-    WheelSpeedFrame, friction_code, rail_code,
+    WheelSpeedFrame, ZoneFrame, friction_code, rail_code,
 };
 use crate::hw::{RigIo, TelemetryEvent};
 use crate::pulse::{PulseRegisters, PulseTimer, wheel_frequency_hz};
@@ -226,9 +226,77 @@ pub struct StartRequest {
     pub emergency: bool,
     pub initial_speed_kmh: f32,
     /// The run's track (`None`: `rail` everywhere), copied from the rig's kept track.
-    pub track: Option<Track>,
-    /// The run's vehicle (the default one, or as set by `Vehicle` commands).
-    pub vehicle: VehicleParams,
+    pub track: Option<TrackFrames>,
+    /// The run's vehicle: the default one with the values set by `Vehicle` commands.
+    pub vehicle: VehicleValues,
+}
+
+/// A track as the board keeps it: the base and the zones as received (checked, in
+/// 0.1 m steps: no floating point in the step); the plant's [`Track`] is made from it
+/// when a run is built ([`TrackFrames::track`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TrackFrames {
+    pub base: Surface,
+    zones: [ZoneFrame; MAX_ZONES],
+    count: u8,
+}
+
+impl TrackFrames {
+    /// `zones` on `base`, by the rules of [`Track::new`] (at most [`MAX_ZONES`], each not
+    /// empty, in order and disjoint), on the frames' integer bounds.
+    pub fn new(base: Surface, zones: &[ZoneFrame]) -> Result<Self, TrackError> {
+        if zones.len() > MAX_ZONES {
+            return Err(TrackError::TooManyZones);
+        }
+        let mut t = Self {
+            base,
+            zones: [ZoneFrame::default(); MAX_ZONES],
+            count: zones.len() as u8,
+        };
+        for (index, z) in zones.iter().enumerate() {
+            if z.end_dm <= z.start_dm {
+                return Err(TrackError::BadZone { index });
+            }
+            if index > 0 && z.start_dm < zones[index - 1].end_dm {
+                return Err(TrackError::Overlap { index });
+            }
+            t.zones[index] = *z;
+        }
+        Ok(t)
+    }
+
+    /// The zones.
+    pub fn zones(&self) -> &[ZoneFrame] {
+        &self.zones[..self.count as usize]
+    }
+
+    /// The plant's track (outside the step: floating point).
+    pub fn track(&self) -> Result<Track, TrackError> {
+        let mut zones = [Zone::default(); MAX_ZONES];
+        for (z, f) in zones.iter_mut().zip(self.zones()) {
+            *z = f.zone();
+        }
+        Track::new(self.base, &zones[..self.count as usize])
+    }
+}
+
+/// The `[vehicle]` values set by `Vehicle` commands ([`VehicleKey::VALUES`] order; `None`:
+/// the default), as received (f32: no conversion in the step); applied when a run is
+/// built.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct VehicleValues(pub [Option<f32>; 5]);
+
+impl VehicleValues {
+    /// The default vehicle with these values.
+    pub fn vehicle(&self) -> VehicleParams {
+        let mut v = VehicleParams::default();
+        for (key, value) in VehicleKey::VALUES.iter().zip(self.0) {
+            if let Some(x) = value {
+                key.apply(&mut v, x);
+            }
+        }
+        v
+    }
 }
 
 /// The simulation of a run, built by [`StartRequest::build`] outside the step.
@@ -315,15 +383,15 @@ impl StartRequest {
     pub fn build_simulation(&self) -> Result<Simulation, CommandError> {
         let mut params = Params::default();
         params.friction.model = self.friction;
-        params.vehicle = self.vehicle;
+        params.vehicle = self.vehicle.vehicle();
         let v0 = self.initial_speed_kmh / KMH_PER_MPS;
         let params_error = |e| CommandError::Build(LoopError::Params(e));
         let adhesion = match self.track {
-            Some(track) => Some(
+            Some(frames) => Some(
                 TrackAdhesion::<f32>::new(
                     &params.contact,
                     &ContactSets::default(),
-                    track,
+                    frames.track().map_err(CommandError::Track)?,
                     &DegradedAdhesionParams::default(),
                     STEP_S,
                 )
@@ -408,12 +476,12 @@ pub struct Rig<S: SimStore = Simulation> {
     /// Builds that came back for a request no longer pending (not installed).
     stale_builds: u32,
     /// Track zones received since the last commit or clear, and which (bit i: zone i).
-    zones: [Zone; MAX_ZONES],
+    zones: [ZoneFrame; MAX_ZONES],
     zones_received: u16,
     /// The track committed (`Start` with `track` runs on it).
-    track: Option<Track>,
+    track: Option<TrackFrames>,
     /// The vehicle of the following runs.
-    vehicle: VehicleParams,
+    vehicle: VehicleValues,
 }
 
 impl Rig<Simulation> {
@@ -489,25 +557,25 @@ impl<S: SimStore> Rig<S> {
             state_before_start: RigState::Idle,
             start_seq: 0,
             stale_builds: 0,
-            zones: [Zone::default(); MAX_ZONES],
+            zones: [ZoneFrame::default(); MAX_ZONES],
             zones_received: 0,
             track: None,
-            vehicle: VehicleParams::default(),
+            vehicle: VehicleValues::default(),
         }
     }
 
     /// The track kept by the last commit (None: cleared or never committed).
-    pub fn track(&self) -> Option<&Track> {
+    pub fn track(&self) -> Option<&TrackFrames> {
         self.track.as_ref()
     }
 
-    /// The vehicle of the following runs.
-    pub fn vehicle(&self) -> &VehicleParams {
+    /// The vehicle values of the following runs.
+    pub fn vehicle(&self) -> &VehicleValues {
         &self.vehicle
     }
 
     /// `TrackZone`: keeps zone `index` for the next commit.
-    fn track_zone(&mut self, index: u8, zone: Zone) -> Result<(), CommandError> {
+    fn track_zone(&mut self, index: u8, zone: ZoneFrame) -> Result<(), CommandError> {
         let slot = self
             .zones
             .get_mut(index as usize)
@@ -532,7 +600,7 @@ impl<S: SimStore> Rig<S> {
         if let Some(index) = (0..n).find(|&i| self.zones_received & (1 << i) == 0) {
             return Err(CommandError::TrackIncomplete { index: index as u8 });
         }
-        let track = Track::new(base, &self.zones[..n]).map_err(CommandError::Track)?;
+        let track = TrackFrames::new(base, &self.zones[..n]).map_err(CommandError::Track)?;
         self.track = Some(track);
         self.zones_received = 0;
         Ok(())
@@ -543,9 +611,9 @@ impl<S: SimStore> Rig<S> {
         if self.busy() {
             return Err(CommandError::NotNow(self.state));
         }
-        match key {
-            VehicleKey::Default => self.vehicle = VehicleParams::default(),
-            key => key.apply(&mut self.vehicle, value),
+        match VehicleKey::VALUES.iter().position(|k| *k == key) {
+            Some(i) => self.vehicle.0[i] = Some(value),
+            None => self.vehicle = VehicleValues::default(),
         }
         Ok(())
     }

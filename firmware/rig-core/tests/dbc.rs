@@ -14,11 +14,12 @@ use can_dbc::{
     ByteOrder, Dbc, MessageId, MultiplexIndicator, Signal, SignalExtendedValueType, ValueType,
 };
 use embedded_can::{Frame, StandardId};
-use hils_plant::{FrictionModel, Rail, Surface, Zone};
+use hils_plant::{FrictionModel, Rail, Surface};
 use hils_rig_core::Code;
 use hils_rig_core::can::{
     self, BrakeCommand, Calibration, Command, CommandFrame, CommandResult, ConfigItem, DiagFrame,
     InjectedFault, RigMode, RigState, StatusFrame, TrackCommand, VehicleKey, WheelSpeedFrame,
+    ZoneFrame,
 };
 use hils_rig_core::sensor::{SensorFault, SensorKind};
 use proptest::prelude::*;
@@ -317,8 +318,8 @@ proptest! {
             5 => Command::Calibrate { channel: ch, action: if k % 2 == 0 { Calibration::SetGain(gain) } else { Calibration::SetOffset(gain.min(4095.0)) } },
             6 => Command::Calibrate { channel: ch, action: Calibration::SetKind(if k % 2 == 0 { SensorKind::LoadCell } else { SensorKind::PressureTransducer }) },
             7 => Command::ClearFaults,
-            9 => Command::TrackZone { index: zone.2, zone: Zone {
-                start_m: zone.0 as f64 * 0.1, end_m: zone.1 as f64 * 0.1, surface: surface(zone.3) } },
+            9 => Command::TrackZone { index: zone.2, zone: ZoneFrame {
+                start_dm: zone.0, end_dm: zone.1, surface: surface(zone.3) } },
             10 => Command::Track(if flags & 1 == 0 { TrackCommand::Clear } else {
                 TrackCommand::Commit { base: surface(zone.3), zones: zone.2 } }),
             11 => Command::Vehicle {
@@ -374,8 +375,8 @@ proptest! {
                     let code = |s: Surface| match s { Surface::Dry => 0.0, Surface::Wet => 1.0, Surface::Low => 2.0, Surface::VeryLow => 3.0 };
                     m.insert("ZoneIndex", index as f64);
                     m.insert("ZoneSurface", code(zone.surface));
-                    m.insert("ZoneStart", zone.start_m);
-                    m.insert("ZoneEnd", zone.end_m);
+                    m.insert("ZoneStart", zone.start_dm as f64 * 0.1);
+                    m.insert("ZoneEnd", zone.end_dm as f64 * 0.1);
                 }
                 Command::Track(t) => {
                     let (action, base, zones) = match t {

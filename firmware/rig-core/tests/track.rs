@@ -6,7 +6,7 @@ use hils_plant::track::TrackError;
 use hils_plant::{FrictionModel, Params, Rail, Surface, Zone};
 use hils_rig_core::can::{
     ClassicFrame, Command, CommandFrame, DecodeError, RigMode, RigState, TrackCommand, VehicleKey,
-    surface_code,
+    ZoneFrame, surface_code,
 };
 use hils_rig_core::hw::{RigIo, TelemetryEvent};
 use hils_rig_core::pulse::PulseRegisters;
@@ -53,12 +53,13 @@ fn zone(start_m: f64, end_m: f64, surface: Surface) -> Zone {
 /// Loads `zones` on `base` by frames and commits them.
 fn load(rig: &mut Rig, n: &mut u8, base: Surface, zones: &[Zone]) -> Result<(), CommandError> {
     for (i, z) in zones.iter().enumerate() {
+        let zone = ZoneFrame::of(z).expect("on the 0.1 m grid");
         send(
             rig,
             n,
             Command::TrackZone {
                 index: i as u8,
-                zone: *z,
+                zone,
             },
         )?;
     }
@@ -108,7 +109,14 @@ fn a_track_loaded_by_frames_puts_each_wheelset_on_its_zone() {
     let mut n = 0;
     let zones = [zone(120.0, 220.0, Surface::Dry)];
     load(&mut rig, &mut n, Surface::Low, &zones).unwrap();
-    assert_eq!(rig.track().unwrap().zones(), &zones);
+    let kept: Vec<Zone> = rig
+        .track()
+        .unwrap()
+        .zones()
+        .iter()
+        .map(|z| z.zone())
+        .collect();
+    assert_eq!(kept, zones);
     send(&mut rig, &mut n, self_test_eb(120.0, true)).unwrap();
     let (stop_change, seen) = run(&mut rig);
     // Wheelset 1 is on the dry zone from 120 m to 220 m (within one refresh, 4 steps), low
@@ -205,7 +213,7 @@ fn track_frames_are_refused_with_their_rule() {
         &mut n,
         Command::TrackZone {
             index: 0,
-            zone: zone(0.0, 10.0, Surface::Low),
+            zone: ZoneFrame::of(&zone(0.0, 10.0, Surface::Low)).unwrap(),
         },
     )
     .unwrap();
@@ -229,7 +237,7 @@ fn track_frames_are_refused_with_their_rule() {
     let mut f: ClassicFrame = CommandFrame {
         command: Command::TrackZone {
             index: 0,
-            zone: zone(0.0, 10.0, Surface::Low),
+            zone: ZoneFrame::of(&zone(0.0, 10.0, Surface::Low)).unwrap(),
         },
         counter: 9,
     }
@@ -243,6 +251,10 @@ fn track_frames_are_refused_with_their_rule() {
         rig.command_frame(&f),
         Err(CommandError::Frame(DecodeError::BadValue("ZoneSurface")))
     );
+    // Bounds off the 0.1 m grid or beyond the frame's range have no frame.
+    assert!(ZoneFrame::of(&zone(0.05, 10.0, Surface::Low)).is_none());
+    assert!(ZoneFrame::of(&zone(0.0, 2.0e5, Surface::Low)).is_none());
+    assert!(ZoneFrame::of(&zone(-1.0, 10.0, Surface::Low)).is_none());
     // Clear forgets the track.
     send(&mut rig, &mut n, Command::Track(TrackCommand::Clear)).unwrap();
     assert!(rig.track().is_none());

@@ -15,7 +15,9 @@ use anyhow::{Context, Result, anyhow, bail};
 use hils_plant::params::VehicleParams;
 use hils_plant::track::{ContactSets, MAX_ZONES};
 use hils_plant::{Params, Track};
-use hils_rig_core::can::{Command, TrackCommand, VehicleKey, ZONE_MAX_M, ZONE_RESOLUTION_M};
+use hils_rig_core::can::{
+    Command, TrackCommand, VehicleKey, ZONE_MAX_M, ZONE_RESOLUTION_M, ZoneFrame,
+};
 use hils_sil::ParamFile;
 
 use crate::wsp::programme::TrackSpec;
@@ -36,18 +38,6 @@ pub fn load_track_file(path: &Path) -> Result<(Track, ContactSets)> {
     Ok((track, spec.sets))
 }
 
-/// A zone bound as the frame carries it, or why not.
-fn on_grid(x_m: f64) -> Result<()> {
-    if !(0.0..=ZONE_MAX_M).contains(&x_m) {
-        bail!("zone bound {x_m} m is outside 0-{ZONE_MAX_M} m (the TrackZone frame's range)");
-    }
-    let steps = x_m / ZONE_RESOLUTION_M;
-    if (steps - steps.round()).abs() > 1e-6 {
-        bail!("zone bound {x_m} m is not on the frame's {ZONE_RESOLUTION_M} m grid");
-    }
-    Ok(())
-}
-
 /// The frames that put `track` on the board (zones, then the commit), or why it cannot go.
 pub fn track_commands(track: &Track, sets: &ContactSets) -> Result<Vec<Command>> {
     if *sets != ContactSets::default() {
@@ -58,11 +48,17 @@ pub fn track_commands(track: &Track, sets: &ContactSets) -> Result<Vec<Command>>
     }
     let mut out = Vec::with_capacity(track.zones().len() + 1);
     for (i, z) in track.zones().iter().enumerate() {
-        on_grid(z.start_m).with_context(|| format!("zone {}", i + 1))?;
-        on_grid(z.end_m).with_context(|| format!("zone {}", i + 1))?;
+        let zone = ZoneFrame::of(z).ok_or_else(|| {
+            anyhow!(
+                "zone {}: bounds {}-{} m not on the TrackZone frame's {ZONE_RESOLUTION_M} m grid within 0-{ZONE_MAX_M} m",
+                i + 1,
+                z.start_m,
+                z.end_m
+            )
+        })?;
         out.push(Command::TrackZone {
             index: i as u8,
-            zone: *z,
+            zone,
         });
     }
     out.push(Command::Track(TrackCommand::Commit {
