@@ -576,6 +576,38 @@ fn a_low_adhesion_programme_runs_on_the_board_as_in_sil() {
             r["name"]
         );
     }
+    // The log carries the zone under each wheelset and its available adhesion: wheelset 1
+    // on the dry zone (well inside 120-220 m) and on the low rail before it.
+    let log = std::fs::read_to_string(dir.join("report").join("change-eb-80.csv")).unwrap();
+    let mut rows = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .from_reader(log.as_bytes());
+    let head = rows.headers().unwrap().clone();
+    let col = |n: &str| head.iter().position(|h| h == n).unwrap();
+    let (c_t, c_v, c_s, c_mu) = (
+        col("t_s"),
+        col("v_ref_mps"),
+        col("surface1"),
+        col("mu_avail1"),
+    );
+    let (mut x, mut t_prev, mut seen_dry, mut seen_low) = (0.0, None::<f64>, false, false);
+    for row in rows.records() {
+        let row = row.unwrap();
+        let (t, v): (f64, f64) = (row[c_t].parse().unwrap(), row[c_v].parse().unwrap());
+        x += v * t_prev.map_or(0.0, |p| t - p);
+        t_prev = Some(t);
+        let mu: f64 = row[c_mu].parse().unwrap();
+        if (140.0..200.0).contains(&x) {
+            assert_eq!(&row[c_s], "dry", "at {x} m");
+            assert!(mu > 0.15, "dry mu_avail {mu}");
+            seen_dry = true;
+        } else if x < 100.0 && v > 5.0 {
+            assert_eq!(&row[c_s], "low", "at {x} m");
+            assert!((0.05..0.09).contains(&mu), "low mu_avail {mu}");
+            seen_low = true;
+        }
+    }
+    assert!(seen_dry && seen_low);
     // The dry zone (120-220 m) shortens the stop against the same start on one low rail.
     let change = runs[0]["stopping_distance_m"].as_f64().unwrap();
     let mut low = board_runs[0].run.clone();

@@ -961,8 +961,17 @@ pub enum BrakeCommand {
 }
 
 impl BrakeCommand {
-    /// Code of the `cmd` column of the run log (0 release, 1 EB, 2 service, 3 service step).
+    /// Code of the `cmd` column of the run log (0 release, 1 EB, 2 service: a service step
+    /// too, as `hils_sil::Cmd::of`).
     pub fn code(self) -> u8 {
+        match self {
+            BrakeCommand::ServiceStep { .. } => 2,
+            b => b.demand_code(),
+        }
+    }
+
+    /// The `BrakeDemand` signal (0 release, 1 EB, 2 service deceleration, 3 service step).
+    pub fn demand_code(self) -> u8 {
         match self {
             BrakeCommand::Release => 0,
             BrakeCommand::Emergency => 1,
@@ -1130,7 +1139,7 @@ impl CommandFrame {
             }
             Command::Stop | Command::ClearFaults => {}
             Command::Brake(b) => {
-                BRAKE_DEMAND.put_raw(&mut d, b.code() as u64);
+                BRAKE_DEMAND.put_raw(&mut d, b.demand_code() as u64);
                 match b {
                     BrakeCommand::Service { deceleration_mps2 } => {
                         SERVICE_DECELERATION.put(&mut d, deceleration_mps2)

@@ -53,7 +53,7 @@ use crate::Code;
 use crate::can::{
     BrakeCommand, Calibration, Command, CommandFrame, CommandResult, ConfigItem, DecodeError,
     DiagFrame, RigMode, RigState, StatusFrame, TrackCommand, VehicleKey, WHEEL_SPEED_MAX_KMH,
-    WheelSpeedFrame, ZoneFrame, friction_code, rail_code,
+    WheelSpeedFrame, ZoneFrame, friction_code, rail_code, surface_code,
 };
 use crate::hw::{RigIo, TelemetryEvent};
 use crate::pulse::{PulseRegisters, PulseTimer, wheel_frequency_hz};
@@ -1119,11 +1119,19 @@ impl<S: SimStore> Rig<S> {
         for (j, s) in self.sensors.iter().enumerate() {
             sensor_faults |= (SensorFault::code(s.fault()) as u16) << (4 * j);
         }
-        let (o, unit) = match self.sim()? {
+        let (o, unit, plant_surfaces) = match self.sim()? {
             Sim::None => return None,
-            Sim::Rig(p) => (p.outputs(), None),
-            Sim::SelfTest(c) => (c.outputs(), Some(c.unit_outputs())),
+            Sim::Rig(p) => (p.outputs(), None, p.track().surfaces()),
+            Sim::SelfTest(c) => (
+                c.outputs(),
+                Some(c.unit_outputs()),
+                c.plant.track().surfaces(),
+            ),
         };
+        let mut surfaces = 0u8;
+        for (j, s) in plant_surfaces.iter().enumerate() {
+            surfaces |= surface_code(*s) << (2 * j);
+        }
         let w = |f: &dyn Fn(usize) -> f32| -> [f32; 4] { [f(0), f(1), f(2), f(3)] };
         let (p_cyl, f_clamp, wsp) = match unit {
             Some(u) => {
@@ -1177,6 +1185,7 @@ impl<S: SimStore> Rig<S> {
             missed_ticks: self.timing.missed_ticks,
             faults,
             sensor_faults,
+            surfaces,
             seq: self.record_seq,
         })
     }

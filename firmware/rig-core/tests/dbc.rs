@@ -343,7 +343,7 @@ proptest! {
                     m.insert("StartSpeed", initial_speed_kmh as f64);
                 }
                 Command::Brake(b) => {
-                    m.insert("BrakeDemand", b.code() as f64);
+                    m.insert("BrakeDemand", b.demand_code() as f64);
                     let decel = if let BrakeCommand::Service { deceleration_mps2 } = b { deceleration_mps2 } else { 0.0 };
                     m.insert("ServiceDeceleration", decel as f64);
                     let step = if let BrakeCommand::ServiceStep { step } = b { step } else { 0 };

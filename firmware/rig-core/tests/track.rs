@@ -98,6 +98,11 @@ fn run(rig: &mut Rig) -> (f64, Vec<(f64, Surface, Surface)>) {
         x += v * 1e-4;
         let s = rig.surfaces().unwrap();
         seen.push((x, s[0], s[3]));
+        if seen.len() % 997 == 0 {
+            // The telemetry record logs the surface under each wheelset.
+            let r = rig.record().unwrap();
+            assert_eq!(core::array::from_fn(|j| r.surface(j)), s);
+        }
     }
     assert_eq!(rig.state(), RigState::Finished);
     (x, seen)

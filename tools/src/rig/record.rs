@@ -25,7 +25,7 @@
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use hils_plant::{Params, WHEELSETS};
+use hils_plant::{Params, Surface, WHEELSETS};
 use hils_rig_core::KMH_PER_MPS;
 use hils_rig_core::can::{Command, DiagFrame, RigState, StatusFrame};
 use hils_rig_core::hw::TelemetryEvent;
@@ -152,6 +152,18 @@ impl Recorder {
         latest(&brakes, t)
     }
 
+    /// The surfaces under the wheelsets of the probe's records (latest first at `t`).
+    fn probe_surfaces(&self, t_from: f64) -> Vec<(f64, [Surface; WHEELSETS])> {
+        self.probe
+            .iter()
+            .filter(|p| p.t_s > t_from)
+            .filter_map(|p| match p.event {
+                TelemetryEvent::Record(r) => Some((p.t_s, core::array::from_fn(|j| r.surface(j)))),
+                _ => None,
+            })
+            .collect()
+    }
+
     /// Probe samples of wheelset `j` of the brake input of `kind`.
     fn probe_series(&self, j: usize, pressure: bool, t_from: f64) -> Vec<(f64, f64)> {
         self.probe
@@ -206,11 +218,16 @@ impl Recorder {
         let clamp: [Vec<(f64, f64)>; WHEELSETS] =
             core::array::from_fn(|j| self.probe_series(j, false, t_from));
         let has_clamp = clamp.iter().any(|c| !c.is_empty());
+        let surfaces = self.probe_surfaces(t_from);
         let mut channels = vec![T, V_REF, OMEGA, P_CYL];
         if has_clamp {
             channels.push(F_CLAMP);
         }
         channels.extend([A_X, CMD, STATE, FAULTS, STEP_MAX, STEP_MEAN, OVERRUNS]);
+        if !surfaces.is_empty() {
+            channels.extend([SURFACE, MU_AVAIL]);
+        }
+        let adhesion = super::track::board_adhesion();
 
         let mut written = Written {
             rows: 0,
@@ -235,6 +252,7 @@ impl Recorder {
             };
             let t_rel = t - *t0.get_or_insert(t);
             let diag = latest(&self.diag, t);
+            let surface = latest(&surfaces, t);
             let num = |x: Option<f64>, d: usize| x.map_or(String::new(), |x| format!("{x:.d$}"));
             let row: Vec<String> = channels
                 .iter()
@@ -252,6 +270,8 @@ impl Recorder {
                     STEP_MAX => num(diag.map(|d| d.step_max_us as f64), 2),
                     STEP_MEAN => num(diag.map(|d| d.step_mean_us as f64), 2),
                     OVERRUNS => diag.map_or(String::new(), |d| d.overruns.to_string()),
+                    SURFACE => surface.map_or("", |s| s[j].name()).to_string(),
+                    MU_AVAIL => num(surface.map(|s| adhesion.at(s[j], v_ref)), 4),
                     _ => String::new(),
                 })
                 .collect();

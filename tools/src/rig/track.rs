@@ -20,6 +20,7 @@ use hils_rig_core::can::{
 };
 use hils_sil::ParamFile;
 
+use crate::wsp::metrics::AvailableAdhesion;
 use crate::wsp::programme::TrackSpec;
 
 /// Reads a track file: the `[tracks.NAME]` table of a programme at the top level
@@ -122,4 +123,13 @@ pub fn check_params(file: &ParamFile) -> Result<()> {
         bail!("the parameter file differs from the default one the board runs");
     }
     Ok(())
+}
+
+/// The available adhesion of the board's plant (default parameters and contact sets,
+/// degraded adhesion off): what `hils decode` and `hils rig record` write as `mu_avail*`
+/// from the logged surface and vehicle speed; the table `hils wsp-test` judges with
+/// ([`AvailableAdhesion`]), computed once.
+pub fn board_adhesion() -> &'static AvailableAdhesion {
+    static TABLE: std::sync::OnceLock<AvailableAdhesion> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| AvailableAdhesion::new(&Params::default(), &ContactSets::default()))
 }
