@@ -322,9 +322,11 @@ proptest! {
                 start_dm: zone.0, end_dm: zone.1, surface: surface(zone.3) } },
             10 => Command::Track(if flags & 1 == 0 { TrackCommand::Clear } else {
                 TrackCommand::Commit { base: surface(zone.3), zones: zone.2 } }),
-            11 => Command::Vehicle {
-                key: if flags & 1 == 0 { VehicleKey::Default } else { VehicleKey::VALUES[k as usize] },
-                value: gain },
+            11 => if flags & 1 == 0 {
+                Command::Vehicle { key: VehicleKey::Default, value: 0.0 } // value unused
+            } else {
+                Command::Vehicle { key: VehicleKey::VALUES[k as usize], value: gain }
+            },
             _ => Command::Configure(if k % 2 == 0 { ConfigItem::TelemetryDivider(b.max(1) as u16) } else { ConfigItem::Teeth((b % 1000).max(1) as u16) }),
         };
         let cf = CommandFrame { command, counter };
