@@ -99,6 +99,7 @@ fn start_metadata(start: Option<Command>) -> Vec<(&'static str, String)> {
         friction,
         initial_speed_kmh,
         mode,
+        track,
         ..
     }) = start
     else {
@@ -107,8 +108,18 @@ fn start_metadata(start: Option<Command>) -> Vec<(&'static str, String)> {
             "run parameters unknown (recording began without a start command)".into(),
         )];
     };
+    // On a kept track the start's rail is unused: no `rail` (it would pick a contact set).
+    let ground = if track {
+        (
+            "track",
+            "the board's kept track (TrackZone frames); surface under each wheelset: surface1..4"
+                .to_string(),
+        )
+    } else {
+        ("rail", format!("{rail:?}").to_lowercase())
+    };
     vec![
-        ("rail", format!("{rail:?}").to_lowercase()),
+        ground,
         ("friction", format!("{friction:?}").to_lowercase()),
         ("initial_speed_kmh", format!("{initial_speed_kmh}")),
         ("mode", format!("{mode:?}").to_lowercase()),
