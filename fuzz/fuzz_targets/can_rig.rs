@@ -1,15 +1,18 @@
 //! The CAN frame decoders and the rig's command handler with rig steps: arbitrary frames
 //! (any identifier, length, payload) to every decoder and to `Rig::command_frame`, direct
-//! commands, and steps with arbitrary ADC sequences (or none). Invariants: a decoded frame
-//! re-encodes to the same payload; in Idle, Stopped and Fault every pulse train is silent
-//! and every wheel speed (state and sent frame) is "not available".
+//! commands, sealed (valid checksum) frames of the track, track-zone and vehicle opcodes with
+//! arbitrary payloads, builds of requested runs (on the kept track and vehicle), and steps
+//! with arbitrary ADC sequences (or none). Invariants: a decoded frame re-encodes to the
+//! same payload; in Idle, Stopped and Fault every pulse train is silent and every wheel
+//! speed (state and sent frame) is "not available"; a kept track has at most 16 zones, each
+//! not empty, in order and disjoint, and makes the plant's track.
 #![no_main]
 
 use embedded_can::{Frame, StandardId};
 use hils_fuzz::Bytes;
 use hils_rig_core::can::{
-    ClassicFrame, CommandFrame, DiagFrame, ID_COMMAND, ID_WHEEL_SPEEDS, RigState, StatusFrame,
-    WheelSpeedFrame,
+    ClassicFrame, CommandFrame, DiagFrame, ID_COMMAND, ID_WHEEL_SPEEDS, Opcode, RigState,
+    StatusFrame, WheelSpeedFrame, checksum,
 };
 use hils_rig_core::hw::{RigIo, TelemetryEvent};
 use hils_rig_core::pulse::PulseRegisters;
@@ -67,6 +70,33 @@ fn decoders(f: &ClassicFrame) {
     round_trip!(WheelSpeedFrame, StatusFrame, DiagFrame, CommandFrame);
 }
 
+/// A sealed command frame of the track, track-zone or vehicle opcode with payload bytes
+/// from the fuzzer (the checksum right, so the board's checks past the CRC are reached).
+fn sealed_track_frame(b: &mut Bytes) -> ClassicFrame {
+    let opcode = [Opcode::TrackZone, Opcode::Track, Opcode::Vehicle][b.u8() as usize % 3];
+    let mut d = [0u8; 8];
+    d[0] = opcode.into();
+    d[1..7].copy_from_slice(&core::array::from_fn::<u8, 6, _>(|_| b.u8()));
+    d[7] = b.u8() & 0x0F;
+    d[7] |= checksum(ID_COMMAND, &d) << 4;
+    ClassicFrame::new(StandardId::new(ID_COMMAND).unwrap(), &d).unwrap()
+}
+
+/// The kept track's invariants.
+fn check_track(rig: &Rig) {
+    if let Some(t) = rig.track() {
+        let z = t.zones();
+        assert!(z.len() <= 16);
+        for (i, zone) in z.iter().enumerate() {
+            assert!(zone.end_dm > zone.start_dm, "{z:?}");
+            if i > 0 {
+                assert!(zone.start_dm >= z[i - 1].end_dm, "{z:?}");
+            }
+        }
+        assert!(t.track().is_ok(), "{t:?}");
+    }
+}
+
 fn check_safe_state(rig: &Rig, io: &FuzzIo) {
     let safe = matches!(
         rig.state(),
@@ -102,7 +132,7 @@ fuzz_target!(|data: &[u8]| {
         frames: Vec::new(),
     };
     while !b.is_empty() {
-        match b.u8() % 4 {
+        match b.u8() % 6 {
             0 => {
                 let f = frame(&mut b);
                 decoders(&f);
@@ -113,6 +143,16 @@ fuzz_target!(|data: &[u8]| {
                 let f = frame(&mut b);
                 if let Ok(c) = CommandFrame::decode(&f) {
                     let _ = rig.command(c.command);
+                }
+            }
+            2 | 3 => {
+                let f = sealed_track_frame(&mut b);
+                decoders(&f);
+                let _ = rig.command_frame(&f);
+                check_track(&rig);
+                if b.u8() % 8 == 0 {
+                    // Build a requested run here, as the board's builder would.
+                    let _ = rig.build_pending();
                 }
             }
             _ => {

@@ -261,7 +261,7 @@ fn times_are_exact_and_distinct_below_a_microsecond() {
 #[test]
 fn bad_input_gives_clear_errors() {
     let e = parse_runs(["tlm1 1 2 3"]).unwrap_err().to_string();
-    assert!(e.contains("line 1") && e.contains("43"), "{e}");
+    assert!(e.contains("line 1") && e.contains("44"), "{e}");
     let (elf, raw) = fixture();
     let text = defmt_to_text(&elf, &raw).unwrap();
     // Records without their run header (capture started mid-run).

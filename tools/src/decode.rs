@@ -314,7 +314,7 @@ impl Run {
         }
         m.push((
             "notes",
-            "p_cyl/f_clamp empty = not measured on that channel; faults = hils_rig_core::rig::Faults bits; sensor_faults = 4 bits per channel; step times from the DWT cycle counter".to_string(),
+            "p_cyl/f_clamp empty = not measured on that channel; faults = hils_rig_core::rig::Faults bits; sensor_faults = 4 bits per channel; step times from the DWT cycle counter; surface = zone under the wheelset (board telemetry); mu_avail = available adhesion of that surface at v_ref (default vehicle and contact sets, as the board's plant; hils wsp-test's table)".to_string(),
         ));
         m
     }
@@ -348,6 +348,11 @@ impl Run {
             STEP_MEAN => us(r.step_mean_cycles),
             OVERRUNS => r.overruns.to_string(),
             MISSED_TICKS => r.missed_ticks.to_string(),
+            SURFACE => r.surface(j).name().to_string(),
+            MU_AVAIL => format!(
+                "{:.4}",
+                crate::rig::track::board_adhesion().at(r.surface(j), r.v_ref as f64)
+            ),
             _ => String::new(),
         }
     }

@@ -130,7 +130,7 @@ fn rig_values_reach_the_command_and_bad_script_values_name_the_value() {
     let lines = hils::rig::parse_script(&path, text).unwrap();
     let cmds: Vec<Command> = lines
         .iter()
-        .map(|l| hils::rig::command_of(l).unwrap().unwrap())
+        .flat_map(|l| hils::rig::commands_of(l).unwrap())
         .collect();
     assert_eq!(
         cmds[..4],

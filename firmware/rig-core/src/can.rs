@@ -9,7 +9,17 @@
 //! | 0x101 | `RIG_WHEEL_SPEED_34` | out | 1 ms | wheel speeds of wheelsets 3, 4 (16 bit, 0.01 km/h), alive counter, checksum |
 //! | 0x110 | `RIG_STATUS` | out | 10 ms | vehicle speed, deceleration, state, mode, command result, fault flags, counter, checksum |
 //! | 0x120 | `RIG_DIAG` | out | 100 ms | step time max/mean, overruns, sensor fault kinds, bus-off count |
-//! | 0x200 | `RIG_COMMAND` | in | on demand | multiplexed by opcode: start, stop, brake, fault injection, calibration, clear faults, configure; counter, checksum |
+//! | 0x200 | `RIG_COMMAND` | in | on demand | multiplexed by opcode: start, stop, brake, fault injection, calibration, clear faults, configure, track zone, track commit/clear, vehicle; counter, checksum |
+//!
+//! **Tracks and vehicles by command** (issue 13 item 5). A track (a base surface and up to
+//! [`hils_plant::track::MAX_ZONES`] zones, `hils_plant::track`) reaches the board as one
+//! `TrackZone` frame per zone (index, start and end at 0.1 m over 0-104 857.5 m, surface
+//! code) and a `Track` commit frame (base surface, zone count) that checks the zones
+//! (all received, ordered, disjoint) and keeps the track; `Track` clear forgets it. A
+//! `Start` with `StartTrack` = 1 runs on the kept track (the rail bit is then unused). A
+//! `Vehicle` frame sets one `[vehicle]` value (IEEE float) of the board's plant for the
+//! following starts, or resets the default vehicle. Surface codes: 0 dry, 1 wet, 2 low,
+//! 3 very low (4-7 undefined: refused).
 //!
 //! **Checksum.** The high nibble of byte 7 is a CRC-4/G-704 (polynomial x^4 + x + 1,
 //! reflected, init 0, no final xor) over the two bytes of the identifier (little endian),
@@ -26,7 +36,7 @@
 //! ([`crate::rig::Faults::SPEED_SATURATED`]). Bytes 4-6 are reserved (0).
 
 use embedded_can::{Frame, Id, StandardId};
-use hils_plant::{FrictionModel, Rail};
+use hils_plant::{FrictionModel, Rail, Surface, Zone};
 
 use num_enum::{IntoPrimitive, TryFromPrimitive};
 
@@ -507,8 +517,30 @@ pub mod command {
     pub const CONFIG_ITEM: Signal = Signal::raw("ConfigItem", 8, 8);
     /// Configuration: value.
     pub const CONFIG_VALUE: Signal = Signal::raw("ConfigValue", 16, 16);
+    /// Start: 1 = run on the track kept by `Track` commit (`StartRail` unused).
+    pub const START_TRACK: Signal = Signal::raw("StartTrack", 13, 1);
+    /// Brake: service brake step (BrakeDemand 3), 1-based.
+    pub const SERVICE_STEP: Signal = Signal::raw("ServiceStep", 32, 8);
+    /// Track zone: index 0-31 (the board keeps 0-15).
+    pub const ZONE_INDEX: Signal = Signal::raw("ZoneIndex", 8, 5);
+    /// Track zone: surface code ([`super::surface_code`]).
+    pub const ZONE_SURFACE: Signal = Signal::raw("ZoneSurface", 13, 3);
+    /// Track zone: start, m (0.1 m per bit).
+    pub const ZONE_START: Signal = Signal::scaled("ZoneStart", 16, 20, 0.1);
+    /// Track zone: end (exclusive), m (0.1 m per bit).
+    pub const ZONE_END: Signal = Signal::scaled("ZoneEnd", 36, 20, 0.1);
+    /// Track: 0 clear, 1 commit.
+    pub const TRACK_ACTION: Signal = Signal::raw("TrackAction", 8, 1);
+    /// Track commit: base surface code.
+    pub const TRACK_BASE: Signal = Signal::raw("TrackBase", 9, 3);
+    /// Track commit: number of zones (0-31; the board keeps up to 16).
+    pub const TRACK_ZONES: Signal = Signal::raw("TrackZones", 16, 5);
+    /// Vehicle: which value ([`super::VehicleKey`]).
+    pub const VEHICLE_KEY: Signal = Signal::raw("VehicleKey", 8, 8);
+    /// Vehicle: the value, IEEE f32 bits (SI units of the `[vehicle]` key).
+    pub const VEHICLE_VALUE: Signal = Signal::raw("VehicleValue", 24, 32).signed();
     /// Every signal of the frame, multiplexed ones included.
-    pub const ALL: [Signal; 17] = [
+    pub const ALL: [Signal; 28] = [
         OPCODE,
         START_MODE,
         START_RAIL,
@@ -524,6 +556,17 @@ pub mod command {
         CAL_VALUE,
         CONFIG_ITEM,
         CONFIG_VALUE,
+        START_TRACK,
+        SERVICE_STEP,
+        ZONE_INDEX,
+        ZONE_SURFACE,
+        ZONE_START,
+        ZONE_END,
+        TRACK_ACTION,
+        TRACK_BASE,
+        TRACK_ZONES,
+        VEHICLE_KEY,
+        VEHICLE_VALUE,
         Signal::raw("CommandAlive", 56, 4),
         Signal::raw("CommandChecksum", 60, 4),
     ];
@@ -538,7 +581,7 @@ pub const FRAMES: [(u16, &[Signal]); 5] = [
     (ID_COMMAND, &command::ALL),
 ];
 
-/// The opcodes of `RIG_COMMAND` (byte 0), in one place: 1-7 in declaration order.
+/// The opcodes of `RIG_COMMAND` (byte 0), in one place: 1-10 in declaration order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, IntoPrimitive, TryFromPrimitive)]
 #[repr(u8)]
 pub enum Opcode {
@@ -556,6 +599,149 @@ pub enum Opcode {
     ClearFaults,
     /// [`Command::Configure`].
     Configure,
+    /// [`Command::TrackZone`].
+    TrackZone,
+    /// [`Command::Track`].
+    Track,
+    /// [`Command::Vehicle`].
+    Vehicle,
+}
+
+/// The code of a surface in `RIG_COMMAND` and telemetry: 0 dry, 1 wet, 2 low, 3 very low
+/// (the order of [`Surface::ALL`]).
+pub fn surface_code(s: Surface) -> u8 {
+    s as u8
+}
+
+/// The surface of a code (`None` for 4-7).
+pub fn surface_of_code(code: u8) -> Option<Surface> {
+    Surface::ALL.get(code as usize).copied()
+}
+
+/// Zone positions per bit in `TrackZone`, m.
+pub const ZONE_RESOLUTION_M: f64 = 0.1;
+/// Farthest zone bound `TrackZone` carries, m.
+pub const ZONE_MAX_M: f64 = ((1u32 << 20) - 1) as f64 * ZONE_RESOLUTION_M;
+
+/// Which `[vehicle]` value a `Vehicle` command sets (`VehicleKey`; 255 = back to the
+/// default vehicle). The keys a WSP programme's vehicle variants may change.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, IntoPrimitive, TryFromPrimitive)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
+pub enum VehicleKey {
+    /// `carbody_mass`, kg.
+    CarbodyMass = 0,
+    /// `carbody_pitch_inertia`, kg m^2.
+    CarbodyPitchInertia,
+    /// `bogie_mass`, kg.
+    BogieMass,
+    /// `wheelset_mass`, kg.
+    WheelsetMass,
+    /// `wheel_radius`, m.
+    WheelRadius,
+    /// Every value back to the default vehicle (the value is unused).
+    Default = 255,
+}
+
+impl VehicleKey {
+    /// The `[vehicle]` key of the parameter file (and of a programme's vehicle variant).
+    pub fn name(self) -> &'static str {
+        match self {
+            VehicleKey::CarbodyMass => "carbody_mass",
+            VehicleKey::CarbodyPitchInertia => "carbody_pitch_inertia",
+            VehicleKey::BogieMass => "bogie_mass",
+            VehicleKey::WheelsetMass => "wheelset_mass",
+            VehicleKey::WheelRadius => "wheel_radius",
+            VehicleKey::Default => "default",
+        }
+    }
+
+    /// The keys that set a value (all but `Default`).
+    pub const VALUES: [VehicleKey; 5] = [
+        VehicleKey::CarbodyMass,
+        VehicleKey::CarbodyPitchInertia,
+        VehicleKey::BogieMass,
+        VehicleKey::WheelsetMass,
+        VehicleKey::WheelRadius,
+    ];
+
+    /// This key's field of `v` (None for `Default`).
+    pub fn field(self, v: &mut hils_plant::params::VehicleParams) -> Option<&mut f64> {
+        Some(match self {
+            VehicleKey::CarbodyMass => &mut v.carbody_mass,
+            VehicleKey::CarbodyPitchInertia => &mut v.carbody_pitch_inertia,
+            VehicleKey::BogieMass => &mut v.bogie_mass,
+            VehicleKey::WheelsetMass => &mut v.wheelset_mass,
+            VehicleKey::WheelRadius => &mut v.wheel_radius,
+            VehicleKey::Default => return None,
+        })
+    }
+
+    /// Sets this key of `v` (nothing for `Default`).
+    pub fn apply(self, v: &mut hils_plant::params::VehicleParams, value: f32) {
+        if let Some(slot) = self.field(v) {
+            *slot = value as f64;
+        }
+    }
+
+    /// This key's value in `v` (0 for `Default`).
+    pub fn value(self, v: &hils_plant::params::VehicleParams) -> f64 {
+        let mut copy = *v;
+        self.field(&mut copy).map_or(0.0, |x| *x)
+    }
+}
+
+/// A zone as `TrackZone` carries it: bounds in steps of 0.1 m (decimetres), so that the
+/// board checks and keeps zones without floating point in its step (the plant's
+/// [`Zone`] is built from it outside the step, [`ZoneFrame::zone`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct ZoneFrame {
+    /// Start, 0.1 m.
+    pub start_dm: u32,
+    /// End (exclusive), 0.1 m.
+    pub end_dm: u32,
+    /// Surface of the zone (its contact set).
+    pub surface: Surface,
+}
+
+impl ZoneFrame {
+    /// The frame of a zone: `None` when a bound is outside 0-[`ZONE_MAX_M`] or off the
+    /// 0.1 m grid (by more than 1e-6 m): nothing is rounded silently.
+    pub fn of(zone: &Zone) -> Option<Self> {
+        let dm = |x: f64| {
+            let steps = x / ZONE_RESOLUTION_M;
+            let r = (steps + 0.5) as u32; // in range: not negative
+            (zone_in_range(x) && (steps - r as f64).abs() <= 1e-5).then_some(r)
+        };
+        Some(Self {
+            start_dm: dm(zone.start_m)?,
+            end_dm: dm(zone.end_m)?,
+            surface: zone.surface,
+        })
+    }
+
+    /// The plant's zone.
+    pub fn zone(&self) -> Zone {
+        Zone {
+            start_m: self.start_dm as f64 * ZONE_RESOLUTION_M,
+            end_m: self.end_dm as f64 * ZONE_RESOLUTION_M,
+            surface: self.surface,
+        }
+    }
+}
+
+/// `Track` command: forget the kept track, or check and keep the zones received.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum TrackCommand {
+    /// Forget the kept track and the zones received (starts on one rail again).
+    Clear,
+    /// Zones 0..`zones` (all received since the last commit or clear) on `base`.
+    Commit {
+        /// Surface outside the zones.
+        base: Surface,
+        /// Number of zones (indices 0..zones).
+        zones: u8,
+    },
 }
 
 // ---------------------------------------------------------------------------------------
@@ -800,15 +986,43 @@ pub enum BrakeCommand {
         /// Demanded deceleration, m/s^2.
         deceleration_mps2: f32,
     },
+    /// Service brake step `step` (1-based) of the controller's steps.
+    ServiceStep {
+        /// The step, 1-based.
+        step: u8,
+    },
 }
 
 impl BrakeCommand {
-    /// Code of the `cmd` column of the run log (0 release, 1 EB, 2 service).
+    /// Code of the `cmd` column of the run log (0 release, 1 EB, 2 service: a service step
+    /// too, as `hils_sil::Cmd::of`).
     pub fn code(self) -> u8 {
+        match self {
+            BrakeCommand::ServiceStep { .. } => 2,
+            b => b.demand_code(),
+        }
+    }
+
+    /// The `BrakeDemand` signal (0 release, 1 EB, 2 service deceleration, 3 service step).
+    pub fn demand_code(self) -> u8 {
         match self {
             BrakeCommand::Release => 0,
             BrakeCommand::Emergency => 1,
             BrakeCommand::Service { .. } => 2,
+            BrakeCommand::ServiceStep { .. } => 3,
+        }
+    }
+
+    /// The brake unit's demand of this command.
+    pub fn demand(self) -> hils_brake_unit::BrakeDemand {
+        use hils_brake_unit::BrakeDemand;
+        match self {
+            BrakeCommand::Release => BrakeDemand::Release,
+            BrakeCommand::Emergency => BrakeDemand::Emergency,
+            BrakeCommand::Service { deceleration_mps2 } => {
+                BrakeDemand::Service { deceleration_mps2 }
+            }
+            BrakeCommand::ServiceStep { step } => BrakeDemand::ServiceStep { step },
         }
     }
 }
@@ -855,6 +1069,8 @@ pub enum Command {
         emergency: bool,
         /// Initial speed, km/h.
         initial_speed_kmh: f32,
+        /// Run on the track kept by [`Command::Track`] commit (else one `rail` everywhere).
+        track: bool,
     },
     /// Opcode 2: stop the run (outputs to the safe state).
     Stop,
@@ -878,6 +1094,22 @@ pub enum Command {
     ClearFaults,
     /// Opcode 7: configuration (only while no run is active).
     Configure(ConfigItem),
+    /// Opcode 8: zone `index` of the next track (kept by [`Command::Track`] commit).
+    TrackZone {
+        /// Zone index, 0-based (below 16).
+        index: u8,
+        /// The zone.
+        zone: ZoneFrame,
+    },
+    /// Opcode 9: commit or clear the track.
+    Track(TrackCommand),
+    /// Opcode 10: one `[vehicle]` value of the following runs (only while no run is active).
+    Vehicle {
+        /// Which value (or the default vehicle).
+        key: VehicleKey,
+        /// The value, in the unit of its `[vehicle]` key (kg, kg m^2, m).
+        value: f32,
+    },
 }
 
 impl Command {
@@ -889,6 +1121,7 @@ impl Command {
             friction,
             emergency: true,
             initial_speed_kmh: 150.0,
+            track: false,
         }
     }
 
@@ -907,6 +1140,9 @@ impl Command {
             Command::Calibrate { .. } => Opcode::Calibrate,
             Command::ClearFaults => Opcode::ClearFaults,
             Command::Configure(_) => Opcode::Configure,
+            Command::TrackZone { .. } => Opcode::TrackZone,
+            Command::Track(_) => Opcode::Track,
+            Command::Vehicle { .. } => Opcode::Vehicle,
         }
     }
 }
@@ -949,7 +1185,9 @@ impl CommandFrame {
                 friction,
                 emergency,
                 initial_speed_kmh,
+                track,
             } => {
+                START_TRACK.put_raw(&mut d, track as u64);
                 START_MODE.put_raw(&mut d, u8::from(mode) as u64);
                 START_RAIL.put_raw(&mut d, rail_code(rail) as u64);
                 START_FRICTION.put_raw(&mut d, friction_code(friction) as u64);
@@ -958,9 +1196,13 @@ impl CommandFrame {
             }
             Command::Stop | Command::ClearFaults => {}
             Command::Brake(b) => {
-                BRAKE_DEMAND.put_raw(&mut d, b.code() as u64);
-                if let BrakeCommand::Service { deceleration_mps2 } = b {
-                    SERVICE_DECELERATION.put(&mut d, deceleration_mps2);
+                BRAKE_DEMAND.put_raw(&mut d, b.demand_code() as u64);
+                match b {
+                    BrakeCommand::Service { deceleration_mps2 } => {
+                        SERVICE_DECELERATION.put(&mut d, deceleration_mps2)
+                    }
+                    BrakeCommand::ServiceStep { step } => SERVICE_STEP.put_raw(&mut d, step as u64),
+                    _ => {}
                 }
             }
             Command::InjectFault { channel, fault } => {
@@ -988,6 +1230,22 @@ impl CommandFrame {
                 CONFIG_ITEM.put_raw(&mut d, code);
                 CONFIG_VALUE.put_raw(&mut d, value as u64);
             }
+            Command::TrackZone { index, zone } => {
+                ZONE_INDEX.put_raw(&mut d, index as u64);
+                ZONE_SURFACE.put_raw(&mut d, surface_code(zone.surface) as u64);
+                ZONE_START.put_raw(&mut d, zone.start_dm as u64);
+                ZONE_END.put_raw(&mut d, zone.end_dm as u64);
+            }
+            Command::Track(TrackCommand::Clear) => {}
+            Command::Track(TrackCommand::Commit { base, zones }) => {
+                TRACK_ACTION.put_raw(&mut d, 1);
+                TRACK_BASE.put_raw(&mut d, surface_code(base) as u64);
+                TRACK_ZONES.put_raw(&mut d, zones as u64);
+            }
+            Command::Vehicle { key, value } => {
+                VEHICLE_KEY.put_raw(&mut d, u8::from(key) as u64);
+                VEHICLE_VALUE.put_raw(&mut d, value.to_bits() as u64);
+            }
         }
         seal(ID_COMMAND, d, self.counter)
     }
@@ -1014,6 +1272,9 @@ impl CommandFrame {
             },
             Opcode::ClearFaults => Command::ClearFaults,
             Opcode::Configure => Command::Configure(decode_config(&d)?),
+            Opcode::TrackZone => decode_zone(&d)?,
+            Opcode::Track => decode_track(&d)?,
+            Opcode::Vehicle => decode_vehicle(&d)?,
         };
         Ok(Self { command, counter })
     }
@@ -1049,7 +1310,57 @@ fn decode_start(d: &[u8; 8]) -> Result<Command, DecodeError> {
         friction,
         emergency: START_EMERGENCY.get_raw(d) == 1,
         initial_speed_kmh: START_SPEED.get(d),
+        track: START_TRACK.get_raw(d) == 1,
     })
+}
+
+/// Whether a position fits `ZoneStart`/`ZoneEnd` (0 to [`ZONE_MAX_M`]).
+pub fn zone_in_range(x_m: f64) -> bool {
+    (0.0..=ZONE_MAX_M).contains(&x_m)
+}
+
+/// A surface code signal's surface (4-7: the signal named as out of range).
+fn decode_surface(d: &[u8; 8], signal: Signal) -> Result<Surface, DecodeError> {
+    surface_of_code(signal.get_raw(d) as u8).ok_or(DecodeError::BadValue(signal.name))
+}
+
+fn decode_zone(d: &[u8; 8]) -> Result<Command, DecodeError> {
+    use command::*;
+    Ok(Command::TrackZone {
+        index: ZONE_INDEX.get_raw(d) as u8,
+        zone: ZoneFrame {
+            start_dm: ZONE_START.get_raw(d) as u32,
+            end_dm: ZONE_END.get_raw(d) as u32,
+            surface: decode_surface(d, ZONE_SURFACE)?,
+        },
+    })
+}
+
+fn decode_track(d: &[u8; 8]) -> Result<Command, DecodeError> {
+    use command::*;
+    Ok(Command::Track(if TRACK_ACTION.get_raw(d) == 0 {
+        TrackCommand::Clear
+    } else {
+        TrackCommand::Commit {
+            base: decode_surface(d, TRACK_BASE)?,
+            zones: TRACK_ZONES.get_raw(d) as u8,
+        }
+    }))
+}
+
+fn decode_vehicle(d: &[u8; 8]) -> Result<Command, DecodeError> {
+    use command::*;
+    let key = decode_enum(d, VEHICLE_KEY)?;
+    let value = f32::from_bits(VEHICLE_VALUE.get_raw(d) as u32);
+    if key == VehicleKey::Default {
+        // The value is unused: whatever the bits, the command is the same (fuzz finding:
+        // a NaN here made the decoded command unequal to itself).
+        return Ok(Command::Vehicle { key, value: 0.0 });
+    }
+    if !(value.is_finite() && value > 0.0) {
+        return Err(DecodeError::BadValue("VehicleValue"));
+    }
+    Ok(Command::Vehicle { key, value })
 }
 
 fn decode_brake(d: &[u8; 8]) -> Result<BrakeCommand, DecodeError> {
@@ -1065,6 +1376,10 @@ fn decode_brake(d: &[u8; 8]) -> Result<BrakeCommand, DecodeError> {
                 deceleration_mps2: a,
             }
         }
+        3 => match command::SERVICE_STEP.get_raw(d) as u8 {
+            0 => return Err(DecodeError::BadValue("ServiceStep")),
+            step => BrakeCommand::ServiceStep { step },
+        },
         _ => return Err(DecodeError::BadValue("BrakeDemand")),
     })
 }
@@ -1262,6 +1577,7 @@ mod tests {
                 friction: FrictionModel::Constant,
                 emergency: true,
                 initial_speed_kmh: 150.0,
+                track: false,
             },
             Command::Start {
                 mode: RigMode::Rig,
@@ -1269,6 +1585,30 @@ mod tests {
                 friction: FrictionModel::Variable,
                 emergency: false,
                 initial_speed_kmh: 80.25,
+                track: true,
+            },
+            Command::Brake(BrakeCommand::ServiceStep { step: 7 }),
+            Command::TrackZone {
+                index: 15,
+                zone: ZoneFrame::of(&Zone {
+                    start_m: 120.0,
+                    end_m: 100_000.0,
+                    surface: Surface::VeryLow,
+                })
+                .unwrap(),
+            },
+            Command::Track(TrackCommand::Commit {
+                base: Surface::Low,
+                zones: 16,
+            }),
+            Command::Track(TrackCommand::Clear),
+            Command::Vehicle {
+                key: VehicleKey::CarbodyMass,
+                value: 26_000.0,
+            },
+            Command::Vehicle {
+                key: VehicleKey::Default,
+                value: 0.0,
             },
             Command::Stop,
             Command::Brake(BrakeCommand::Release),
@@ -1321,6 +1661,7 @@ mod tests {
                         rail,
                         friction,
                         emergency,
+                        track,
                     },
                     Command::Start {
                         initial_speed_kmh: b,
@@ -1328,10 +1669,14 @@ mod tests {
                         rail: r2,
                         friction: f2,
                         emergency: e2,
+                        track: t2,
                     },
                 ) => {
                     assert!((a - b).abs() < 0.006);
-                    assert_eq!((*mode, *rail, *friction, *emergency), (m2, r2, f2, e2));
+                    assert_eq!(
+                        (*mode, *rail, *friction, *emergency, *track),
+                        (m2, r2, f2, e2, t2)
+                    );
                 }
                 (
                     Command::Brake(BrakeCommand::Service {
@@ -1385,6 +1730,28 @@ mod tests {
         assert_eq!(
             CommandFrame::decode(&raw([7, 5, 1, 0, 0, 0, 0])),
             Err(DecodeError::BadValue("ConfigItem"))
+        );
+        // Surface code 5 in a zone (bits 13-15 of byte 1), and as a track's base.
+        assert_eq!(
+            CommandFrame::decode(&raw([8, 5 << 5, 0, 0, 0, 0, 0])),
+            Err(DecodeError::BadValue("ZoneSurface"))
+        );
+        assert_eq!(
+            CommandFrame::decode(&raw([9, 1 | (6 << 1), 0, 0, 0, 0, 0])),
+            Err(DecodeError::BadValue("TrackBase"))
+        );
+        assert_eq!(
+            CommandFrame::decode(&raw([10, 7, 0, 0, 0, 0x80, 0x3F])),
+            Err(DecodeError::BadValue("VehicleKey"))
+        );
+        let nan = f32::NAN.to_bits().to_le_bytes();
+        assert_eq!(
+            CommandFrame::decode(&raw([10, 0, 0, nan[0], nan[1], nan[2], nan[3]])),
+            Err(DecodeError::BadValue("VehicleValue"))
+        );
+        assert_eq!(
+            CommandFrame::decode(&raw([3, 3, 0, 0, 0, 0, 0])),
+            Err(DecodeError::BadValue("ServiceStep"))
         );
     }
 

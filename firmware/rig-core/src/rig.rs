@@ -40,15 +40,20 @@
 
 use embedded_can::Frame;
 use hils_brake_unit::BrakeDemand;
-use hils_plant::{BrakeInput, Flags, FrictionModel, Outputs, Params, Plant, Rail};
+use hils_plant::params::VehicleParams;
+use hils_plant::track::{ContactSets, MAX_ZONES, TrackError};
+use hils_plant::{
+    BrakeInput, DegradedAdhesionParams, Flags, FrictionModel, Outputs, Params, Plant, Rail, STEP_S,
+    Surface, Track, TrackAdhesion, Zone,
+};
 use hils_sil::scenario::at_standstill;
 use hils_sil::{ClosedLoop, LoopError};
 
 use crate::Code;
 use crate::can::{
     BrakeCommand, Calibration, Command, CommandFrame, CommandResult, ConfigItem, DecodeError,
-    DiagFrame, RigMode, RigState, StatusFrame, WHEEL_SPEED_MAX_KMH, WheelSpeedFrame, friction_code,
-    rail_code,
+    DiagFrame, RigMode, RigState, StatusFrame, TrackCommand, VehicleKey, WHEEL_SPEED_MAX_KMH,
+    WheelSpeedFrame, ZoneFrame, friction_code, rail_code, surface_code,
 };
 use crate::hw::{RigIo, TelemetryEvent};
 use crate::pulse::{PulseRegisters, PulseTimer, wheel_frequency_hz};
@@ -181,6 +186,17 @@ pub enum CommandError {
     SensorFaults,
     /// The plant or brake unit refused the parameters.
     Build(LoopError),
+    /// A `Start` on the kept track, but no track is kept (commit one first).
+    NoTrack,
+    /// A track commit whose zone `index` (0-based) was not received since the last commit
+    /// or clear.
+    TrackIncomplete {
+        /// The first missing zone index.
+        index: u8,
+    },
+    /// A track zone or commit refused: zone index or count above 16, a zone empty, out of
+    /// order or overlapping ([`TrackError`]).
+    Track(TrackError),
     /// A build came back for a start request that is no longer pending (stopped, or
     /// superseded by a later `Start`): not installed, counted ([`Rig::stale_builds`]).
     StaleBuild {
@@ -217,6 +233,79 @@ pub struct StartRequest {
     pub emergency: bool,
     /// Initial speed, km/h.
     pub initial_speed_kmh: f32,
+    /// The run's track (`None`: `rail` everywhere), copied from the rig's kept track.
+    pub track: Option<TrackFrames>,
+    /// The run's vehicle: the default one with the values set by `Vehicle` commands.
+    pub vehicle: VehicleValues,
+}
+
+/// A track as the board keeps it: the base and the zones as received (checked, in
+/// 0.1 m steps: no floating point in the step); the plant's [`Track`] is made from it
+/// when a run is built ([`TrackFrames::track`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TrackFrames {
+    /// Surface outside the zones.
+    pub base: Surface,
+    zones: [ZoneFrame; MAX_ZONES],
+    count: u8,
+}
+
+impl TrackFrames {
+    /// `zones` on `base`, by the rules of [`Track::new`] (at most [`MAX_ZONES`], each not
+    /// empty, in order and disjoint), on the frames' integer bounds.
+    pub fn new(base: Surface, zones: &[ZoneFrame]) -> Result<Self, TrackError> {
+        if zones.len() > MAX_ZONES {
+            return Err(TrackError::TooManyZones);
+        }
+        let mut t = Self {
+            base,
+            zones: [ZoneFrame::default(); MAX_ZONES],
+            count: zones.len() as u8,
+        };
+        for (index, z) in zones.iter().enumerate() {
+            if z.end_dm <= z.start_dm {
+                return Err(TrackError::BadZone { index });
+            }
+            if index > 0 && z.start_dm < zones[index - 1].end_dm {
+                return Err(TrackError::Overlap { index });
+            }
+            t.zones[index] = *z;
+        }
+        Ok(t)
+    }
+
+    /// The zones.
+    pub fn zones(&self) -> &[ZoneFrame] {
+        &self.zones[..self.count as usize]
+    }
+
+    /// The plant's track (outside the step: floating point).
+    pub fn track(&self) -> Result<Track, TrackError> {
+        let mut zones = [Zone::default(); MAX_ZONES];
+        for (z, f) in zones.iter_mut().zip(self.zones()) {
+            *z = f.zone();
+        }
+        Track::new(self.base, &zones[..self.count as usize])
+    }
+}
+
+/// The `[vehicle]` values set by `Vehicle` commands ([`VehicleKey::VALUES`] order; `None`:
+/// the default), as received (f32: no conversion in the step); applied when a run is
+/// built.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct VehicleValues(pub [Option<f32>; 5]);
+
+impl VehicleValues {
+    /// The default vehicle with these values.
+    pub fn vehicle(&self) -> VehicleParams {
+        let mut v = VehicleParams::default();
+        for (key, value) in VehicleKey::VALUES.iter().zip(self.0) {
+            if let Some(x) = value {
+                key.apply(&mut v, x);
+            }
+        }
+        v
+    }
 }
 
 /// The simulation of a run, built by [`StartRequest::build`] outside the step.
@@ -303,14 +392,35 @@ impl StartRequest {
     pub fn build_simulation(&self) -> Result<Simulation, CommandError> {
         let mut params = Params::default();
         params.friction.model = self.friction;
+        params.vehicle = self.vehicle.vehicle();
         let v0 = self.initial_speed_kmh / KMH_PER_MPS;
-        let sim = match self.mode {
-            RigMode::Rig => Sim::Rig(
-                Plant::new(&params, self.rail, v0)
-                    .map_err(|e| CommandError::Build(LoopError::Params(e)))?,
+        let params_error = |e| CommandError::Build(LoopError::Params(e));
+        let adhesion = match self.track {
+            Some(frames) => Some(
+                TrackAdhesion::<f32>::new(
+                    &params.contact,
+                    &ContactSets::default(),
+                    frames.track().map_err(CommandError::Track)?,
+                    &DegradedAdhesionParams::default(),
+                    STEP_S,
+                )
+                .map_err(params_error)?,
             ),
+            None => None,
+        };
+        let sim = match self.mode {
+            RigMode::Rig => {
+                let mut plant = Plant::new(&params, self.rail, v0).map_err(params_error)?;
+                if let Some(a) = adhesion {
+                    plant.set_track(a);
+                }
+                Sim::Rig(plant)
+            }
             RigMode::SelfTest => {
                 let mut c = ClosedLoop::new(&params, self.rail, v0).map_err(CommandError::Build)?;
+                if let Some(a) = adhesion {
+                    c.plant.set_track(a);
+                }
                 c.set_demand(if self.emergency {
                     BrakeDemand::Emergency
                 } else {
@@ -376,6 +486,13 @@ pub struct Rig<S: SimStore = Simulation> {
     start_seq: u32,
     /// Builds that came back for a request no longer pending (not installed).
     stale_builds: u32,
+    /// Track zones received since the last commit or clear, and which (bit i: zone i).
+    zones: [ZoneFrame; MAX_ZONES],
+    zones_received: u16,
+    /// The track committed (`Start` with `track` runs on it).
+    track: Option<TrackFrames>,
+    /// The vehicle of the following runs.
+    vehicle: VehicleValues,
 }
 
 impl Rig<Simulation> {
@@ -451,7 +568,65 @@ impl<S: SimStore> Rig<S> {
             state_before_start: RigState::Idle,
             start_seq: 0,
             stale_builds: 0,
+            zones: [ZoneFrame::default(); MAX_ZONES],
+            zones_received: 0,
+            track: None,
+            vehicle: VehicleValues::default(),
         }
+    }
+
+    /// The track kept by the last commit (None: cleared or never committed).
+    pub fn track(&self) -> Option<&TrackFrames> {
+        self.track.as_ref()
+    }
+
+    /// The vehicle values of the following runs.
+    pub fn vehicle(&self) -> &VehicleValues {
+        &self.vehicle
+    }
+
+    /// `TrackZone`: keeps zone `index` for the next commit.
+    fn track_zone(&mut self, index: u8, zone: ZoneFrame) -> Result<(), CommandError> {
+        let slot = self
+            .zones
+            .get_mut(index as usize)
+            .ok_or(CommandError::Track(TrackError::TooManyZones))?;
+        *slot = zone;
+        self.zones_received |= 1 << index;
+        Ok(())
+    }
+
+    /// `Track`: commit checks the zones received (all of 0..n, ordered, disjoint, not
+    /// empty) and keeps the track; clear forgets it. A refused commit keeps the last track.
+    fn track_command(&mut self, command: TrackCommand) -> Result<(), CommandError> {
+        let TrackCommand::Commit { base, zones } = command else {
+            self.track = None;
+            self.zones_received = 0;
+            return Ok(());
+        };
+        let n = zones as usize;
+        if n > MAX_ZONES {
+            return Err(CommandError::Track(TrackError::TooManyZones));
+        }
+        if let Some(index) = (0..n).find(|&i| self.zones_received & (1 << i) == 0) {
+            return Err(CommandError::TrackIncomplete { index: index as u8 });
+        }
+        let track = TrackFrames::new(base, &self.zones[..n]).map_err(CommandError::Track)?;
+        self.track = Some(track);
+        self.zones_received = 0;
+        Ok(())
+    }
+
+    /// `Vehicle`: one value of the following runs' vehicle (checked when a run is built).
+    fn vehicle_command(&mut self, key: VehicleKey, value: f32) -> Result<(), CommandError> {
+        if self.busy() {
+            return Err(CommandError::NotNow(self.state));
+        }
+        match VehicleKey::VALUES.iter().position(|k| *k == key) {
+            Some(i) => self.vehicle.0[i] = Some(value),
+            None => self.vehicle = VehicleValues::default(),
+        }
+        Ok(())
     }
 
     /// State of the rig.
@@ -498,6 +673,15 @@ impl<S: SimStore> Rig<S> {
             Sim::None => None,
             Sim::Rig(p) => Some(p.outputs()),
             Sim::SelfTest(c) => Some(c.outputs()),
+        }
+    }
+
+    /// The surface under each wheelset (None without a run).
+    pub fn surfaces(&self) -> Option<[Surface; WHEELSETS]> {
+        match self.sim()? {
+            Sim::None => None,
+            Sim::Rig(p) => Some(p.track().surfaces()),
+            Sim::SelfTest(c) => Some(c.plant.track().surfaces()),
         }
     }
 
@@ -606,10 +790,14 @@ impl<S: SimStore> Rig<S> {
             friction,
             emergency,
             initial_speed_kmh,
+            track,
         } = command
         else {
             return Ok(());
         };
+        if track && self.track.is_none() {
+            return Err(CommandError::NoTrack);
+        }
         if self.busy() {
             return Err(CommandError::NotNow(self.state));
         }
@@ -631,6 +819,8 @@ impl<S: SimStore> Rig<S> {
             friction,
             emergency,
             initial_speed_kmh,
+            track: if track { self.track } else { None },
+            vehicle: self.vehicle,
         });
         self.start_request_new = true;
         self.state_before_start = self.state;
@@ -738,13 +928,7 @@ impl<S: SimStore> Rig<S> {
             },
             Command::Brake(b) => {
                 if let Some(Sim::SelfTest(c)) = self.sim_mut() {
-                    c.set_demand(match b {
-                        BrakeCommand::Release => BrakeDemand::Release,
-                        BrakeCommand::Emergency => BrakeDemand::Emergency,
-                        BrakeCommand::Service { deceleration_mps2 } => {
-                            BrakeDemand::Service { deceleration_mps2 }
-                        }
-                    });
+                    c.set_demand(b.demand());
                 }
                 // In rig mode the brake controller gets its command from the train lines;
                 // the command is kept as the run log's `cmd` marker.
@@ -803,6 +987,9 @@ impl<S: SimStore> Rig<S> {
                 }
                 Ok(())
             }
+            Command::TrackZone { index, zone } => self.track_zone(index, zone),
+            Command::Track(t) => self.track_command(t),
+            Command::Vehicle { key, value } => self.vehicle_command(key, value),
         }
     }
 
@@ -947,11 +1134,19 @@ impl<S: SimStore> Rig<S> {
         for (j, s) in self.sensors.iter().enumerate() {
             sensor_faults |= (SensorFault::code(s.fault()) as u16) << (4 * j);
         }
-        let (o, unit) = match self.sim()? {
+        let (o, unit, plant_surfaces) = match self.sim()? {
             Sim::None => return None,
-            Sim::Rig(p) => (p.outputs(), None),
-            Sim::SelfTest(c) => (c.outputs(), Some(c.unit_outputs())),
+            Sim::Rig(p) => (p.outputs(), None, p.track().surfaces()),
+            Sim::SelfTest(c) => (
+                c.outputs(),
+                Some(c.unit_outputs()),
+                c.plant.track().surfaces(),
+            ),
         };
+        let mut surfaces = 0u8;
+        for (j, s) in plant_surfaces.iter().enumerate() {
+            surfaces |= surface_code(*s) << (2 * j);
+        }
         let w = |f: &dyn Fn(usize) -> f32| -> [f32; 4] { [f(0), f(1), f(2), f(3)] };
         let (p_cyl, f_clamp, wsp) = match unit {
             Some(u) => {
@@ -1005,6 +1200,7 @@ impl<S: SimStore> Rig<S> {
             missed_ticks: self.timing.missed_ticks,
             faults,
             sensor_faults,
+            surfaces,
             seq: self.record_seq,
         })
     }

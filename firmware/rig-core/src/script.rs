@@ -90,6 +90,7 @@ pub fn cost_command(k: u32) -> Option<Command> {
             friction: FrictionModel::Constant,
             emergency: false,
             initial_speed_kmh: 120.0,
+            track: false,
         },
         21_010 => inject(Some(InjectedFault::Open)),
         21_100 => inject(None),

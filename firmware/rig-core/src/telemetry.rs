@@ -1,7 +1,7 @@
 //! Telemetry: the decimated record of a run, its defmt lines and their parser.
 //!
 //! The board logs one [`TelemetryRecord`] every `divider` plant steps (default 100: 100 Hz)
-//! as a defmt line `tlm1 <43 fields>`, a [`RunHeader`] line `tlm1-start ...` when a run
+//! as a defmt line `tlm1 <44 fields>`, a [`RunHeader`] line `tlm1-start ...` when a run
 //! starts and a `tlm1-end <step> <state>` line when it ends. The host decoder (`hils decode`)
 //! gets the lines' text from defmt's decoder (or from a probe-rs log), parses them here
 //! ([`parse_line`]) and writes a run-log CSV (`spec/measured-data.md`, section 1).
@@ -21,8 +21,8 @@
 use crate::Code;
 use crate::can::{RigMode, RigState};
 
-/// Names of the fields of a `tlm1` line, in order (43).
-pub const FIELDS: [&str; 43] = [
+/// Names of the fields of a `tlm1` line, in order (44).
+pub const FIELDS: [&str; 44] = [
     "step",
     "state",
     "mode",
@@ -64,6 +64,7 @@ pub const FIELDS: [&str; 43] = [
     "missed_ticks",
     "faults",
     "sensor_faults",
+    "surfaces",
     "seq",
     "crc32",
 ];
@@ -121,6 +122,9 @@ pub struct TelemetryRecord {
     pub faults: u32,
     /// Sensor fault codes, 4 bits per channel (channel 1 in bits 0-3).
     pub sensor_faults: u16,
+    /// The surface (zone) under each wheelset, 2 bits per wheelset (wheelset 1 in bits
+    /// 0-1), [`crate::can::surface_code`]: 0 dry, 1 wet, 2 low, 3 very low.
+    pub surfaces: u8,
     /// Number of the record in its run (0 = the t = 0 record), counting dropped ones.
     pub seq: u32,
 }
@@ -286,6 +290,7 @@ pub fn parse_line(text: &str) -> Result<Option<Line>, ParseError> {
                 missed_ticks: f.next()?,
                 faults: f.next()?,
                 sensor_faults: f.next()?,
+                surfaces: f.next()?,
                 seq: f.next()?,
             };
             let received: u32 = f.next()?;
@@ -371,6 +376,7 @@ impl TelemetryRecord {
             c = crc32_update(c, &x.to_le_bytes());
         }
         c = crc32_update(c, &self.sensor_faults.to_le_bytes());
+        c = crc32_update(c, &[self.surfaces]);
         !crc32_update(c, &self.seq.to_le_bytes())
     }
 
@@ -388,7 +394,7 @@ impl TelemetryRecord {
     pub fn log(&self) {
         let r = self;
         defmt::println!(
-            "tlm1 {=u32} {=u8} {=u8} {=u8} {=u8} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=u32} {=u32} {=u32} {=u32} {=u32} {=u16} {=u32} {=u32}",
+            "tlm1 {=u32} {=u8} {=u8} {=u8} {=u8} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=u32} {=u32} {=u32} {=u32} {=u32} {=u16} {=u8} {=u32} {=u32}",
             r.step,
             r.state,
             r.mode,
@@ -430,9 +436,16 @@ impl TelemetryRecord {
             r.missed_ticks,
             r.faults,
             r.sensor_faults,
+            r.surfaces,
             r.seq,
             r.crc32()
         );
+    }
+
+    /// The surface under wheelset `j` (0-based).
+    pub fn surface(&self, j: usize) -> hils_plant::Surface {
+        let code = (self.surfaces >> (2 * (j & 3))) & 3;
+        crate::can::surface_of_code(code).unwrap_or_default()
     }
 }
 
@@ -482,7 +495,7 @@ mod tests {
             }
         }
         s += &format!(
-            " {} {} {} {} {} {} {} {} {}",
+            " {} {} {} {} {} {} {} {} {} {}",
             r.a_x,
             r.step_max_cycles,
             r.step_mean_cycles,
@@ -490,6 +503,7 @@ mod tests {
             r.missed_ticks,
             r.faults,
             r.sensor_faults,
+            r.surfaces,
             r.seq,
             r.crc32()
         );
@@ -518,6 +532,7 @@ mod tests {
             missed_ticks: 1,
             faults: 0x8001_0010,
             sensor_faults: 0x4010,
+            surfaces: 0b11_10_01_00,
             seq: 410,
         }
     }
@@ -542,6 +557,7 @@ mod tests {
                 a.missed_ticks,
                 a.faults,
                 a.sensor_faults,
+                a.surfaces,
             ) == (
                 b.step_max_cycles,
                 b.step_mean_cycles,
@@ -549,6 +565,7 @@ mod tests {
                 b.missed_ticks,
                 b.faults,
                 b.sensor_faults,
+                b.surfaces,
             )
     }
 
@@ -610,8 +627,8 @@ mod tests {
         assert_eq!(
             parse_line(short),
             Err(ParseError::FieldCount {
-                expected: 43,
-                found: 42
+                expected: 44,
+                found: 43
             })
         );
         let bad = line.replacen(" 38.5 ", " 38.5x ", 1);

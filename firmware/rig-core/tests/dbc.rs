@@ -14,11 +14,12 @@ use can_dbc::{
     ByteOrder, Dbc, MessageId, MultiplexIndicator, Signal, SignalExtendedValueType, ValueType,
 };
 use embedded_can::{Frame, StandardId};
-use hils_plant::{FrictionModel, Rail};
+use hils_plant::{FrictionModel, Rail, Surface};
 use hils_rig_core::Code;
 use hils_rig_core::can::{
     self, BrakeCommand, Calibration, Command, CommandFrame, CommandResult, ConfigItem, DiagFrame,
-    InjectedFault, RigMode, RigState, StatusFrame, WheelSpeedFrame,
+    InjectedFault, RigMode, RigState, StatusFrame, TrackCommand, VehicleKey, WheelSpeedFrame,
+    ZoneFrame,
 };
 use hils_rig_core::sensor::{SensorFault, SensorKind};
 use proptest::prelude::*;
@@ -290,8 +291,10 @@ proptest! {
     }
 
     #[test]
-    fn command_frame(pick in 0usize..9, a in 0u32..=16382, b in 0u32..=10000, ch in 0u8..4, k in 0u8..5,
-                     flags in 0u8..16, gain in 0.001f32..1.0e6, counter in 0u8..16) {
+    fn command_frame(pick in 0usize..12, a in 0u32..=16382, b in 0u32..=10000, ch in 0u8..4, k in 0u8..5,
+                     flags in 0u8..32, gain in 0.001f32..1.0e6, counter in 0u8..16,
+                     zone in (0u32..(1 << 20), 0u32..(1 << 20), 0u8..32, 0u8..4, 1u8..=255)) {
+        let surface = |c: u8| [Surface::Dry, Surface::Wet, Surface::Low, Surface::VeryLow][c as usize % 4];
         let command = match pick {
             0 => Command::Start {
                 mode: if flags & 1 == 0 { RigMode::Rig } else { RigMode::SelfTest },
@@ -299,12 +302,14 @@ proptest! {
                 friction: if flags & 4 == 0 { FrictionModel::Variable } else { FrictionModel::Constant },
                 emergency: flags & 8 != 0,
                 initial_speed_kmh: a as f32 * 0.01,
+                track: flags & 16 != 0,
             },
             1 => Command::Stop,
-            2 => Command::Brake(match k % 3 {
+            2 => Command::Brake(match k % 4 {
                 0 => BrakeCommand::Release,
                 1 => BrakeCommand::Emergency,
-                _ => BrakeCommand::Service { deceleration_mps2: b as f32 * 0.001 },
+                2 => BrakeCommand::Service { deceleration_mps2: b as f32 * 0.001 },
+                _ => BrakeCommand::ServiceStep { step: zone.4 },
             }),
             3 => Command::InjectFault { channel: ch, fault: match k {
                 0 => None, 1 => Some(InjectedFault::Open), 2 => Some(InjectedFault::Short),
@@ -313,6 +318,15 @@ proptest! {
             5 => Command::Calibrate { channel: ch, action: if k % 2 == 0 { Calibration::SetGain(gain) } else { Calibration::SetOffset(gain.min(4095.0)) } },
             6 => Command::Calibrate { channel: ch, action: Calibration::SetKind(if k % 2 == 0 { SensorKind::LoadCell } else { SensorKind::PressureTransducer }) },
             7 => Command::ClearFaults,
+            9 => Command::TrackZone { index: zone.2, zone: ZoneFrame {
+                start_dm: zone.0, end_dm: zone.1, surface: surface(zone.3) } },
+            10 => Command::Track(if flags & 1 == 0 { TrackCommand::Clear } else {
+                TrackCommand::Commit { base: surface(zone.3), zones: zone.2 } }),
+            11 => if flags & 1 == 0 {
+                Command::Vehicle { key: VehicleKey::Default, value: 0.0 } // value unused
+            } else {
+                Command::Vehicle { key: VehicleKey::VALUES[k as usize], value: gain }
+            },
             _ => Command::Configure(if k % 2 == 0 { ConfigItem::TelemetryDivider(b.max(1) as u16) } else { ConfigItem::Teeth((b % 1000).max(1) as u16) }),
         };
         let cf = CommandFrame { command, counter };
@@ -322,7 +336,8 @@ proptest! {
             m.insert("CommandAlive", cf.counter as f64);
             m.insert("CommandChecksum", f.map(checksum_of).unwrap_or(0.0));
             match cf.command {
-                Command::Start { mode, rail, friction, emergency, initial_speed_kmh } => {
+                Command::Start { mode, rail, friction, emergency, initial_speed_kmh, track } => {
+                    m.insert("StartTrack", track as u8 as f64);
                     m.insert("StartMode", mode as u8 as f64);
                     m.insert("StartRail", (rail == Rail::Dry) as u8 as f64);
                     m.insert("StartFriction", (friction == FrictionModel::Constant) as u8 as f64);
@@ -330,9 +345,11 @@ proptest! {
                     m.insert("StartSpeed", initial_speed_kmh as f64);
                 }
                 Command::Brake(b) => {
-                    m.insert("BrakeDemand", b.code() as f64);
+                    m.insert("BrakeDemand", b.demand_code() as f64);
                     let decel = if let BrakeCommand::Service { deceleration_mps2 } = b { deceleration_mps2 } else { 0.0 };
                     m.insert("ServiceDeceleration", decel as f64);
+                    let step = if let BrakeCommand::ServiceStep { step } = b { step } else { 0 };
+                    m.insert("ServiceStep", step as f64);
                 }
                 Command::InjectFault { channel, fault } => {
                     m.insert("FaultChannel", channel as f64);
@@ -355,6 +372,28 @@ proptest! {
                     let (code, v) = match item { ConfigItem::TelemetryDivider(v) => (0.0, v), ConfigItem::Teeth(v) => (1.0, v) };
                     m.insert("ConfigItem", code);
                     m.insert("ConfigValue", v as f64);
+                }
+                Command::TrackZone { index, zone } => {
+                    let code = |s: Surface| match s { Surface::Dry => 0.0, Surface::Wet => 1.0, Surface::Low => 2.0, Surface::VeryLow => 3.0 };
+                    m.insert("ZoneIndex", index as f64);
+                    m.insert("ZoneSurface", code(zone.surface));
+                    m.insert("ZoneStart", zone.start_dm as f64 * 0.1);
+                    m.insert("ZoneEnd", zone.end_dm as f64 * 0.1);
+                }
+                Command::Track(t) => {
+                    let (action, base, zones) = match t {
+                        TrackCommand::Clear => (0.0, 0.0, 0.0),
+                        TrackCommand::Commit { base, zones } => (1.0, match base { Surface::Dry => 0.0, Surface::Wet => 1.0, Surface::Low => 2.0, Surface::VeryLow => 3.0 }, zones as f64),
+                    };
+                    m.insert("TrackAction", action);
+                    m.insert("TrackBase", base);
+                    m.insert("TrackZones", zones);
+                }
+                Command::Vehicle { key, value } => {
+                    let code = match key { VehicleKey::CarbodyMass => 0.0, VehicleKey::CarbodyPitchInertia => 1.0,
+                        VehicleKey::BogieMass => 2.0, VehicleKey::WheelsetMass => 3.0, VehicleKey::WheelRadius => 4.0, VehicleKey::Default => 255.0 };
+                    m.insert("VehicleKey", code);
+                    m.insert("VehicleValue", value as f64);
                 }
                 Command::Stop | Command::ClearFaults => {}
             }

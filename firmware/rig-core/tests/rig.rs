@@ -136,6 +136,7 @@ fn rig_start(initial_speed_kmh: f32) -> Command {
         friction: FrictionModel::Variable,
         emergency: false,
         initial_speed_kmh,
+        track: false,
     }
 }
 
@@ -473,6 +474,7 @@ fn each_plausibility_fault_stops_a_rig_run_and_self_test_only_reports() {
                     friction: FrictionModel::Constant,
                     emergency: true,
                     initial_speed_kmh: 150.0,
+                    track: false,
                 },
             )
             .unwrap();
@@ -961,6 +963,7 @@ fn a_late_build_is_not_installed_under_a_later_start() {
         friction,
         emergency,
         initial_speed_kmh: 80.0,
+        track: false,
     };
     rig.command(first).unwrap();
     let req1 = rig.take_start_request().unwrap();

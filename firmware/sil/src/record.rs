@@ -136,6 +136,12 @@ pub mod run_log {
     pub const OVERRUNS: Channel = Channel::scalar("overruns", "");
     /// Missed ticks since the run started (`hils decode`).
     pub const MISSED_TICKS: Channel = Channel::scalar("missed_ticks", "");
+    /// The surface (zone) under the wheelset: `dry`, `wet`, `low`, `very_low` (rig
+    /// telemetry; an extra column, which the spec allows).
+    pub const SURFACE: Channel = Channel::wheelset("surface", "");
+    /// The available adhesion under the wheelset (peak of F/Q over creepage of its surface
+    /// at the vehicle speed; rig logs, an extra column).
+    pub const MU_AVAIL: Channel = Channel::wheelset("mu_avail", "");
 
     /// The spec's channels, in order: the required ones, then the optional ones.
     pub const SPEC: [Channel; 11] = [
@@ -144,7 +150,7 @@ pub mod run_log {
 
     /// Every channel, in the order writers put them: the spec's, the simulation's extras,
     /// the rig's extras. A writer leaves out what it does not log and keeps the order.
-    pub const ALL: [Channel; 23] = [
+    pub const ALL: [Channel; 25] = [
         T,
         V_REF,
         OMEGA,
@@ -168,6 +174,8 @@ pub mod run_log {
         STEP_MEAN,
         OVERRUNS,
         MISSED_TICKS,
+        SURFACE,
+        MU_AVAIL,
     ];
 }
 

@@ -17,9 +17,10 @@
 //!   process can hit by chance. A rejected command changes nothing on the board, so the
 //!   repeat is safe.
 
+use hils_plant::track::MAX_ZONES;
 use hils_rig_core::can::{
     Calibration, ClassicFrame, Command, CommandFrame, CommandResult, RigMode, RigState,
-    StatusFrame, WHEEL_SPEED_MAX_KMH,
+    StatusFrame, TrackCommand, WHEEL_SPEED_MAX_KMH,
 };
 use hils_rig_core::rig::Faults;
 
@@ -63,6 +64,10 @@ pub fn command_name(c: &Command) -> &'static str {
         Command::Calibrate { .. } => "calibrate",
         Command::ClearFaults => "clear-faults",
         Command::Configure(_) => "configure",
+        Command::TrackZone { .. } => "track-zone",
+        Command::Track(TrackCommand::Commit { .. }) => "track-commit",
+        Command::Track(TrackCommand::Clear) => "track-clear",
+        Command::Vehicle { .. } => "vehicle",
     }
 }
 
@@ -94,6 +99,7 @@ pub fn rejection_reason(command: &Command, before: &StatusFrame) -> Option<Strin
         Command::Start {
             mode,
             initial_speed_kmh,
+            track,
             ..
         } => {
             if running {
@@ -107,10 +113,19 @@ pub fn rejection_reason(command: &Command, before: &StatusFrame) -> Option<Strin
                     "sensor fault latched on channel(s) {}: clear faults first (`hils rig clear-faults`)",
                     sensor_channels(before.faults).join(", ")
                 ))
+            } else if *track {
+                Some("no track kept on the board: send its zones and commit it first (`--track FILE`)".into())
             } else {
                 None
             }
         }
+        Command::TrackZone { index, .. } if *index as usize >= MAX_ZONES => Some(format!(
+            "zone index {index}: a track holds at most {MAX_ZONES} zones"
+        )),
+        Command::Track(TrackCommand::Commit { zones, .. }) => Some(format!(
+            "the board refused the track of {zones} zone(s): more than {MAX_ZONES}, a zone of 0..{zones} not received since the last commit, or zones empty, out of order or overlapping"
+        )),
+        Command::Vehicle { .. } if running => Some("not allowed during a run".into()),
         Command::Stop if !running => Some(format!(
             "no run to stop (state {})",
             state_name(before.state)

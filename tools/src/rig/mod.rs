@@ -25,12 +25,13 @@ pub mod programme;
 pub mod record;
 pub mod sim;
 pub mod socketcan;
+pub mod track;
 pub mod transport;
 pub mod watch;
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Result, anyhow, bail};
+use anyhow::{Context, Result, anyhow, bail};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use hils_plant::{FrictionModel, Rail};
 use hils_rig_core::can::{
@@ -147,7 +148,9 @@ pub struct StartArgs {
     pub rail: RailArg,
     #[arg(long, value_enum, default_value_t = FrictionArg::Variable)]
     pub friction: FrictionArg,
-    /// Track profile: not carried by `hils.dbc` (refused with an error).
+    /// Track file (a programme's `[tracks.NAME]` table at the top level: `base`, `[[zone]]`):
+    /// its zones are sent (`TrackZone`, `Track` commit) and the run starts on it
+    /// (`--rail` unused).
     #[arg(long)]
     pub track: Option<PathBuf>,
     /// `rig` (the controller on the rig) or `self-test` (the board's own simulated brake unit).
@@ -255,27 +258,33 @@ fn channel(c: u8) -> Result<u8> {
     }
 }
 
+/// The `RIG_COMMAND`s of a line, in order (none for lines that send nothing): `start
+/// --track FILE` sends the track's zones and commit before the start.
+pub fn commands_of(line: &Line) -> Result<Vec<Command>> {
+    let mut out = Vec::new();
+    if let Line::Start(StartArgs { track: Some(t), .. }) = line {
+        let (track, sets) = track::load_track_file(t)?;
+        out = track::track_commands(&track, &sets)
+            .with_context(|| format!("--track {}", t.display()))?;
+    }
+    out.extend(command_of(line)?);
+    Ok(out)
+}
+
 /// The `RIG_COMMAND` of a line (None for lines that send nothing).
-pub fn command_of(line: &Line) -> Result<Option<Command>> {
+fn command_of(line: &Line) -> Result<Option<Command>> {
     Ok(Some(match line {
-        Line::Start(a) => {
-            if let Some(t) = &a.track {
-                bail!(
-                    "--track {}: the board takes no track profile over CAN (hils.dbc has no track signal); not supported yet",
-                    t.display()
-                );
-            }
-            Command::Start {
-                mode: match a.mode {
-                    ModeArg::Rig => RigMode::Rig,
-                    ModeArg::SelfTest => RigMode::SelfTest,
-                },
-                rail: a.rail.rail(),
-                friction: a.friction.model(),
-                emergency: a.eb,
-                initial_speed_kmh: a.speed_kmh,
-            }
-        }
+        Line::Start(a) => Command::Start {
+            track: a.track.is_some(),
+            mode: match a.mode {
+                ModeArg::Rig => RigMode::Rig,
+                ModeArg::SelfTest => RigMode::SelfTest,
+            },
+            rail: a.rail.rail(),
+            friction: a.friction.model(),
+            emergency: a.eb,
+            initial_speed_kmh: a.speed_kmh,
+        },
         Line::Stop => Command::Stop,
         Line::Brake { demand, decel_mps2 } => Command::Brake(match (demand, decel_mps2) {
             (BrakeKind::Eb, None) => BrakeCommand::Emergency,
@@ -390,11 +399,14 @@ pub fn run_line<T: Transport>(
     recording: &mut Option<Recording>,
     alone: bool,
 ) -> Result<(), Stop> {
-    if let Some(c) = command_of(line)? {
-        let o = s.command(c)?;
-        println!("{o}");
-        if !o.accepted {
-            return Err(Stop::Rejected(o));
+    let commands = commands_of(line)?;
+    if !commands.is_empty() {
+        for c in commands {
+            let o = s.command(c)?;
+            println!("{o}");
+            if !o.accepted {
+                return Err(Stop::Rejected(o));
+            }
         }
         return Ok(());
     }

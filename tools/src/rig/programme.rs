@@ -10,18 +10,32 @@
 //!
 //! # What the board can run
 //!
-//! `RIG_COMMAND`'s start carries a rail (`wet` or `dry`), the friction model and the initial
-//! speed (0-655.34 km/h); the board's plant has the default vehicle. A run whose track is a
-//! uniform `wet` or `dry` surface with the default vehicle and an `emergency` or
-//! `service:<m/s^2 <= 10>` demand runs on the board; any other (low-adhesion surfaces,
-//! zones, vehicle variants, `step:` demands, faster starts) is listed as *not run on the
-//! rig* with the reason, not approximated.
+//! Each run's track goes to the board in `TrackZone` / `Track` commit frames and its
+//! vehicle variant in `Vehicle` frames ([`super::track`]); the start frame carries the
+//! friction model and the initial speed (0-655.34 km/h), the brake frame `emergency`,
+//! `service:<m/s^2 <= 10>` or `step:<n>`. A run the frames cannot carry exactly (own
+//! contact sets, zone bounds off the 0.1 m grid, a parameter file other than the default,
+//! degraded adhesion on, faster starts) is listed as *not run on the rig* with the reason,
+//! not approximated.
 //!
 //! # A run
 //!
-//! `brake release`, `--settle-s` (3 s: the controller vents the last run's brake), `start`
-//! (rig mode), the run's brake demand, then frames until the board leaves `running` (or
-//! `--max-run-s`, then `stop`). The run's log (`NAME.csv`, spec run-log schema) is judged
+//! `brake release`, `--settle-s` (3 s: the controller vents the last run's brake), the
+//! vehicle and track frames, `start` (rig mode, on the track), the run's brake demand, then
+//! frames until the board leaves `running` (or `--max-run-s`, then `stop`).
+//!
+//! # Air consumption and WSP timer actions on the rig
+//!
+//! The board does not see the controller's dump valves (no frame of `hils.dbc` carries
+//! them), but it measures the cylinder pressures (its transducer channels; in the log from
+//! the probe's telemetry). Under a constant brake demand (every programme run) the
+//! controller only lowers a cylinder pressure to relieve a sliding wheelset, so a sample is
+//! counted as venting while its cylinder pressure falls faster than
+//! [`VENT_FALL_PA_PER_S`] (2 bar/s: above the transducer noise of +-2 ADC counts over a
+//! 10 ms telemetry interval, below a dump valve's fall). The vent flags feed the same
+//! formulas as SIL (`crate::wsp::metrics`): free air = sum over vent samples of
+//! V_cyl (p[k-1] - p[k]) / p_atm; a WSP timer action = a continuous vent of `wsp_timer_s`.
+//! Without measured pressures both are `not_measured`. The run's log (`NAME.csv`, spec run-log schema) is judged
 //! from its brake command exactly as `hils wsp-test --programme FILE --log NAME.csv` judges
 //! it ([`crate::wsp::trace_of_log`], [`crate::wsp::judge_trace`]); every run of the programme
 //! is also simulated in SIL ([`crate::wsp::run_one`]). `--json` holds one entry per run: the
@@ -38,7 +52,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, anyhow};
 use clap::Args;
 use hils_brake_unit::BrakeDemand;
-use hils_plant::{Rail, Surface};
+use hils_plant::Rail;
 use hils_rig_core::can::{
     BrakeCommand, Command, RigMode, RigState, WHEEL_SPEED_MAX_KMH, WHEEL_SPEED_RESOLUTION_KMH,
 };
@@ -47,6 +61,7 @@ use rayon::prelude::*;
 use super::commands::{Flow, Session, state_name};
 use super::monitor::Seen;
 use super::record::{Recorder, RunMeta};
+use super::track;
 use super::transport::Transport;
 use super::{FrictionArg, RigArgs, Stop, open};
 use crate::wsp::metrics::Verdict;
@@ -82,37 +97,33 @@ pub struct RunArgs {
     pub only: Option<String>,
 }
 
+/// What the board is sent for a run: the vehicle and track frames, then the brake command
+/// after the start.
+#[derive(Clone, Debug)]
+pub struct Plan {
+    /// `Vehicle` frames, then `TrackZone` frames and the `Track` commit.
+    pub setup: Vec<Command>,
+    pub demand: BrakeCommand,
+}
+
 /// A run of the programme as the board can (or cannot) run it.
 #[derive(Clone, Debug)]
 pub struct BoardRun {
     pub run: Run,
-    /// The board's rail and brake command, or why the run cannot be run on the board.
-    pub plan: Result<(Rail, BrakeCommand), String>,
+    /// What the board is sent, or why the run cannot be run on the board.
+    pub plan: Result<Plan, String>,
 }
 
 /// What the board runs of a programme run, or why not (module doc).
-fn board_plan(vehicle: Option<&str>, run: &Run) -> Result<(Rail, BrakeCommand), String> {
-    if let Some(v) = vehicle {
-        return Err(format!(
-            "vehicle `{v}`: the board's plant has the default vehicle"
-        ));
-    }
-    let zones = run.track.zones().len();
-    if zones > 0 {
-        return Err(format!(
-            "the track has {zones} zone(s): the board runs one rail condition"
-        ));
-    }
-    let rail = match run.track.base() {
-        Surface::Wet => Rail::Wet,
-        Surface::Dry => Rail::Dry,
-        other => {
-            return Err(format!(
-                "surface `{}`: the start frame carries rail wet or dry only",
-                other.name()
-            ));
-        }
-    };
+fn board_plan(vehicle: Option<&str>, run: &Run) -> Result<Plan, String> {
+    let mut setup = Vec::new();
+    let why = |e: anyhow::Error| format!("{e:#}");
+    track::check_params(&run.file).map_err(why)?;
+    setup.extend(
+        track::vehicle_commands(&run.file.plant.vehicle)
+            .map_err(|e| format!("vehicle `{}`: {e:#}", vehicle.unwrap_or("default")))?,
+    );
+    setup.extend(track::track_commands(&run.track, &run.sets).map_err(why)?);
     let speed_kmh = run.speed_mps * hils_sil::KMH_PER_MPS;
     if speed_kmh > WHEEL_SPEED_MAX_KMH as f64 {
         return Err(format!(
@@ -124,13 +135,35 @@ fn board_plan(vehicle: Option<&str>, run: &Run) -> Result<(Rail, BrakeCommand), 
         BrakeDemand::Service { deceleration_mps2 } if deceleration_mps2 <= 10.0 => {
             BrakeCommand::Service { deceleration_mps2 }
         }
+        BrakeDemand::ServiceStep { step } if step > 0 => BrakeCommand::ServiceStep { step },
         other => {
             return Err(format!(
-                "demand {other:?}: the brake frame carries emergency or service 0-10 m/s^2"
+                "demand {other:?}: the brake frame carries emergency, service 0-10 m/s^2 or a step 1-255"
             ));
         }
     };
-    Ok((rail, demand))
+    Ok(Plan { setup, demand })
+}
+
+/// Falls of a cylinder pressure faster than this count as venting (module doc), Pa/s.
+pub const VENT_FALL_PA_PER_S: f64 = 2.0e5;
+
+/// Vent flags from the measured cylinder pressures (module doc): sample k vents while
+/// (p[k-1] - p[k]) / dt > [`VENT_FALL_PA_PER_S`]. False when no pressure was measured.
+pub fn vents_from_pressure(trace: &mut crate::wsp::metrics::Trace) -> bool {
+    if trace.p_cyl_pa.iter().any(Vec::is_empty) {
+        return false;
+    }
+    for j in 0..hils_plant::WHEELSETS {
+        let p = &trace.p_cyl_pa[j];
+        let mut vent = vec![false; p.len()];
+        for k in 1..p.len() {
+            let dt = trace.t_s[k] - trace.t_s[k - 1];
+            vent[k] = dt > 0.0 && (p[k - 1] - p[k]) / dt > VENT_FALL_PA_PER_S;
+        }
+        trace.venting[j] = vent;
+    }
+    true
 }
 
 /// Reads a programme with `hils wsp-test`'s parser: its criteria and runs (on the default
@@ -163,7 +196,12 @@ pub struct RigRun {
     pub outcome: Option<Outcome>,
     /// Metrics the log cannot give (their values are 0, not measured).
     pub not_measured: Vec<&'static str>,
+    /// Metrics estimated from the measured cylinder pressures (module doc).
+    pub estimated: Vec<&'static str>,
 }
+
+/// The metrics that need the dump valves' states.
+const VENT_METRICS: [&str; 2] = ["air_consumption_l", "wsp_timer_actions"];
 
 impl RigRun {
     /// The JSON entry (module doc).
@@ -178,6 +216,12 @@ impl RigRun {
             if !self.not_measured.is_empty() {
                 m.insert("not_measured".into(), self.not_measured.clone().into());
             }
+            if !self.estimated.is_empty() {
+                m.insert(
+                    "estimated_from_cylinder_pressure".into(),
+                    self.estimated.clone().into(),
+                );
+            }
         }
         v
     }
@@ -187,18 +231,20 @@ impl RigRun {
 fn run_one<T: Transport>(
     s: &mut Session<T>,
     run: &Run,
-    (rail, demand): (Rail, BrakeCommand),
+    plan: &Plan,
     args: &RunArgs,
     log: &Path,
 ) -> (String, Option<Stop>) {
     s.recorder = Some(Recorder::default());
     let start = Command::Start {
         mode: RigMode::Rig,
-        rail,
+        rail: Rail::Wet,
         friction: args.friction.model(),
         emergency: false,
         initial_speed_kmh: (run.speed_mps * hils_sil::KMH_PER_MPS) as f32,
+        track: true,
     };
+    let demand = plan.demand;
     let mut stop = None;
     let mut steps = || -> Result<String, Stop> {
         let send = |s: &mut Session<T>, c: Command| -> Result<(), Stop> {
@@ -212,6 +258,9 @@ fn run_one<T: Transport>(
         // The controller vents the last run's brake before the next run starts.
         send(s, Command::Brake(BrakeCommand::Release))?;
         s.run_for(args.settle_s, |_, _| Flow::Continue)?;
+        for c in &plan.setup {
+            send(s, *c)?;
+        }
         send(s, start)?;
         send(s, Command::Brake(demand))?;
         let mut running = true;
@@ -273,13 +322,14 @@ pub fn run_programme<T: Transport>(
             end: String::new(),
             outcome: None,
             not_measured: Vec::new(),
+            estimated: Vec::new(),
         };
         match (&stopped, plan) {
             (Some(e), _) => rig.end = format!("not run: the programme ended ({e})"),
             (None, Err(why)) => rig.end = format!("not run on the rig: {why}"),
             (None, Ok(plan)) => {
                 let log = log_dir.join(format!("{}.csv", run.name));
-                let (end, stop) = run_one(s, run, *plan, args, &log);
+                let (end, stop) = run_one(s, run, plan, args, &log);
                 rig.on_rig = true;
                 rig.end = end;
                 stopped = stop;
@@ -289,8 +339,12 @@ pub fn run_programme<T: Transport>(
                         trace.speed_resolution_mps =
                             (WHEEL_SPEED_RESOLUTION_KMH / hils_sil::KMH_PER_MPS as f32) as f64;
                         if trace.venting.iter().any(Vec::is_empty) {
-                            // The log has no WSP vent commands: not measured, not passed.
-                            rig.not_measured = vec!["air_consumption_l", "wsp_timer_actions"];
+                            if vents_from_pressure(&mut trace) {
+                                rig.estimated = VENT_METRICS.to_vec();
+                            } else {
+                                // No vent commands and no pressures: not measured, not passed.
+                                rig.not_measured = VENT_METRICS.to_vec();
+                            }
                         }
                         rig.outcome = Some(judge_trace(run.clone(), trace, criteria));
                     }
@@ -315,6 +369,15 @@ pub fn summary_table(rig: &[RigRun], sil: &[Outcome]) -> String {
                     name: format!("{} (rig)", r.name),
                     ..o.verdict.clone()
                 });
+                if !r.estimated.is_empty() {
+                    let _ = writeln!(
+                        not_judged,
+                        "- {} (rig): estimated from the measured cylinder pressure falls (> {} bar/s counts as venting): {}",
+                        r.name,
+                        VENT_FALL_PA_PER_S / 1e5,
+                        r.estimated.join(", ")
+                    );
+                }
                 if !r.not_measured.is_empty() {
                     let _ = writeln!(
                         not_judged,
@@ -338,7 +401,7 @@ pub fn summary_table(rig: &[RigRun], sil: &[Outcome]) -> String {
     if !not_judged.is_empty() {
         let _ = write!(
             t,
-            "\nNot judged or not measured on the rig:\n\n{not_judged}"
+            "\nNot judged, not measured or estimated on the rig:\n\n{not_judged}"
         );
     }
     t

@@ -25,7 +25,7 @@
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use hils_plant::{Params, WHEELSETS};
+use hils_plant::{Params, Surface, WHEELSETS};
 use hils_rig_core::KMH_PER_MPS;
 use hils_rig_core::can::{Command, DiagFrame, RigState, StatusFrame};
 use hils_rig_core::hw::TelemetryEvent;
@@ -99,6 +99,7 @@ fn start_metadata(start: Option<Command>) -> Vec<(&'static str, String)> {
         friction,
         initial_speed_kmh,
         mode,
+        track,
         ..
     }) = start
     else {
@@ -107,8 +108,18 @@ fn start_metadata(start: Option<Command>) -> Vec<(&'static str, String)> {
             "run parameters unknown (recording began without a start command)".into(),
         )];
     };
+    // On a kept track the start's rail is unused: no `rail` (it would pick a contact set).
+    let ground = if track {
+        (
+            "track",
+            "the board's kept track (TrackZone frames); surface under each wheelset: surface1..4"
+                .to_string(),
+        )
+    } else {
+        ("rail", format!("{rail:?}").to_lowercase())
+    };
     vec![
-        ("rail", format!("{rail:?}").to_lowercase()),
+        ground,
         ("friction", format!("{friction:?}").to_lowercase()),
         ("initial_speed_kmh", format!("{initial_speed_kmh}")),
         ("mode", format!("{mode:?}").to_lowercase()),
@@ -150,6 +161,18 @@ impl Recorder {
             })
             .collect();
         latest(&brakes, t)
+    }
+
+    /// The surfaces under the wheelsets of the probe's records (latest first at `t`).
+    fn probe_surfaces(&self, t_from: f64) -> Vec<(f64, [Surface; WHEELSETS])> {
+        self.probe
+            .iter()
+            .filter(|p| p.t_s > t_from)
+            .filter_map(|p| match p.event {
+                TelemetryEvent::Record(r) => Some((p.t_s, core::array::from_fn(|j| r.surface(j)))),
+                _ => None,
+            })
+            .collect()
     }
 
     /// Probe samples of wheelset `j` of the brake input of `kind`.
@@ -206,11 +229,16 @@ impl Recorder {
         let clamp: [Vec<(f64, f64)>; WHEELSETS] =
             core::array::from_fn(|j| self.probe_series(j, false, t_from));
         let has_clamp = clamp.iter().any(|c| !c.is_empty());
+        let surfaces = self.probe_surfaces(t_from);
         let mut channels = vec![T, V_REF, OMEGA, P_CYL];
         if has_clamp {
             channels.push(F_CLAMP);
         }
         channels.extend([A_X, CMD, STATE, FAULTS, STEP_MAX, STEP_MEAN, OVERRUNS]);
+        if !surfaces.is_empty() {
+            channels.extend([SURFACE, MU_AVAIL]);
+        }
+        let adhesion = super::track::board_adhesion();
 
         let mut written = Written {
             rows: 0,
@@ -235,6 +263,7 @@ impl Recorder {
             };
             let t_rel = t - *t0.get_or_insert(t);
             let diag = latest(&self.diag, t);
+            let surface = latest(&surfaces, t);
             let num = |x: Option<f64>, d: usize| x.map_or(String::new(), |x| format!("{x:.d$}"));
             let row: Vec<String> = channels
                 .iter()
@@ -252,6 +281,8 @@ impl Recorder {
                     STEP_MAX => num(diag.map(|d| d.step_max_us as f64), 2),
                     STEP_MEAN => num(diag.map(|d| d.step_mean_us as f64), 2),
                     OVERRUNS => diag.map_or(String::new(), |d| d.overruns.to_string()),
+                    SURFACE => surface.map_or("", |s| s[j].name()).to_string(),
+                    MU_AVAIL => num(surface.map(|s| adhesion.at(s[j], v_ref)), 4),
                     _ => String::new(),
                 })
                 .collect();

@@ -38,7 +38,7 @@ use hils_brake_unit::{BrakeDemand, BrakeUnit, UnitConfig};
 use hils_plant::params::STEP_S;
 use hils_plant::{Params, WHEELSETS};
 use hils_rig_core::can::{
-    BrakeCommand, ClassicFrame, Command, CommandFrame, StatusFrame, WheelSpeedFrame,
+    ClassicFrame, Command, CommandFrame, StatusFrame, VehicleKey, WheelSpeedFrame,
 };
 use hils_rig_core::hw::{RigIo, TelemetryEvent};
 use hils_rig_core::pulse::PulseRegisters;
@@ -154,17 +154,21 @@ impl SimController {
                 None
             };
         } else if let Ok(c) = CommandFrame::decode(frame) {
-            if let Command::Brake(b) = c.command {
-                self.demand = match b {
-                    BrakeCommand::Release => BrakeDemand::Release,
-                    BrakeCommand::Emergency => BrakeDemand::Emergency,
-                    BrakeCommand::Service { deceleration_mps2 } => {
-                        BrakeDemand::Service { deceleration_mps2 }
+            match c.command {
+                Command::Brake(b) => {
+                    self.demand = b.demand();
+                    if let Some(u) = &mut self.unit {
+                        u.set_demand(self.demand);
                     }
-                };
-                if let Some(u) = &mut self.unit {
-                    u.set_demand(self.demand);
                 }
+                // Load weighing: the controller takes the vehicle the board is told (a real
+                // unit measures it, e.g. from the air-suspension pressure); used from its
+                // next start (the board refuses the frame during a run).
+                Command::Vehicle { key, value } => match key {
+                    VehicleKey::Default => self.params.vehicle = Params::default().vehicle,
+                    key => key.apply(&mut self.params.vehicle, value),
+                },
+                _ => {}
             }
         }
     }

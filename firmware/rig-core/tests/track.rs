@@ -1,0 +1,319 @@
+//! Tracks and vehicle variants by command (issue 13 item 5): zones sent in `TrackZone`
+//! frames, checked and kept by `Track` commit, selected by `Start`; the run's plant sees
+//! the zone under each wheelset; the rejections name their rule.
+
+use hils_plant::track::TrackError;
+use hils_plant::{FrictionModel, Params, Rail, Surface, Zone};
+use hils_rig_core::can::{
+    ClassicFrame, Command, CommandFrame, DecodeError, RigMode, RigState, TrackCommand, VehicleKey,
+    ZoneFrame, surface_code,
+};
+use hils_rig_core::hw::{RigIo, TelemetryEvent};
+use hils_rig_core::pulse::PulseRegisters;
+use hils_rig_core::rig::{CommandError, Rig, RigConfig};
+use hils_rig_core::sensor::ADC_SEQUENCE_LEN;
+
+struct Io;
+
+impl RigIo for Io {
+    type Frame = ClassicFrame;
+    fn adc_sequence(&mut self) -> Option<[u16; ADC_SEQUENCE_LEN]> {
+        None
+    }
+    fn set_pulse(&mut self, _: usize, _: &PulseRegisters) {}
+    fn queue_frame(&mut self, _: ClassicFrame) -> bool {
+        true
+    }
+    fn queue_telemetry(&mut self, _: &TelemetryEvent) -> bool {
+        true
+    }
+}
+
+/// Sends a command as a frame (counter from `n`), builds a requested run as the builder would.
+fn send(rig: &mut Rig, n: &mut u8, c: Command) -> Result<(), CommandError> {
+    *n = n.wrapping_add(1);
+    let f: ClassicFrame = CommandFrame {
+        command: c,
+        counter: *n & 0x0F,
+    }
+    .encode()
+    .unwrap();
+    rig.command_frame(&f)?;
+    rig.build_pending()
+}
+
+fn zone(start_m: f64, end_m: f64, surface: Surface) -> Zone {
+    Zone {
+        start_m,
+        end_m,
+        surface,
+    }
+}
+
+/// Loads `zones` on `base` by frames and commits them.
+fn load(rig: &mut Rig, n: &mut u8, base: Surface, zones: &[Zone]) -> Result<(), CommandError> {
+    for (i, z) in zones.iter().enumerate() {
+        let zone = ZoneFrame::of(z).expect("on the 0.1 m grid");
+        send(
+            rig,
+            n,
+            Command::TrackZone {
+                index: i as u8,
+                zone,
+            },
+        )?;
+    }
+    send(
+        rig,
+        n,
+        Command::Track(TrackCommand::Commit {
+            base,
+            zones: zones.len() as u8,
+        }),
+    )
+}
+
+fn self_test_eb(speed_kmh: f32, track: bool) -> Command {
+    Command::Start {
+        mode: RigMode::SelfTest,
+        rail: Rail::Dry,
+        friction: FrictionModel::Variable,
+        emergency: true,
+        initial_speed_kmh: speed_kmh,
+        track,
+    }
+}
+
+/// Runs to standstill; the stopping distance (m, integrated from the vehicle speed) and
+/// the surfaces seen under wheelset 1 and 4 at each position passed.
+fn run(rig: &mut Rig) -> (f64, Vec<(f64, Surface, Surface)>) {
+    let mut x = 0.0;
+    let mut seen = Vec::new();
+    for _ in 0..2_000_000 {
+        rig.step(&mut Io);
+        if rig.state() != RigState::Running {
+            break;
+        }
+        let v = rig.outputs().unwrap().vehicle_speed as f64;
+        x += v * 1e-4;
+        let s = rig.surfaces().unwrap();
+        seen.push((x, s[0], s[3]));
+        if seen.len() % 997 == 0 {
+            // The telemetry record logs the surface under each wheelset.
+            let r = rig.record().unwrap();
+            assert_eq!(core::array::from_fn(|j| r.surface(j)), s);
+        }
+    }
+    assert_eq!(rig.state(), RigState::Finished);
+    (x, seen)
+}
+
+#[test]
+fn a_track_loaded_by_frames_puts_each_wheelset_on_its_zone() {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut n = 0;
+    let zones = [zone(120.0, 220.0, Surface::Dry)];
+    load(&mut rig, &mut n, Surface::Low, &zones).unwrap();
+    let kept: Vec<Zone> = rig
+        .track()
+        .unwrap()
+        .zones()
+        .iter()
+        .map(|z| z.zone())
+        .collect();
+    assert_eq!(kept, zones);
+    send(&mut rig, &mut n, self_test_eb(120.0, true)).unwrap();
+    let (stop_change, seen) = run(&mut rig);
+    // Wheelset 1 is on the dry zone from 120 m to 220 m (within one refresh, 4 steps), low
+    // elsewhere; wheelset 4 (16.5 m behind: bogie base 14 m + wheel base 2.5 m) reaches
+    // it 16.5 m later.
+    let lag = 4.0 * 34.0 * 1e-4;
+    for &(x, s1, s4) in &seen {
+        if (x - 120.0).abs() > lag && (x - 220.0).abs() > lag {
+            let dry = (120.0..220.0).contains(&x);
+            assert_eq!(s1 == Surface::Dry, dry, "wheelset 1 at {x} m: {s1:?}");
+        }
+        let x4 = x - 16.5;
+        if (x4 - 120.0).abs() > lag && (x4 - 220.0).abs() > lag {
+            let dry = (120.0..220.0).contains(&x4);
+            assert_eq!(s4 == Surface::Dry, dry, "wheelset 4 at {x4} m: {s4:?}");
+        }
+    }
+    assert!(stop_change > 240.0, "the stop runs past the dry zone");
+    // The same start on one low rail (the committed track, no zones), and on the dry rail
+    // of the start frame (no track): the sudden change stops between the two.
+    load(&mut rig, &mut n, Surface::Low, &[]).unwrap();
+    send(&mut rig, &mut n, self_test_eb(120.0, true)).unwrap();
+    let (stop_low, _) = run(&mut rig);
+    send(&mut rig, &mut n, self_test_eb(120.0, false)).unwrap();
+    let (stop_dry, seen_dry) = run(&mut rig);
+    assert!(
+        seen_dry
+            .iter()
+            .all(|s| s.1 == Surface::Dry && s.2 == Surface::Dry)
+    );
+    assert!(
+        stop_dry < stop_change && stop_change < stop_low,
+        "dry {stop_dry} change {stop_change} low {stop_low}"
+    );
+    // Low adhesion: the EB (about 1.39 m/s^2 on dry rail) is limited by ~0.07 g.
+    let v0 = 120.0 / 3.6;
+    assert!(stop_low > v0 * v0 / (2.0 * 0.08 * 9.81), "low {stop_low}");
+}
+
+#[test]
+fn track_frames_are_refused_with_their_rule() {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut n = 0;
+    // Start on the kept track before one is kept.
+    assert_eq!(
+        send(&mut rig, &mut n, self_test_eb(80.0, true)),
+        Err(CommandError::NoTrack)
+    );
+    // Zones out of order (the second starts before the first ends).
+    let unordered = [
+        zone(100.0, 200.0, Surface::Dry),
+        zone(150.0, 300.0, Surface::Wet),
+    ];
+    assert_eq!(
+        load(&mut rig, &mut n, Surface::Low, &unordered),
+        Err(CommandError::Track(TrackError::Overlap { index: 1 }))
+    );
+    // Empty zone.
+    assert_eq!(
+        load(
+            &mut rig,
+            &mut n,
+            Surface::Low,
+            &[zone(50.0, 50.0, Surface::Dry)]
+        ),
+        Err(CommandError::Track(TrackError::BadZone { index: 0 }))
+    );
+    assert!(rig.track().is_none(), "a refused commit keeps no track");
+    // Seventeen zones: the index 16 is refused, as is a commit of 17.
+    let many: Vec<Zone> = (0..17)
+        .map(|i| zone(10.0 * i as f64, 10.0 * i as f64 + 5.0, Surface::Dry))
+        .collect();
+    assert_eq!(
+        load(&mut rig, &mut n, Surface::Wet, &many),
+        Err(CommandError::Track(TrackError::TooManyZones))
+    );
+    assert_eq!(
+        send(
+            &mut rig,
+            &mut n,
+            Command::Track(TrackCommand::Commit {
+                base: Surface::Wet,
+                zones: 17
+            })
+        ),
+        Err(CommandError::Track(TrackError::TooManyZones))
+    );
+    // Sixteen are kept.
+    load(&mut rig, &mut n, Surface::Wet, &many[..16]).unwrap();
+    assert_eq!(rig.track().unwrap().zones().len(), 16);
+    // A commit of zones not all received since the last commit: which one is missing.
+    send(
+        &mut rig,
+        &mut n,
+        Command::TrackZone {
+            index: 0,
+            zone: ZoneFrame::of(&zone(0.0, 10.0, Surface::Low)).unwrap(),
+        },
+    )
+    .unwrap();
+    assert_eq!(
+        send(
+            &mut rig,
+            &mut n,
+            Command::Track(TrackCommand::Commit {
+                base: Surface::Wet,
+                zones: 2
+            })
+        ),
+        Err(CommandError::TrackIncomplete { index: 1 })
+    );
+    assert_eq!(
+        rig.track().unwrap().zones().len(),
+        16,
+        "the last track stays"
+    );
+    // An unknown surface code (4-7) in a zone frame: the frame is refused, naming the field.
+    let mut f: ClassicFrame = CommandFrame {
+        command: Command::TrackZone {
+            index: 0,
+            zone: ZoneFrame::of(&zone(0.0, 10.0, Surface::Low)).unwrap(),
+        },
+        counter: 9,
+    }
+    .encode()
+    .unwrap();
+    assert_eq!(surface_code(Surface::Low), 2);
+    f.data[1] |= 0b111 << 5; // ZoneSurface = 7
+    let crc = hils_rig_core::can::checksum(hils_rig_core::can::ID_COMMAND, &f.data);
+    f.data[7] = (f.data[7] & 0x0F) | (crc << 4);
+    assert_eq!(
+        rig.command_frame(&f),
+        Err(CommandError::Frame(DecodeError::BadValue("ZoneSurface")))
+    );
+    // Bounds off the 0.1 m grid or beyond the frame's range have no frame.
+    assert!(ZoneFrame::of(&zone(0.05, 10.0, Surface::Low)).is_none());
+    assert!(ZoneFrame::of(&zone(0.0, 2.0e5, Surface::Low)).is_none());
+    assert!(ZoneFrame::of(&zone(-1.0, 10.0, Surface::Low)).is_none());
+    // Clear forgets the track.
+    send(&mut rig, &mut n, Command::Track(TrackCommand::Clear)).unwrap();
+    assert!(rig.track().is_none());
+}
+
+#[test]
+fn a_vehicle_variant_by_command_sets_the_run_s_axle_loads() {
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut n = 0;
+    let p = Params::default();
+    let static_load = |carbody: f64| {
+        (carbody + 2.0 * p.vehicle.bogie_mass + 4.0 * p.vehicle.wheelset_mass) * p.vehicle.g
+    };
+    let key = VehicleKey::CarbodyMass;
+    for (mass, expected) in [
+        (Some(26_000.0), static_load(26_000.0)),
+        (None, static_load(p.vehicle.carbody_mass)),
+    ] {
+        let c = match mass {
+            Some(m) => Command::Vehicle { key, value: m },
+            None => Command::Vehicle {
+                key: VehicleKey::Default,
+                value: 0.0,
+            },
+        };
+        send(&mut rig, &mut n, c).unwrap();
+        send(&mut rig, &mut n, self_test_eb(60.0, false)).unwrap();
+        rig.step(&mut Io);
+        let q: f64 = rig
+            .outputs()
+            .unwrap()
+            .wheelsets
+            .iter()
+            .map(|w| w.axle_load as f64)
+            .sum();
+        assert!(
+            (q - expected).abs() < 1e-3 * expected,
+            "{mass:?}: {q} N vs {expected} N"
+        );
+        send(&mut rig, &mut n, Command::Stop).unwrap();
+        rig.step(&mut Io); // the run's end record
+    }
+    // Not while a run is active; a value outside the plant's range fails the start.
+    send(&mut rig, &mut n, self_test_eb(60.0, false)).unwrap();
+    assert_eq!(
+        send(&mut rig, &mut n, Command::Vehicle { key, value: 1.0 }),
+        Err(CommandError::NotNow(RigState::Running))
+    );
+    send(&mut rig, &mut n, Command::Stop).unwrap();
+    rig.step(&mut Io);
+    send(&mut rig, &mut n, Command::Vehicle { key, value: 1.0 }).unwrap();
+    assert!(matches!(
+        send(&mut rig, &mut n, self_test_eb(60.0, false)),
+        Err(CommandError::Build(_))
+    ));
+    assert_ne!(rig.state(), RigState::Running);
+}

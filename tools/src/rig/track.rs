@@ -1,0 +1,135 @@
+//! Tracks and vehicle variants sent to the board (issue 13 item 5): the `RIG_COMMAND`
+//! frames `TrackZone` (one per zone), `Track` commit, and `Vehicle`, then a `Start` with
+//! `StartTrack` = 1 (`hils rig start --track FILE`, `hils rig run --programme`).
+//!
+//! What the frames carry, checked here before anything is sent (nothing is approximated):
+//! zone bounds on a 0.1 m grid within 0-104 857.5 m; up to 16 zones (the plant's
+//! `MAX_ZONES`); the documented low / very-low contact sets (the board has no others);
+//! the `[vehicle]` keys of [`VehicleKey`] as IEEE f32 (a value f32 does not hold exactly to
+//! 1e-6 is refused); the rest of the parameter file at its defaults (the board's plant runs
+//! the default parameter file), degraded adhesion off.
+
+use std::path::Path;
+
+use anyhow::{Context, Result, anyhow, bail};
+use hils_plant::params::VehicleParams;
+use hils_plant::track::{ContactSets, MAX_ZONES};
+use hils_plant::{Params, Track};
+use hils_rig_core::can::{
+    Command, TrackCommand, VehicleKey, ZONE_MAX_M, ZONE_RESOLUTION_M, ZoneFrame,
+};
+use hils_sil::ParamFile;
+
+use crate::wsp::metrics::AvailableAdhesion;
+use crate::wsp::programme::TrackSpec;
+
+/// Reads a track file: the `[tracks.NAME]` table of a programme at the top level
+/// (`base = "low"`, `[[zone]]` with `start_m`, `end_m`, `surface`; optional `[sets]`).
+pub fn load_track_file(path: &Path) -> Result<(Track, ContactSets)> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read track file {}", path.display()))?;
+    let spec: TrackSpec = toml::from_str(&text)
+        .map_err(|e| anyhow!("{}: invalid track file: {e}", path.display()))?;
+    let track = spec
+        .track()
+        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    spec.sets
+        .validate()
+        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    Ok((track, spec.sets))
+}
+
+/// The frames that put `track` on the board (zones, then the commit), or why it cannot go.
+pub fn track_commands(track: &Track, sets: &ContactSets) -> Result<Vec<Command>> {
+    if *sets != ContactSets::default() {
+        bail!("the track's own low/very-low contact sets: the board has the documented ones only");
+    }
+    if track.zones().len() > MAX_ZONES {
+        bail!("a track on the board holds at most {MAX_ZONES} zones");
+    }
+    let mut out = Vec::with_capacity(track.zones().len() + 1);
+    for (i, z) in track.zones().iter().enumerate() {
+        let zone = ZoneFrame::of(z).ok_or_else(|| {
+            anyhow!(
+                "zone {}: bounds {}-{} m not on the TrackZone frame's {ZONE_RESOLUTION_M} m grid within 0-{ZONE_MAX_M} m",
+                i + 1,
+                z.start_m,
+                z.end_m
+            )
+        })?;
+        out.push(Command::TrackZone {
+            index: i as u8,
+            zone,
+        });
+    }
+    out.push(Command::Track(TrackCommand::Commit {
+        base: track.base(),
+        zones: track.zones().len() as u8,
+    }));
+    Ok(out)
+}
+
+/// The frames that set the board's vehicle to `vehicle` (the default vehicle, then each
+/// key that differs), or why it cannot be carried.
+pub fn vehicle_commands(vehicle: &VehicleParams) -> Result<Vec<Command>> {
+    let default = VehicleParams::default();
+    let mut out = vec![Command::Vehicle {
+        key: VehicleKey::Default,
+        value: 0.0,
+    }];
+    let mut carried = default;
+    for key in VehicleKey::VALUES {
+        let value = key.value(vehicle);
+        if value != key.value(&default) {
+            let v32 = value as f32;
+            if ((v32 as f64) - value).abs() > 1e-6 * value.abs() {
+                bail!(
+                    "vehicle {} = {value}: not carried exactly as f32",
+                    key.name()
+                );
+            }
+            out.push(Command::Vehicle { key, value: v32 });
+        }
+        key.apply(&mut carried, value as f32);
+    }
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-6 * b.abs();
+    let same = [
+        (carried.g, vehicle.g),
+        (carried.carbody_cog_height, vehicle.carbody_cog_height),
+        (carried.bogie_pitch_inertia, vehicle.bogie_pitch_inertia),
+        (carried.bogie_cog_height, vehicle.bogie_cog_height),
+        (carried.wheelset_spin_inertia, vehicle.wheelset_spin_inertia),
+        (carried.bogie_base, vehicle.bogie_base),
+        (carried.wheel_base, vehicle.wheel_base),
+    ]
+    .iter()
+    .all(|&(a, b)| close(a, b));
+    if !same {
+        bail!("a [vehicle] key the Vehicle frame does not carry differs from the default");
+    }
+    Ok(out)
+}
+
+/// Whether the board can run on `file`'s parameters: everything but `[vehicle]` (sent by
+/// [`vehicle_commands`]) and the friction model (in the start frame) at the defaults.
+pub fn check_params(file: &ParamFile) -> Result<()> {
+    if file.degraded_adhesion.enabled {
+        bail!("degraded adhesion is on: the board's plant runs it off (no frame carries it)");
+    }
+    let mut plant = file.plant;
+    plant.vehicle = Params::default().vehicle;
+    plant.friction.model = Params::default().friction.model;
+    if plant != Params::default() {
+        bail!("the parameter file differs from the default one the board runs");
+    }
+    Ok(())
+}
+
+/// The available adhesion of the board's plant (default parameters and contact sets,
+/// degraded adhesion off): what `hils decode` and `hils rig record` write as `mu_avail*`
+/// from the logged surface and vehicle speed; the table `hils wsp-test` judges with
+/// ([`AvailableAdhesion`]), computed once.
+pub fn board_adhesion() -> &'static AvailableAdhesion {
+    static TABLE: std::sync::OnceLock<AvailableAdhesion> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| AvailableAdhesion::new(&Params::default(), &ContactSets::default()))
+}
