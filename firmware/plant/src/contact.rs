@@ -45,6 +45,7 @@ impl<F: Real> Polach<F> {
 
     /// The model of one parameter set `set` on the contact geometry of `contact` (the
     /// track's low-adhesion sets, [`crate::track`]).
+    #[inline(never)] // one copy for the four surfaces (board flash)
     pub fn with_set(contact: &ContactParams, set: &AdhesionSet) -> Self {
         let stiffness = 2.0 / 3.0
             * contact.shear_stiffness_c

@@ -373,7 +373,9 @@ impl core::fmt::Display for ParamError {
 }
 
 /// Checks that `value` lies in `[min, max]` (NaN fails); the error names `key`
-/// (`section.key` as in the parameter file). Every section's validation uses it.
+/// (`section.key` as in the parameter file). Every section's validation uses it; one copy,
+/// not inlined at each key (two soft-float compares a key on the board: its flash budget).
+#[inline(never)]
 pub fn check(key: &'static str, value: f64, min: f64, max: f64) -> Result<(), ParamError> {
     // `!(a && b)` also rejects NaN.
     if value >= min && value <= max {
