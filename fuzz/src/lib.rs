@@ -49,7 +49,7 @@ pub fn check_run_log(r: &RunLog) {
     assert!(t.iter().all(|x| x.is_finite()), "non-finite time");
     assert!(t.windows(2).all(|w| w[1] > w[0]), "time not increasing");
     let n = t.len();
-    let mut check = |name: &str, v: &[f64]| {
+    let check = |name: &str, v: &[f64]| {
         assert_eq!(v.len(), n, "{name}: length");
         for x in v {
             assert!(x.is_nan() || x.is_finite(), "{name}: {x}");

@@ -9,8 +9,9 @@ use serde::Deserialize;
 use crate::ep::{EpConstants, EpValve};
 use crate::wsp::{ReferenceSpeed, Valve, WspChannel, WspConstants, WspTuning};
 
-/// Brake demand given to the unit.
+/// Brake demand given to the unit (also the rig's brake command, `hils_rig_core::can`).
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum BrakeDemand {
     /// Brakes released.
     #[default]

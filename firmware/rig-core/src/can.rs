@@ -499,7 +499,7 @@ pub mod command {
     pub const START_EMERGENCY: Signal = Signal::raw("StartEmergency", 12, 1);
     /// Start: initial speed, km/h.
     pub const START_SPEED: Signal = Signal::scaled("StartSpeed", 16, 16, 0.01);
-    /// Brake: [`super::BrakeCommand::code`].
+    /// Brake: [`super::brake_signal_code`].
     pub const BRAKE_DEMAND: Signal = Signal::raw("BrakeDemand", 8, 2);
     /// Brake: service deceleration, m/s^2.
     pub const SERVICE_DECELERATION: Signal = Signal::scaled("ServiceDeceleration", 16, 16, 0.001);
@@ -973,57 +973,17 @@ impl DiagFrame {
 // ---------------------------------------------------------------------------------------
 // RIG_COMMAND
 
-/// Brake command of the self-test mode (the simulated brake unit's demand).
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum BrakeCommand {
-    /// Release the brakes.
-    Release,
-    /// Emergency brake (the paper's EB).
-    Emergency,
-    /// Service brake for a deceleration, m/s^2 (0.001 m/s^2 per bit, 0-10).
-    Service {
-        /// Demanded deceleration, m/s^2.
-        deceleration_mps2: f32,
-    },
-    /// Service brake step `step` (1-based) of the controller's steps.
-    ServiceStep {
-        /// The step, 1-based.
-        step: u8,
-    },
-}
+/// Brake command of the self-test mode and of `Brake` commands: the simulated brake unit's
+/// demand itself (one type; its `BrakeDemand` signal code is [`brake_signal_code`]).
+pub use hils_brake_unit::BrakeDemand as BrakeCommand;
 
-impl BrakeCommand {
-    /// Code of the `cmd` column of the run log (0 release, 1 EB, 2 service: a service step
-    /// too, as `hils_sil::Cmd::of`).
-    pub fn code(self) -> u8 {
-        match self {
-            BrakeCommand::ServiceStep { .. } => 2,
-            b => b.demand_code(),
-        }
-    }
-
-    /// The `BrakeDemand` signal (0 release, 1 EB, 2 service deceleration, 3 service step).
-    pub fn demand_code(self) -> u8 {
-        match self {
-            BrakeCommand::Release => 0,
-            BrakeCommand::Emergency => 1,
-            BrakeCommand::Service { .. } => 2,
-            BrakeCommand::ServiceStep { .. } => 3,
-        }
-    }
-
-    /// The brake unit's demand of this command.
-    pub fn demand(self) -> hils_brake_unit::BrakeDemand {
-        use hils_brake_unit::BrakeDemand;
-        match self {
-            BrakeCommand::Release => BrakeDemand::Release,
-            BrakeCommand::Emergency => BrakeDemand::Emergency,
-            BrakeCommand::Service { deceleration_mps2 } => {
-                BrakeDemand::Service { deceleration_mps2 }
-            }
-            BrakeCommand::ServiceStep { step } => BrakeDemand::ServiceStep { step },
-        }
+/// The `BrakeDemand` signal (0 release, 1 EB, 2 service deceleration, 3 service step).
+pub fn brake_signal_code(b: BrakeCommand) -> u8 {
+    match b {
+        BrakeCommand::Release => 0,
+        BrakeCommand::Emergency => 1,
+        BrakeCommand::Service { .. } => 2,
+        BrakeCommand::ServiceStep { .. } => 3,
     }
 }
 
@@ -1196,7 +1156,7 @@ impl CommandFrame {
             }
             Command::Stop | Command::ClearFaults => {}
             Command::Brake(b) => {
-                BRAKE_DEMAND.put_raw(&mut d, b.demand_code() as u64);
+                BRAKE_DEMAND.put_raw(&mut d, brake_signal_code(b) as u64);
                 match b {
                     BrakeCommand::Service { deceleration_mps2 } => {
                         SERVICE_DECELERATION.put(&mut d, deceleration_mps2)

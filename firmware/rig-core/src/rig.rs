@@ -928,7 +928,7 @@ impl<S: SimStore> Rig<S> {
             },
             Command::Brake(b) => {
                 if let Some(Sim::SelfTest(c)) = self.sim_mut() {
-                    c.set_demand(b.demand());
+                    c.set_demand(b);
                 }
                 // In rig mode the brake controller gets its command from the train lines;
                 // the command is kept as the run log's `cmd` marker.
@@ -1183,7 +1183,10 @@ impl<S: SimStore> Rig<S> {
             step: self.run_steps,
             state: self.state as u8,
             mode: self.mode as u8,
-            cmd: self.brake.map(|b| b.code()).unwrap_or(0xFF),
+            cmd: self
+                .brake
+                .map(|b| u8::from(hils_sil::Cmd::of(b)))
+                .unwrap_or(0xFF),
             wsp,
             v_ref: o.vehicle_speed,
             omega: w(&|j| o.wheelsets[j].omega),

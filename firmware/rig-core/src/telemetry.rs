@@ -88,7 +88,7 @@ pub struct TelemetryRecord {
     pub state: u8,
     /// Mode of the run ([`RigMode`] code).
     pub mode: u8,
-    /// Brake command in force ([`crate::can::BrakeCommand::code`]).
+    /// Brake command in force (`hils_sil::Cmd` code of [`crate::can::BrakeCommand`]).
     pub cmd: u8,
     /// WSP venting bits 0-3, [`WSP_KNOWN`] when known.
     pub wsp: u8,

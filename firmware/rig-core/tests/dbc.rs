@@ -345,7 +345,15 @@ proptest! {
                     m.insert("StartSpeed", initial_speed_kmh as f64);
                 }
                 Command::Brake(b) => {
-                    m.insert("BrakeDemand", b.demand_code() as f64);
+                    m.insert(
+                        "BrakeDemand",
+                        match b {
+                            BrakeCommand::Release => 0.0,
+                            BrakeCommand::Emergency => 1.0,
+                            BrakeCommand::Service { .. } => 2.0,
+                            BrakeCommand::ServiceStep { .. } => 3.0,
+                        },
+                    );
                     let decel = if let BrakeCommand::Service { deceleration_mps2 } = b { deceleration_mps2 } else { 0.0 };
                     m.insert("ServiceDeceleration", decel as f64);
                     let step = if let BrakeCommand::ServiceStep { step } = b { step } else { 0 };

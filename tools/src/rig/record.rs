@@ -156,7 +156,7 @@ impl Recorder {
             .commands
             .iter()
             .filter_map(|&(ti, c)| match c {
-                Command::Brake(b) => Cmd::try_from(b.code()).ok().map(|k| (ti, k)),
+                Command::Brake(b) => Some((ti, Cmd::of(b))),
                 _ => None,
             })
             .collect();
@@ -297,7 +297,7 @@ impl Recorder {
         let first_brake = |code: Option<u8>| {
             self.commands.iter().find(|(t, c)| {
                 *t > t_from
-                    && matches!(c, Command::Brake(b) if code.map_or(b.code() != Cmd::Release as u8, |k| b.code() == k))
+                    && matches!(c, Command::Brake(b) if code.map_or(Cmd::of(*b) != Cmd::Release, |k| u8::from(Cmd::of(*b)) == k))
             })
         };
         if let Some(t0) = t0 {

@@ -156,7 +156,7 @@ impl SimController {
         } else if let Ok(c) = CommandFrame::decode(frame) {
             match c.command {
                 Command::Brake(b) => {
-                    self.demand = b.demand();
+                    self.demand = b;
                     if let Some(u) = &mut self.unit {
                         u.set_demand(self.demand);
                     }
