@@ -63,14 +63,12 @@ fn load(rig: &mut Rig, n: &mut u8, base: Surface, zones: &[Zone]) -> Result<(), 
             },
         )?;
     }
-    send(
-        rig,
-        n,
-        Command::Track(TrackCommand::Commit {
-            base,
-            zones: zones.len() as u8,
-        }),
-    )
+    commit(rig, n, base, zones.len() as u8)
+}
+
+/// Sends a track commit of `zones` zones on `base`.
+fn commit(rig: &mut Rig, n: &mut u8, base: Surface, zones: u8) -> Result<(), CommandError> {
+    send(rig, n, Command::Track(TrackCommand::Commit { base, zones }))
 }
 
 fn self_test_eb(speed_kmh: f32, track: bool) -> Command {
@@ -199,14 +197,7 @@ fn track_frames_are_refused_with_their_rule() {
         Err(CommandError::Track(TrackError::TooManyZones))
     );
     assert_eq!(
-        send(
-            &mut rig,
-            &mut n,
-            Command::Track(TrackCommand::Commit {
-                base: Surface::Wet,
-                zones: 17
-            })
-        ),
+        commit(&mut rig, &mut n, Surface::Wet, 17),
         Err(CommandError::Track(TrackError::TooManyZones))
     );
     // Sixteen are kept.
@@ -223,14 +214,7 @@ fn track_frames_are_refused_with_their_rule() {
     )
     .unwrap();
     assert_eq!(
-        send(
-            &mut rig,
-            &mut n,
-            Command::Track(TrackCommand::Commit {
-                base: Surface::Wet,
-                zones: 2
-            })
-        ),
+        commit(&mut rig, &mut n, Surface::Wet, 2),
         Err(CommandError::TrackIncomplete { index: 1 })
     );
     assert_eq!(
