@@ -597,23 +597,24 @@ impl<S: SimStore> Rig<S> {
     }
 
     /// `Track`: commit checks the zones received (all of 0..n, ordered, disjoint, not
-    /// empty) and keeps the track; clear forgets it. A refused commit keeps the last track.
+    /// empty) and keeps the track; clear forgets it. A refused commit keeps the last track;
+    /// every commit, refused or not, forgets the zones received, so a later commit cannot
+    /// pick up a refused attempt's zones.
     fn track_command(&mut self, command: TrackCommand) -> Result<(), CommandError> {
+        let received = core::mem::take(&mut self.zones_received);
         let TrackCommand::Commit { base, zones } = command else {
             self.track = None;
-            self.zones_received = 0;
             return Ok(());
         };
         let n = zones as usize;
         if n > MAX_ZONES {
             return Err(CommandError::Track(TrackError::TooManyZones));
         }
-        if let Some(index) = (0..n).find(|&i| self.zones_received & (1 << i) == 0) {
+        if let Some(index) = (0..n).find(|&i| received & (1 << i) == 0) {
             return Err(CommandError::TrackIncomplete { index: index as u8 });
         }
         let track = TrackFrames::new(base, &self.zones[..n]).map_err(CommandError::Track)?;
         self.track = Some(track);
-        self.zones_received = 0;
         Ok(())
     }
 

@@ -247,6 +247,23 @@ fn track_frames_are_refused_with_their_rule() {
     // Clear forgets the track.
     send(&mut rig, &mut n, Command::Track(TrackCommand::Clear)).unwrap();
     assert!(rig.track().is_none());
+    // A refused commit forgets its zones: a later commit whose zone 1 was lost on the bus is
+    // refused, not completed with the refused attempt's zone 1.
+    assert!(load(&mut rig, &mut n, Surface::Low, &unordered).is_err());
+    send(
+        &mut rig,
+        &mut n,
+        Command::TrackZone {
+            index: 0,
+            zone: ZoneFrame::of(&zone(0.0, 10.0, Surface::Dry)).unwrap(),
+        },
+    )
+    .unwrap();
+    assert_eq!(
+        commit(&mut rig, &mut n, Surface::Wet, 2),
+        Err(CommandError::TrackIncomplete { index: 1 })
+    );
+    assert!(rig.track().is_none());
 }
 
 #[test]
