@@ -406,12 +406,23 @@ fn programme_runs_each_run_on_the_board_and_reports() {
     ] {
         assert!(runs[0].get(key).is_some(), "key {key}: {}", runs[0]);
     }
-    // The rig's log has no vent commands of the controller under test: the air and timer
-    // figures are estimated from the measured cylinder pressures, and flagged so.
+    // The rig's log has no vent commands of the controller under test: the air is estimated
+    // from the measured cylinder pressures, and flagged so; the WSP timer needs the hold
+    // states, which no pressure shows: not measured, its criterion not judged, the run not
+    // passed.
     assert_eq!(
         runs[0]["estimated_from_cylinder_pressure"],
-        serde_json::json!(["air_consumption_l", "wsp_timer_actions"])
+        serde_json::json!(["air_consumption_l"])
     );
+    assert_eq!(runs[0]["not_measured"], serde_json::json!(["wsp_timer_actions"]));
+    assert_eq!(runs[0]["passed"], false, "{}", runs[0]);
+    let criteria = runs[0]["criteria"].as_array().unwrap();
+    let timer = criteria
+        .iter()
+        .find(|c| c["criterion"].as_str().unwrap().starts_with("wsp_timer_actions"))
+        .unwrap();
+    assert_eq!(timer["passed"], false);
+    assert!(timer["criterion"].as_str().unwrap().ends_with("(not measured: not judged)"));
     // The low-adhesion track runs on the board.
     assert_eq!(runs[1]["on_rig"], true, "{}", runs[1]);
     assert_eq!(runs[1]["end"], "finished");

@@ -34,8 +34,11 @@
 //! [`VENT_FALL_PA_PER_S`] (2 bar/s: above the transducer noise of +-2 ADC counts over a
 //! 10 ms telemetry interval, below a dump valve's fall). The vent flags feed the same
 //! formulas as SIL (`crate::wsp::metrics`): free air = sum over vent samples of
-//! V_cyl (p[k-1] - p[k]) / p_atm; a WSP timer action = a continuous vent of `wsp_timer_s`.
-//! Without measured pressures both are `not_measured`. The run's log (`NAME.csv`, spec run-log schema) is judged
+//! V_cyl (p[k-1] - p[k]) / p_atm. WSP timer actions need the valves' hold states too (a
+//! cylinder held low does not fall), which no pressure shows: they are `not_measured` on the
+//! rig, as is the air without measured pressures. A criterion on a metric not measured is
+//! not judged: it is listed as `... (not measured: not judged)` and fails, so a run with one
+//! never passes (nothing is passed that was not measured). The run's log (`NAME.csv`, spec run-log schema) is judged
 //! from its brake command exactly as `hils wsp-test --programme FILE --log NAME.csv` judges
 //! it ([`crate::wsp::trace_of_log`], [`crate::wsp::judge_trace`]); every run of the programme
 //! is also simulated in SIL ([`crate::wsp::run_one`]). `--json` holds one entry per run: the
@@ -202,6 +205,21 @@ pub struct RigRun {
 
 /// The metrics that need the dump valves' states.
 const VENT_METRICS: [&str; 2] = ["air_consumption_l", "wsp_timer_actions"];
+/// Of those, what the measured cylinder pressure falls estimate (module doc).
+const PRESSURE_METRICS: [&str; 1] = ["air_consumption_l"];
+/// Of those, what needs the hold states (module doc).
+const HOLD_METRICS: [&str; 1] = ["wsp_timer_actions"];
+
+/// Fails each criterion of `verdict` on a metric in `metrics` as not judged (module doc).
+fn not_judged(verdict: &mut Verdict, metrics: &[&str]) {
+    for c in &mut verdict.criteria {
+        if metrics.iter().any(|m| c.criterion.starts_with(m)) {
+            c.passed = false;
+            c.criterion += " (not measured: not judged)";
+        }
+    }
+    verdict.passed = verdict.criteria.iter().all(|c| c.passed);
+}
 
 impl RigRun {
     /// The JSON entry (module doc).
@@ -340,13 +358,15 @@ pub fn run_programme<T: Transport>(
                             (WHEEL_SPEED_RESOLUTION_KMH / hils_sil::KMH_PER_MPS as f32) as f64;
                         if trace.venting.iter().any(Vec::is_empty) {
                             if vents_from_pressure(&mut trace) {
-                                rig.estimated = VENT_METRICS.to_vec();
+                                rig.estimated = PRESSURE_METRICS.to_vec();
+                                rig.not_measured = HOLD_METRICS.to_vec();
                             } else {
-                                // No vent commands and no pressures: not measured, not passed.
                                 rig.not_measured = VENT_METRICS.to_vec();
                             }
                         }
-                        rig.outcome = Some(judge_trace(run.clone(), trace, criteria));
+                        let mut outcome = judge_trace(run.clone(), trace, criteria);
+                        not_judged(&mut outcome.verdict, &rig.not_measured);
+                        rig.outcome = Some(outcome);
                     }
                     Err(e) => rig.end = format!("{}; not judged: {e:#}", rig.end),
                 }
