@@ -485,6 +485,7 @@ pub fn finish<T: Transport>(
             run: r.run,
             start: s.last_start,
             end: end.to_string(),
+            wheel_radius_m: None,
         };
         let w = rec.write(&r.out, &meta)?;
         println!(

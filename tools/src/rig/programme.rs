@@ -316,6 +316,7 @@ fn run_one<T: Transport>(
         run: Some(run.name.clone()),
         start: s.last_start,
         end: end.clone(),
+        wheel_radius_m: Some(run.file.plant.vehicle.wheel_radius),
     };
     if let Err(e) = rec.write(log, &meta) {
         end = format!("{end}; log: {e:#}");

@@ -63,6 +63,9 @@ pub struct RunMeta {
     pub start: Option<Command>,
     /// Why the recording ended.
     pub end: String,
+    /// Wheel radius of the run's vehicle, m, turning the frames' wheel speeds (r omega) into
+    /// the log's omega (None: the default vehicle's).
+    pub wheel_radius_m: Option<f64>,
 }
 
 /// What was written.
@@ -199,7 +202,9 @@ impl Recorder {
 
     /// Writes the run log.
     pub fn write_to<W: std::io::Write>(&self, out: W, m: &RunMeta) -> Result<Written> {
-        let r_w = Params::default().vehicle.wheel_radius;
+        let r_w = m
+            .wheel_radius_m
+            .unwrap_or(Params::default().vehicle.wheel_radius);
         // Frames up to the (first) start command belong to an earlier run (a frame stamped
         // at the send's instant was made before the board took the command).
         let t_from = self
