@@ -37,10 +37,11 @@
 //!   change over seconds; each step refreshes one of them for one wheelset in turn (each
 //!   every 0.8 ms), which takes three of the four transcendental functions per wheelset
 //!   out of the 10 kHz step.
-//! * **Tracked exponentials.** e^(-B |w|) (Eq 11) and e^(-m_v v_d) (Eq 2) move little from
-//!   step to step: [`TrackedExp`] serves them from an exact anchor with a degree-3
-//!   polynomial (within 4.2e-7 relative, tested against the exact function) and evaluates
-//!   e^x again only when the argument leaves a window of 1/64.
+//! * **Tracked exponentials.** e^(-B |w|) (Eq 11), e^(-m_v v_d) and e^(-m_T T_d) (Eq 2)
+//!   move little from step to step (or refresh to refresh): [`TrackedExp`] serves them
+//!   from an exact anchor with a degree-3 polynomial (within 4.2e-7 relative, tested
+//!   against the exact function) and evaluates e^x again only when the argument leaves a
+//!   window of 1/64.
 //! * **Bad input.** Brake inputs are clamped to [0, 1.5 x the physical maximum] and
 //!   flagged; a NaN/inf input holds the last valid value and is flagged. A non-finite state
 //!   (never seen with validated parameters) puts the plant in a safe state: at rest, flagged.
@@ -250,7 +251,8 @@ struct Constants<F> {
     davis_a: F,
     davis_b: F,
     davis_c: F,
-    resistance_speed_band: F,
+    /// 1 / the speed band over which the running resistance fades in, s/m.
+    inv_resistance_speed_band: F,
     actuator_lag_rate: F,
     /// Whether the actuator lag acts (rate below 1).
     actuator_lag: bool,
@@ -326,6 +328,8 @@ struct WheelsetState<F: Real> {
     rail_decay: TrackedExp<F>,
     /// e^(-m_v v_d) of Eq (2), tracked from an exact anchor.
     speed_decay: TrackedExp<F>,
+    /// e^(-m_T T_d) of Eq (2), tracked from an exact anchor.
+    temperature_decay: TrackedExp<F>,
 }
 
 /// The plant: vehicle, contact, brakes, disc heat. `F` = f32 on the target.
@@ -520,7 +524,7 @@ impl<F: Real> Plant<F> {
             davis_a: F::of(p.resistance.davis_a_n),
             davis_b: F::of(p.resistance.davis_b_n_per_mps),
             davis_c: F::of(p.resistance.davis_c_n_per_mps2),
-            resistance_speed_band: F::of(0.01),
+            inv_resistance_speed_band: F::of(1.0 / 0.01),
             actuator_lag_rate: F::of(if lag > 0.0 { (dt / lag).min(1.0) } else { 1.0 }),
             actuator_lag: lag > 0.0 && dt / lag < 1.0,
             pressure_low: -F::of(0.02) * caliper.pressure_limit,
@@ -542,6 +546,7 @@ impl<F: Real> Plant<F> {
         for w in self.s.w.iter_mut() {
             w.disc_temp = disc_temp;
             w.temperature_factor = self.k.friction.temperature_factor(disc_temp);
+            w.temperature_decay = self.k.friction.temperature_decay_at(disc_temp);
             w.heat_loss = self.k.thermal.loss_coefficient(v0);
             w.speed_decay = self
                 .k
@@ -621,16 +626,22 @@ impl<F: Real> Plant<F> {
             BrakeInput::CylinderPressure(p) => (p, cal.pressure_limit, k.pressure_low),
             BrakeInput::ClampForce(f) => (f, cal.clamp_force_limit, k.clamp_force_low),
         };
-        if !value.is_finite() {
-            *flags |= Flags::wheelset_bit(Flags::INPUT_NOT_FINITE, j);
-            return *last_clamp;
-        }
-        // Below zero by more than 2 % of the range, or above the limit: out of range.
-        // Small negative readings are sensor noise around zero and clamp silently to 0.
-        if value > limit || value < low {
-            *flags |= Flags::wheelset_bit(Flags::INPUT_OUT_OF_RANGE, j);
-        }
-        let value = value.clamp_to(F::ZERO, limit);
+        // The usual case, a reading within [0, limit], by one integer compare; the
+        // detailed checks only when it fails.
+        let value = if value.within_zero_and(limit) {
+            value
+        } else {
+            if !value.is_finite() {
+                *flags |= Flags::wheelset_bit(Flags::INPUT_NOT_FINITE, j);
+                return *last_clamp;
+            }
+            // Below zero by more than 2 % of the range, or above the limit: out of range.
+            // Small negative readings are sensor noise around zero and clamp silently to 0.
+            if value > limit || value < low {
+                *flags |= Flags::wheelset_bit(Flags::INPUT_OUT_OF_RANGE, j);
+            }
+            value.clamp_to(F::ZERO, limit)
+        };
         let clamp = match input {
             BrakeInput::CylinderPressure(_) => cal.clamp_force(value).min(cal.clamp_force_limit),
             BrakeInput::ClampForce(_) => value,
@@ -727,7 +738,10 @@ impl<F: Real> Plant<F> {
         let turn = self.out.steps % (2 * WHEELSETS as u32);
         let slow = (turn % WHEELSETS as u32) as usize;
         if turn < WHEELSETS as u32 {
-            s.w[slow].temperature_factor = k.friction.temperature_factor(s.w[slow].disc_temp);
+            let w = &mut s.w[slow];
+            w.temperature_factor = k
+                .friction
+                .temperature_factor_tracked(w.disc_temp, &mut w.temperature_decay);
         } else {
             s.w[slow].heat_loss = k.thermal.loss_coefficient(k.r * ws[slow].omega);
         }
@@ -796,11 +810,7 @@ impl<F: Real> Plant<F> {
             w.creepage = contact.creepage;
             w.axle_load = ws[j].q;
             w.adhesion_force = force;
-            w.adhesion = if ws[j].q > F::ZERO {
-                force / ws[j].q
-            } else {
-                F::ZERO
-            };
+            w.adhesion = force * contact.inv_load;
             w.rail_mu = contact.mu;
             w.mu_d = mu_d;
             w.clamp_force = ws[j].clamp;
@@ -821,7 +831,7 @@ impl<F: Real> Plant<F> {
         // ---- Bodies ----
         // Running resistance on the carbody (Davis), faded in over +-1 cm/s so that the
         // vehicle never creeps backwards at rest.
-        let speed_fade = (v_c / k.resistance_speed_band).clamp_to(-F::ONE, F::ONE);
+        let speed_fade = (v_c * k.inv_resistance_speed_band).clamp_to(-F::ONE, F::ONE);
         let v_abs = v_c.abs();
         let resistance = (k.davis_a + k.davis_b * v_abs + k.davis_c * v_abs * v_abs) * speed_fade;
         let a_c = (-(f_sl[0] + f_sl[1]) - resistance) * k.inv_m_c - k.g_along;
