@@ -214,6 +214,10 @@ pub struct Energy {
 struct Constants<F> {
     dt: F,
     g_along: F,
+    /// Gradient force on the carbody, one bogie and one wheelset, m g_along, N.
+    grade_force_c: F,
+    grade_force_b: F,
+    grade_force_w: F,
     m_c: F,
     inv_m_c: F,
     inv_i_c: F,
@@ -489,10 +493,14 @@ impl<F: Real> Plant<F> {
         let grad = p.track.gradient_permille / 1000.0;
         let r = v.wheel_radius;
         let lag = p.brake.actuator_lag_s;
+        let g_along = v.g * grad / libm::sqrt(1.0 + grad * grad);
         let caliper = Caliper::new(&p.brake);
         Ok(Constants {
             dt: F::of(dt),
-            g_along: F::of(v.g * grad / libm::sqrt(1.0 + grad * grad)),
+            g_along: F::of(g_along),
+            grade_force_c: F::of(g_along * v.carbody_mass),
+            grade_force_b: F::of(g_along * v.bogie_mass),
+            grade_force_w: F::of(g_along * v.wheelset_mass),
             m_c: F::of(v.carbody_mass),
             inv_m_c: F::of(1.0 / v.carbody_mass),
             inv_i_c: F::of(1.0 / v.carbody_pitch_inertia),
@@ -890,14 +898,15 @@ impl<F: Real> Plant<F> {
         }
 
         // ---- External power (resistance and gradient) for the energy balance ----
+        // Gradient forces m g_along of each body folded at construction; bogies and
+        // wheelsets summed first (one product per body kind).
         let v_mid = half * (v_c + v_c_new);
-        let mut external = -resistance * v_mid - k.g_along * k.m_c * v_mid;
-        for i in 0..2 {
-            external -= k.g_along * k.m_b * (v_mid + s.dv_b[i]);
-        }
-        for j in 0..WHEELSETS {
-            external -= k.g_along * k.m_w * self.out.wheelsets[j].speed;
-        }
+        let bogie_speeds = (v_mid + s.dv_b[0]) + (v_mid + s.dv_b[1]);
+        let wo = &self.out.wheelsets;
+        let wheelset_speeds = (wo[0].speed + wo[1].speed) + (wo[2].speed + wo[3].speed);
+        let external = -(resistance + k.grade_force_c) * v_mid
+            - k.grade_force_b * bogie_speeds
+            - k.grade_force_w * wheelset_speeds;
 
         // ---- Safe state on a non-finite state (never expected with valid parameters) ----
         // One test on a sum: a NaN or an infinity anywhere makes the sum NaN or infinite
