@@ -221,6 +221,11 @@ struct Constants<F> {
     m_c: F,
     inv_m_c: F,
     inv_i_c: F,
+    /// dt/m and dt/I of the carbody and a bogie (vertical and pitch updates).
+    dt_inv_m_c: F,
+    dt_inv_i_c: F,
+    dt_inv_m_b: F,
+    dt_inv_i_b: F,
     m_b: F,
     inv_m_b: F,
     inv_i_b: F,
@@ -504,6 +509,10 @@ impl<F: Real> Plant<F> {
             m_c: F::of(v.carbody_mass),
             inv_m_c: F::of(1.0 / v.carbody_mass),
             inv_i_c: F::of(1.0 / v.carbody_pitch_inertia),
+            dt_inv_m_c: F::of(dt / v.carbody_mass),
+            dt_inv_i_c: F::of(dt / v.carbody_pitch_inertia),
+            dt_inv_m_b: F::of(dt / v.bogie_mass),
+            dt_inv_i_b: F::of(dt / v.bogie_pitch_inertia),
             m_b: F::of(v.bogie_mass),
             inv_m_b: F::of(1.0 / v.bogie_mass),
             inv_i_b: F::of(1.0 / v.bogie_pitch_inertia),
@@ -850,21 +859,22 @@ impl<F: Real> Plant<F> {
         let v_abs = v_c.abs();
         let resistance = (k.davis_a + k.davis_b * v_abs + k.davis_c * v_abs * v_abs) * speed_fade;
         let a_c = (-(f_sl[0] + f_sl[1]) - resistance) * k.inv_m_c - k.g_along;
-        let az_c = (f_sv[0] + f_sv[1]) * k.inv_m_c;
+        // Vertical and pitch velocity increments over the step (dt/m, dt/I folded).
+        let dvz_c = (f_sv[0] + f_sv[1]) * k.dt_inv_m_c;
         let mut moment_c = F::ZERO;
         for i in 0..2 {
             // Vertical deviation at X_i; longitudinal force on the carbody (-f_sl) at pz.
             moment_c += k.x_bogie[i] * f_sv[i] + k.pz_carbody_sl * f_sl[i];
         }
-        let alpha_c = moment_c * k.inv_i_c;
+        let dpitch_rate_c = moment_c * k.dt_inv_i_c;
 
         let mut a_b = [F::ZERO; 2];
-        let mut az_b = [F::ZERO; 2];
-        let mut alpha_b = [F::ZERO; 2];
+        let mut dvz_b = [F::ZERO; 2];
+        let mut dpitch_rate_b = [F::ZERO; 2];
         for i in 0..2 {
             let (j0, j1) = (2 * i, 2 * i + 1);
             a_b[i] = (f_sl[i] - ws[j0].f_pl - ws[j1].f_pl) * k.inv_m_b - k.g_along;
-            az_b[i] = (ws[j0].f_pv + ws[j1].f_pv - f_sv[i]) * k.inv_m_b;
+            dvz_b[i] = (ws[j0].f_pv + ws[j1].f_pv - f_sv[i]) * k.dt_inv_m_b;
             // Moments: primary vertical at +-b/2, primary longitudinal (-f_pl on the bogie)
             // at pz_pl, secondary longitudinal at pz_sl, brake reactions -T_b.
             let m = k.x_axle[0] * ws[j0].f_pv
@@ -873,23 +883,23 @@ impl<F: Real> Plant<F> {
                 - k.pz_bogie_sl * f_sl[i]
                 - ws[j0].brake_torque
                 - ws[j1].brake_torque;
-            alpha_b[i] = m * k.inv_i_b;
+            dpitch_rate_b[i] = m * k.dt_inv_i_b;
         }
 
         // ---- Integrate (symplectic Euler: velocities, then positions) ----
         kahan_add(&mut s.v_c, &mut s.v_c_comp, a_c * dt);
         let v_c_new = s.v_c;
         kahan_add(&mut s.x_c, &mut s.x_c_comp, v_c_new * dt);
-        s.vz_c += az_c * dt;
+        s.vz_c += dvz_c;
         s.z_c += s.vz_c * dt;
-        s.pitch_rate_c += alpha_c * dt;
+        s.pitch_rate_c += dpitch_rate_c;
         s.pitch_c += s.pitch_rate_c * dt;
         for i in 0..2 {
             s.dv_b[i] += (a_b[i] - a_c) * dt;
             s.dx_b[i] += s.dv_b[i] * dt;
-            s.vz_b[i] += az_b[i] * dt;
+            s.vz_b[i] += dvz_b[i];
             s.z_b[i] += s.vz_b[i] * dt;
-            s.pitch_rate_b[i] += alpha_b[i] * dt;
+            s.pitch_rate_b[i] += dpitch_rate_b[i];
             s.pitch_b[i] += s.pitch_rate_b[i] * dt;
         }
         for j in 0..WHEELSETS {
