@@ -35,6 +35,9 @@ pub struct ContactForce<F> {
     pub mu: F,
     /// Creepage s (Eq 12, with the speed floor).
     pub creepage: F,
+    /// 1/Q, 1/N, for the adhesion coefficient F/Q (Eq 13) without another division
+    /// (0 when the wheelset is unloaded or mu is 0: no adhesion).
+    pub inv_load: F,
 }
 
 impl<F: Real> Polach<F> {
@@ -97,17 +100,21 @@ impl<F: Real> Polach<F> {
     #[inline(always)]
     pub fn evaluate_with_mu(&self, slip_velocity: F, speed: F, load: F, mu: F) -> ContactForce<F> {
         let v_floor = speed.abs().max(self.creep_speed_floor);
-        let inv_v_floor = F::ONE / v_floor;
-        let creepage = slip_velocity * inv_v_floor;
-        if !(load > F::ZERO) {
+        let load_mu = load * mu;
+        if !(load_mu > F::ZERO) {
             return ContactForce {
                 force: F::ZERO,
                 chord: F::ZERO,
                 mu,
-                creepage,
+                creepage: slip_velocity / v_floor,
+                inv_load: F::ZERO,
             };
         }
-        let eps = self.stiffness * creepage / (load * mu);
+        // One division for Eqs (10) and (12): 1 / (V Q mu) gives 1/V, 1/(Q mu) and 1/Q.
+        let inv_v_load_mu = F::ONE / (v_floor * load_mu);
+        let inv_v_floor = load_mu * inv_v_load_mu;
+        let creepage = slip_velocity * inv_v_floor;
+        let eps = self.stiffness * slip_velocity * inv_v_load_mu;
         let x_a = self.k_a * eps;
         let x_s = self.k_s * eps;
         let adhesion_part = self.k_a / (F::ONE + x_a * x_a);
@@ -119,6 +126,7 @@ impl<F: Real> Polach<F> {
             chord,
             mu,
             creepage,
+            inv_load: mu * v_floor * inv_v_load_mu,
         }
     }
 

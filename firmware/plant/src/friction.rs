@@ -58,6 +58,23 @@ impl<F: Real> DiscPadFriction<F> {
         }
     }
 
+    /// [`Self::temperature_factor`] with e^(-m_T T_d) from a [`TrackedExp`] (the plant's
+    /// refresh in turn: the disc temperature moves little between refreshes; within
+    /// [`crate::math::TRACK_MAX_REL_ERROR`] of the exact factor).
+    #[inline(always)]
+    pub fn temperature_factor_tracked(&self, t_d: F, decay: &mut TrackedExp<F>) -> F {
+        if self.variable {
+            self.n_t * decay.exp(-self.m_t * t_d) + F::ONE
+        } else {
+            F::ONE
+        }
+    }
+
+    /// The tracker of the temperature factor's e^(-m_T T_d), anchored at `t_d` (degC).
+    pub fn temperature_decay_at(&self, t_d: F) -> TrackedExp<F> {
+        TrackedExp::at(-self.m_t * t_d)
+    }
+
     /// The tracker of the speed factor's e^(-m_v v_d), anchored at friction speed `v_d`.
     pub fn speed_decay_at(&self, v_d: F) -> TrackedExp<F> {
         TrackedExp::at(-self.m_v * v_d.abs())

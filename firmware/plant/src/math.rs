@@ -27,7 +27,10 @@ mod tracked;
 
 pub use atan::ATAN_OVER_X_MAX_REL_ERROR;
 
-pub use tracked::{TRACK_MAX_REL_ERROR, TRACK_WINDOW, TrackedExp};
+pub use tracked::{
+    PowLaw, TRACK_MAX_REL_ERROR, TRACK_POW_MAX_REL_ERROR, TRACK_POW_WINDOW, TRACK_WINDOW,
+    TrackedExp, TrackedPow,
+};
 
 #[cfg(all(feature = "math-libm", feature = "math-micromath"))]
 compile_error!("the features math-libm and math-micromath exclude each other");

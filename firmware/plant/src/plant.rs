@@ -36,11 +36,13 @@
 //!   Eq (5) (alpha + beta v_w^0.8) follow the disc temperature and the wheel speed, which
 //!   change over seconds; each step refreshes one of them for one wheelset in turn (each
 //!   every 0.8 ms), which takes three of the four transcendental functions per wheelset
-//!   out of the 10 kHz step.
-//! * **Tracked exponentials.** e^(-B |w|) (Eq 11) and e^(-m_v v_d) (Eq 2) move little from
-//!   step to step: [`TrackedExp`] serves them from an exact anchor with a degree-3
-//!   polynomial (within 4.2e-7 relative, tested against the exact function) and evaluates
-//!   e^x again only when the argument leaves a window of 1/64.
+//!   out of the 10 kHz step; v_w^0.8 is tracked by [`TrackedPow`] (a binomial series
+//!   about an exact anchor while v_w stays within 1/64 of it; within 8e-7 relative).
+//! * **Tracked exponentials.** e^(-B |w|) (Eq 11), e^(-m_v v_d) and e^(-m_T T_d) (Eq 2)
+//!   move little from step to step (or refresh to refresh): [`TrackedExp`] serves them
+//!   from an exact anchor with a degree-3 polynomial (within 4.2e-7 relative, tested
+//!   against the exact function) and evaluates e^x again only when the argument leaves a
+//!   window of 1/64.
 //! * **Bad input.** Brake inputs are clamped to [0, 1.5 x the physical maximum] and
 //!   flagged; a NaN/inf input holds the last valid value and is flagged. A non-finite state
 //!   (never seen with validated parameters) puts the plant in a safe state: at rest, flagged.
@@ -48,7 +50,7 @@
 use crate::brake::Caliper;
 use crate::contact::{ContactForce, Polach};
 use crate::friction::DiscPadFriction;
-use crate::math::TrackedExp;
+use crate::math::{TrackedExp, TrackedPow};
 use crate::params::{ParamError, Params, Rail};
 use crate::real::Real;
 use crate::thermal::DiscThermal;
@@ -212,9 +214,18 @@ pub struct Energy {
 struct Constants<F> {
     dt: F,
     g_along: F,
+    /// Gradient force on the carbody, one bogie and one wheelset, m g_along, N.
+    grade_force_c: F,
+    grade_force_b: F,
+    grade_force_w: F,
     m_c: F,
     inv_m_c: F,
     inv_i_c: F,
+    /// dt/m and dt/I of the carbody and a bogie (vertical and pitch updates).
+    dt_inv_m_c: F,
+    dt_inv_i_c: F,
+    dt_inv_m_b: F,
+    dt_inv_i_b: F,
     m_b: F,
     inv_m_b: F,
     inv_i_b: F,
@@ -250,7 +261,8 @@ struct Constants<F> {
     davis_a: F,
     davis_b: F,
     davis_c: F,
-    resistance_speed_band: F,
+    /// 1 / the speed band over which the running resistance fades in, s/m.
+    inv_resistance_speed_band: F,
     actuator_lag_rate: F,
     /// Whether the actuator lag acts (rate below 1).
     actuator_lag: bool,
@@ -326,6 +338,10 @@ struct WheelsetState<F: Real> {
     rail_decay: TrackedExp<F>,
     /// e^(-m_v v_d) of Eq (2), tracked from an exact anchor.
     speed_decay: TrackedExp<F>,
+    /// e^(-m_T T_d) of Eq (2), tracked from an exact anchor.
+    temperature_decay: TrackedExp<F>,
+    /// v_w^0.8 of Eq (5), tracked from an exact anchor.
+    speed_power: TrackedPow<F>,
 }
 
 /// The plant: vehicle, contact, brakes, disc heat. `F` = f32 on the target.
@@ -482,13 +498,21 @@ impl<F: Real> Plant<F> {
         let grad = p.track.gradient_permille / 1000.0;
         let r = v.wheel_radius;
         let lag = p.brake.actuator_lag_s;
+        let g_along = v.g * grad / libm::sqrt(1.0 + grad * grad);
         let caliper = Caliper::new(&p.brake);
         Ok(Constants {
             dt: F::of(dt),
-            g_along: F::of(v.g * grad / libm::sqrt(1.0 + grad * grad)),
+            g_along: F::of(g_along),
+            grade_force_c: F::of(g_along * v.carbody_mass),
+            grade_force_b: F::of(g_along * v.bogie_mass),
+            grade_force_w: F::of(g_along * v.wheelset_mass),
             m_c: F::of(v.carbody_mass),
             inv_m_c: F::of(1.0 / v.carbody_mass),
             inv_i_c: F::of(1.0 / v.carbody_pitch_inertia),
+            dt_inv_m_c: F::of(dt / v.carbody_mass),
+            dt_inv_i_c: F::of(dt / v.carbody_pitch_inertia),
+            dt_inv_m_b: F::of(dt / v.bogie_mass),
+            dt_inv_i_b: F::of(dt / v.bogie_pitch_inertia),
             m_b: F::of(v.bogie_mass),
             inv_m_b: F::of(1.0 / v.bogie_mass),
             inv_i_b: F::of(1.0 / v.bogie_pitch_inertia),
@@ -520,7 +544,7 @@ impl<F: Real> Plant<F> {
             davis_a: F::of(p.resistance.davis_a_n),
             davis_b: F::of(p.resistance.davis_b_n_per_mps),
             davis_c: F::of(p.resistance.davis_c_n_per_mps2),
-            resistance_speed_band: F::of(0.01),
+            inv_resistance_speed_band: F::of(1.0 / 0.01),
             actuator_lag_rate: F::of(if lag > 0.0 { (dt / lag).min(1.0) } else { 1.0 }),
             actuator_lag: lag > 0.0 && dt / lag < 1.0,
             pressure_low: -F::of(0.02) * caliper.pressure_limit,
@@ -542,7 +566,9 @@ impl<F: Real> Plant<F> {
         for w in self.s.w.iter_mut() {
             w.disc_temp = disc_temp;
             w.temperature_factor = self.k.friction.temperature_factor(disc_temp);
+            w.temperature_decay = self.k.friction.temperature_decay_at(disc_temp);
             w.heat_loss = self.k.thermal.loss_coefficient(v0);
+            w.speed_power = self.k.thermal.speed_power_at(v0);
             w.speed_decay = self
                 .k
                 .friction
@@ -621,16 +647,22 @@ impl<F: Real> Plant<F> {
             BrakeInput::CylinderPressure(p) => (p, cal.pressure_limit, k.pressure_low),
             BrakeInput::ClampForce(f) => (f, cal.clamp_force_limit, k.clamp_force_low),
         };
-        if !value.is_finite() {
-            *flags |= Flags::wheelset_bit(Flags::INPUT_NOT_FINITE, j);
-            return *last_clamp;
-        }
-        // Below zero by more than 2 % of the range, or above the limit: out of range.
-        // Small negative readings are sensor noise around zero and clamp silently to 0.
-        if value > limit || value < low {
-            *flags |= Flags::wheelset_bit(Flags::INPUT_OUT_OF_RANGE, j);
-        }
-        let value = value.clamp_to(F::ZERO, limit);
+        // The usual case, a reading within [0, limit], by one integer compare; the
+        // detailed checks only when it fails.
+        let value = if value.within_zero_and(limit) {
+            value
+        } else {
+            if !value.is_finite() {
+                *flags |= Flags::wheelset_bit(Flags::INPUT_NOT_FINITE, j);
+                return *last_clamp;
+            }
+            // Below zero by more than 2 % of the range, or above the limit: out of range.
+            // Small negative readings are sensor noise around zero and clamp silently to 0.
+            if value > limit || value < low {
+                *flags |= Flags::wheelset_bit(Flags::INPUT_OUT_OF_RANGE, j);
+            }
+            value.clamp_to(F::ZERO, limit)
+        };
         let clamp = match input {
             BrakeInput::CylinderPressure(_) => cal.clamp_force(value).min(cal.clamp_force_limit),
             BrakeInput::ClampForce(_) => value,
@@ -727,9 +759,15 @@ impl<F: Real> Plant<F> {
         let turn = self.out.steps % (2 * WHEELSETS as u32);
         let slow = (turn % WHEELSETS as u32) as usize;
         if turn < WHEELSETS as u32 {
-            s.w[slow].temperature_factor = k.friction.temperature_factor(s.w[slow].disc_temp);
+            let w = &mut s.w[slow];
+            w.temperature_factor = k
+                .friction
+                .temperature_factor_tracked(w.disc_temp, &mut w.temperature_decay);
         } else {
-            s.w[slow].heat_loss = k.thermal.loss_coefficient(k.r * ws[slow].omega);
+            let w = &mut s.w[slow];
+            w.heat_loss = k
+                .thermal
+                .loss_coefficient_tracked(k.r * ws[slow].omega, &mut w.speed_power);
         }
         // Zones and degraded adhesion along the track (crate::track): one wheelset per
         // step, in turn; nothing to do on a uniform track with degraded adhesion off.
@@ -796,11 +834,7 @@ impl<F: Real> Plant<F> {
             w.creepage = contact.creepage;
             w.axle_load = ws[j].q;
             w.adhesion_force = force;
-            w.adhesion = if ws[j].q > F::ZERO {
-                force / ws[j].q
-            } else {
-                F::ZERO
-            };
+            w.adhesion = force * contact.inv_load;
             w.rail_mu = contact.mu;
             w.mu_d = mu_d;
             w.clamp_force = ws[j].clamp;
@@ -821,25 +855,26 @@ impl<F: Real> Plant<F> {
         // ---- Bodies ----
         // Running resistance on the carbody (Davis), faded in over +-1 cm/s so that the
         // vehicle never creeps backwards at rest.
-        let speed_fade = (v_c / k.resistance_speed_band).clamp_to(-F::ONE, F::ONE);
+        let speed_fade = (v_c * k.inv_resistance_speed_band).clamp_to(-F::ONE, F::ONE);
         let v_abs = v_c.abs();
         let resistance = (k.davis_a + k.davis_b * v_abs + k.davis_c * v_abs * v_abs) * speed_fade;
         let a_c = (-(f_sl[0] + f_sl[1]) - resistance) * k.inv_m_c - k.g_along;
-        let az_c = (f_sv[0] + f_sv[1]) * k.inv_m_c;
+        // Vertical and pitch velocity increments over the step (dt/m, dt/I folded).
+        let dvz_c = (f_sv[0] + f_sv[1]) * k.dt_inv_m_c;
         let mut moment_c = F::ZERO;
         for i in 0..2 {
             // Vertical deviation at X_i; longitudinal force on the carbody (-f_sl) at pz.
             moment_c += k.x_bogie[i] * f_sv[i] + k.pz_carbody_sl * f_sl[i];
         }
-        let alpha_c = moment_c * k.inv_i_c;
+        let dpitch_rate_c = moment_c * k.dt_inv_i_c;
 
         let mut a_b = [F::ZERO; 2];
-        let mut az_b = [F::ZERO; 2];
-        let mut alpha_b = [F::ZERO; 2];
+        let mut dvz_b = [F::ZERO; 2];
+        let mut dpitch_rate_b = [F::ZERO; 2];
         for i in 0..2 {
             let (j0, j1) = (2 * i, 2 * i + 1);
             a_b[i] = (f_sl[i] - ws[j0].f_pl - ws[j1].f_pl) * k.inv_m_b - k.g_along;
-            az_b[i] = (ws[j0].f_pv + ws[j1].f_pv - f_sv[i]) * k.inv_m_b;
+            dvz_b[i] = (ws[j0].f_pv + ws[j1].f_pv - f_sv[i]) * k.dt_inv_m_b;
             // Moments: primary vertical at +-b/2, primary longitudinal (-f_pl on the bogie)
             // at pz_pl, secondary longitudinal at pz_sl, brake reactions -T_b.
             let m = k.x_axle[0] * ws[j0].f_pv
@@ -848,23 +883,23 @@ impl<F: Real> Plant<F> {
                 - k.pz_bogie_sl * f_sl[i]
                 - ws[j0].brake_torque
                 - ws[j1].brake_torque;
-            alpha_b[i] = m * k.inv_i_b;
+            dpitch_rate_b[i] = m * k.dt_inv_i_b;
         }
 
         // ---- Integrate (symplectic Euler: velocities, then positions) ----
         kahan_add(&mut s.v_c, &mut s.v_c_comp, a_c * dt);
         let v_c_new = s.v_c;
         kahan_add(&mut s.x_c, &mut s.x_c_comp, v_c_new * dt);
-        s.vz_c += az_c * dt;
+        s.vz_c += dvz_c;
         s.z_c += s.vz_c * dt;
-        s.pitch_rate_c += alpha_c * dt;
+        s.pitch_rate_c += dpitch_rate_c;
         s.pitch_c += s.pitch_rate_c * dt;
         for i in 0..2 {
             s.dv_b[i] += (a_b[i] - a_c) * dt;
             s.dx_b[i] += s.dv_b[i] * dt;
-            s.vz_b[i] += az_b[i] * dt;
+            s.vz_b[i] += dvz_b[i];
             s.z_b[i] += s.vz_b[i] * dt;
-            s.pitch_rate_b[i] += alpha_b[i] * dt;
+            s.pitch_rate_b[i] += dpitch_rate_b[i];
             s.pitch_b[i] += s.pitch_rate_b[i] * dt;
         }
         for j in 0..WHEELSETS {
@@ -873,14 +908,15 @@ impl<F: Real> Plant<F> {
         }
 
         // ---- External power (resistance and gradient) for the energy balance ----
+        // Gradient forces m g_along of each body folded at construction; bogies and
+        // wheelsets summed first (one product per body kind).
         let v_mid = half * (v_c + v_c_new);
-        let mut external = -resistance * v_mid - k.g_along * k.m_c * v_mid;
-        for i in 0..2 {
-            external -= k.g_along * k.m_b * (v_mid + s.dv_b[i]);
-        }
-        for j in 0..WHEELSETS {
-            external -= k.g_along * k.m_w * self.out.wheelsets[j].speed;
-        }
+        let bogie_speeds = (v_mid + s.dv_b[0]) + (v_mid + s.dv_b[1]);
+        let wo = &self.out.wheelsets;
+        let wheelset_speeds = (wo[0].speed + wo[1].speed) + (wo[2].speed + wo[3].speed);
+        let external = -(resistance + k.grade_force_c) * v_mid
+            - k.grade_force_b * bogie_speeds
+            - k.grade_force_w * wheelset_speeds;
 
         // ---- Safe state on a non-finite state (never expected with valid parameters) ----
         // One test on a sum: a NaN or an infinity anywhere makes the sum NaN or infinite

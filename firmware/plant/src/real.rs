@@ -44,6 +44,11 @@ pub trait Real:
     fn is_finite(self) -> bool;
     /// Not a number.
     fn is_nan(self) -> bool;
+    /// Whether `0 <= self <= hi` (for a finite `hi >= 0`) by one integer compare of the
+    /// bit patterns, which order as the values for non-negative floats; false for NaN,
+    /// infinities above `hi`, negative values and -0 (the callers then take their detailed
+    /// path, which treats these).
+    fn within_zero_and(self, hi: Self) -> bool;
 
     /// |x| (clears the sign bit).
     fn abs(self) -> Self;
@@ -101,6 +106,10 @@ macro_rules! impl_real {
             #[inline(always)]
             fn is_finite(self) -> bool {
                 (self.to_bits() & $exp_mask) != $exp_mask
+            }
+            #[inline(always)]
+            fn within_zero_and(self, hi: $t) -> bool {
+                self.to_bits() <= hi.to_bits()
             }
             #[inline(always)]
             fn is_nan(self) -> bool {

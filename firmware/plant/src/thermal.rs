@@ -1,7 +1,11 @@
 //! Lumped disc heat balance per wheelset, paper Eqs (3)-(6).
 
+use crate::math::{PowLaw, TrackedPow};
 use crate::params::ThermalParams;
 use crate::real::Real;
+
+/// The exponent of the wheel speed in the convective loss of Eq (5).
+const CONVECTION_EXPONENT: f64 = 0.8;
 
 /// Precomputed constants of Eqs (3)-(6).
 #[derive(Clone, Copy, Debug)]
@@ -10,7 +14,8 @@ pub struct DiscThermal<F> {
     inv_heat_capacity: F,
     alpha: F,
     beta: F,
-    convection_exponent: F,
+    /// v_w^0.8 of Eq (5).
+    speed_power: PowLaw<F>,
 }
 
 impl<F: Real> DiscThermal<F> {
@@ -21,7 +26,7 @@ impl<F: Real> DiscThermal<F> {
             inv_heat_capacity: F::of(1.0 / (p.specific_heat * p.disc_mass)),
             alpha: F::of(p.alpha),
             beta: F::of(p.beta),
-            convection_exponent: F::of(0.8),
+            speed_power: PowLaw::new(CONVECTION_EXPONENT),
         }
     }
 
@@ -40,7 +45,19 @@ impl<F: Real> DiscThermal<F> {
     /// step.
     #[inline(always)]
     pub fn loss_coefficient(&self, wheel_speed: F) -> F {
-        self.alpha + self.beta * wheel_speed.abs().powf_pos(self.convection_exponent)
+        self.alpha + self.beta * wheel_speed.abs().powf_pos(self.speed_power.exponent())
+    }
+
+    /// [`Self::loss_coefficient`] with v_w^0.8 from a [`TrackedPow`] (the plant's refresh in
+    /// turn; within [`crate::math::TRACK_POW_MAX_REL_ERROR`] of the exact power).
+    #[inline(always)]
+    pub fn loss_coefficient_tracked(&self, wheel_speed: F, power: &mut TrackedPow<F>) -> F {
+        self.alpha + self.beta * power.pow(wheel_speed.abs(), &self.speed_power)
+    }
+
+    /// The tracker of v_w^0.8 of Eq (5), anchored at wheel speed `wheel_speed` (m/s).
+    pub fn speed_power_at(&self, wheel_speed: F) -> TrackedPow<F> {
+        TrackedPow::at(wheel_speed.abs(), &self.speed_power)
     }
 
     /// dT_d/dt with a precomputed [`Self::loss_coefficient`].
