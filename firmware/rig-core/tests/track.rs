@@ -79,7 +79,15 @@ fn self_test_eb(speed_kmh: f32, track: bool) -> Command {
         emergency: true,
         initial_speed_kmh: speed_kmh,
         track,
+        setup_digest: 0,
     }
+}
+
+/// Sends a self-test EB start stamped with the digest of the rig's kept setup (the tests
+/// of tracks and vehicles; the digest's own tests send the digest of what they sent).
+fn start(rig: &mut Rig, n: &mut u8, speed_kmh: f32, track: bool) -> Result<(), CommandError> {
+    let c = rig.on_kept_setup(self_test_eb(speed_kmh, track));
+    send(rig, n, c)
 }
 
 /// Runs to standstill; the stopping distance (m, integrated from the vehicle speed) and
@@ -120,7 +128,7 @@ fn a_track_loaded_by_frames_puts_each_wheelset_on_its_zone() {
         .map(|z| z.zone())
         .collect();
     assert_eq!(kept, zones);
-    send(&mut rig, &mut n, self_test_eb(120.0, true)).unwrap();
+    start(&mut rig, &mut n, 120.0, true).unwrap();
     let (stop_change, seen) = run(&mut rig);
     // Wheelset 1 is on the dry zone from 120 m to 220 m (within one refresh, 4 steps), low
     // elsewhere; wheelset 4 (16.5 m behind: bogie base 14 m + wheel base 2.5 m) reaches
@@ -141,9 +149,9 @@ fn a_track_loaded_by_frames_puts_each_wheelset_on_its_zone() {
     // The same start on one low rail (the committed track, no zones), and on the dry rail
     // of the start frame (no track): the sudden change stops between the two.
     load(&mut rig, &mut n, Surface::Low, &[]).unwrap();
-    send(&mut rig, &mut n, self_test_eb(120.0, true)).unwrap();
+    start(&mut rig, &mut n, 120.0, true).unwrap();
     let (stop_low, _) = run(&mut rig);
-    send(&mut rig, &mut n, self_test_eb(120.0, false)).unwrap();
+    start(&mut rig, &mut n, 120.0, false).unwrap();
     let (stop_dry, seen_dry) = run(&mut rig);
     assert!(
         seen_dry
@@ -165,7 +173,7 @@ fn track_frames_are_refused_with_their_rule() {
     let mut n = 0;
     // Start on the kept track before one is kept.
     assert_eq!(
-        send(&mut rig, &mut n, self_test_eb(80.0, true)),
+        start(&mut rig, &mut n, 80.0, true),
         Err(CommandError::NoTrack)
     );
     // Zones out of order (the second starts before the first ends).
@@ -270,7 +278,7 @@ fn a_vehicle_variant_by_command_sets_the_run_s_axle_loads() {
             },
         };
         send(&mut rig, &mut n, c).unwrap();
-        send(&mut rig, &mut n, self_test_eb(60.0, false)).unwrap();
+        start(&mut rig, &mut n, 60.0, false).unwrap();
         rig.step(&mut Io);
         let q: f64 = rig
             .outputs()
@@ -287,7 +295,7 @@ fn a_vehicle_variant_by_command_sets_the_run_s_axle_loads() {
         rig.step(&mut Io); // the run's end record
     }
     // Not while a run is active; a value outside the plant's range fails the start.
-    send(&mut rig, &mut n, self_test_eb(60.0, false)).unwrap();
+    start(&mut rig, &mut n, 60.0, false).unwrap();
     assert_eq!(
         send(&mut rig, &mut n, Command::Vehicle { key, value: 1.0 }),
         Err(CommandError::NotNow(RigState::Running))
@@ -296,7 +304,7 @@ fn a_vehicle_variant_by_command_sets_the_run_s_axle_loads() {
     rig.step(&mut Io);
     send(&mut rig, &mut n, Command::Vehicle { key, value: 1.0 }).unwrap();
     assert!(matches!(
-        send(&mut rig, &mut n, self_test_eb(60.0, false)),
+        start(&mut rig, &mut n, 60.0, false),
         Err(CommandError::Build(_))
     ));
     assert_ne!(rig.state(), RigState::Running);
