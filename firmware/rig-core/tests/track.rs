@@ -257,6 +257,98 @@ fn track_frames_are_refused_with_their_rule() {
     assert!(rig.track().is_none());
 }
 
+/// A `Track` commit or `Vehicle` frame lost on the bus leaves the board's kept setup as it
+/// was; the start, stamped with the digest of what the sender set up (`StartDigest`), is
+/// rejected (`SetupMismatch`) and nothing changes, instead of a run on the earlier setup
+/// with the previous command's `Accepted` showing.
+#[test]
+fn a_lost_commit_or_vehicle_frame_rejects_the_start() {
+    use hils_rig_core::digest::setup_digest;
+    use hils_rig_core::rig::{TrackFrames, VehicleValues};
+    let stamped = |track: Option<&TrackFrames>, vehicle: &VehicleValues| {
+        let mut c = self_test_eb(80.0, track.is_some());
+        if let Command::Start {
+            setup_digest: d, ..
+        } = &mut c
+        {
+            *d = setup_digest(track, vehicle);
+        }
+        c
+    };
+    // A rejected start changes nothing: no run requested, the kept setup as it was.
+    let rejected = |rig: &mut Rig, n: &mut u8, c: Command| {
+        let before = (rig.track().copied(), *rig.vehicle(), rig.state());
+        let on_track = matches!(c, Command::Start { track: true, .. });
+        let kept = setup_digest(before.0.as_ref().filter(|_| on_track), &before.1);
+        assert_eq!(send(rig, n, c), Err(CommandError::SetupMismatch { kept }));
+        assert_eq!(rig.take_start_request(), None);
+        assert_eq!((rig.track().copied(), *rig.vehicle(), rig.state()), before);
+    };
+    let stop = |rig: &mut Rig, n: &mut u8| {
+        send(rig, n, Command::Stop).unwrap();
+        rig.step(&mut Io); // the run's end record
+    };
+    let vehicle = |key, value| Command::Vehicle { key, value };
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut n = 0;
+    // Track A kept, vehicle variant 26 t.
+    load(
+        &mut rig,
+        &mut n,
+        Surface::Wet,
+        &[zone(10.0, 20.0, Surface::Low)],
+    )
+    .unwrap();
+    send(&mut rig, &mut n, vehicle(VehicleKey::CarbodyMass, 26_000.0)).unwrap();
+    // The host loads track B; its clear and its commit are lost: the board still has A.
+    let b = [
+        zone(30.0, 50.0, Surface::VeryLow),
+        zone(60.0, 70.0, Surface::Dry),
+    ];
+    let b_frames = b.map(|z| ZoneFrame::of(&z).unwrap());
+    for (i, zone) in b_frames.iter().enumerate() {
+        let c = Command::TrackZone {
+            index: i as u8,
+            zone: *zone,
+        };
+        send(&mut rig, &mut n, c).unwrap();
+    }
+    let track_b = TrackFrames::new(Surface::Dry, &b_frames).unwrap();
+    let mut sent = VehicleValues::default();
+    sent.set(VehicleKey::CarbodyMass, 26_000.0);
+    rejected(&mut rig, &mut n, stamped(Some(&track_b), &sent));
+    // Only the commit lost (the clear arrived): no track kept, rejected too.
+    let mut fresh = Rig::new(RigConfig::nucleo_g474re());
+    send(&mut fresh, &mut n, Command::Track(TrackCommand::Clear)).unwrap();
+    assert_eq!(
+        send(&mut fresh, &mut n, stamped(Some(&track_b), &sent)),
+        Err(CommandError::NoTrack)
+    );
+    // Resent: accepted, the run is on B.
+    commit(&mut rig, &mut n, Surface::Dry, 2).unwrap();
+    assert_eq!(rig.track(), Some(&track_b));
+    send(&mut rig, &mut n, stamped(Some(&track_b), &sent)).unwrap();
+    assert_eq!(rig.state(), RigState::Running);
+    stop(&mut rig, &mut n);
+    // A Vehicle default lost: the board keeps 26 t, the host started on the default vehicle.
+    rejected(&mut rig, &mut n, stamped(None, &VehicleValues::default()));
+    // A variant's value lost: the board has the default, the host sent 30 t.
+    send(&mut rig, &mut n, vehicle(VehicleKey::Default, 0.0)).unwrap();
+    let mut v30 = VehicleValues::default();
+    v30.set(VehicleKey::CarbodyMass, 30_000.0);
+    rejected(&mut rig, &mut n, stamped(None, &v30));
+    rejected(&mut rig, &mut n, stamped(Some(&track_b), &v30));
+    // A one-rail start does not depend on the kept track; the button's start (stamped
+    // with the kept setup) runs on whatever the board keeps.
+    send(&mut rig, &mut n, stamped(None, &VehicleValues::default())).unwrap();
+    assert_eq!(rig.state(), RigState::Running);
+    stop(&mut rig, &mut n);
+    send(&mut rig, &mut n, vehicle(VehicleKey::WheelRadius, 0.43)).unwrap();
+    let button = rig.on_kept_setup(Command::paper_self_test(FrictionModel::Variable));
+    rig.command(button).unwrap();
+    assert_eq!(rig.state(), RigState::Starting);
+}
+
 #[test]
 fn a_vehicle_variant_by_command_sets_the_run_s_axle_loads() {
     let mut rig = Rig::new(RigConfig::nucleo_g474re());
