@@ -1,6 +1,6 @@
 //! The CAN frame decoders and the rig's command handler with rig steps: arbitrary frames
 //! (any identifier, length, payload) to every decoder and to `Rig::command_frame`, direct
-//! commands, sealed (valid checksum) frames of the track, track-zone and vehicle opcodes with
+//! commands (starts half the time with the kept setup's digest), sealed (valid checksum) frames of the track, track-zone and vehicle opcodes with
 //! arbitrary payloads, builds of requested runs (on the kept track and vehicle), and steps
 //! with arbitrary ADC sequences (or none). Invariants: a decoded frame re-encodes to the
 //! same payload; in Idle, Stopped and Fault every pulse train is silent and every wheel
@@ -142,7 +142,14 @@ fuzz_target!(|data: &[u8]| {
                 // A well-formed command frame (valid checksum) from a decoded command.
                 let f = frame(&mut b);
                 if let Ok(c) = CommandFrame::decode(&f) {
-                    let _ = rig.command(c.command);
+                    // Half the starts carry the kept setup's digest (else a run would
+                    // almost never start: a 16-bit digest to guess).
+                    let c = if b.u8() % 2 == 0 {
+                        rig.on_kept_setup(c.command)
+                    } else {
+                        c.command
+                    };
+                    let _ = rig.command(c);
                 }
             }
             2 | 3 => {

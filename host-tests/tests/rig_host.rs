@@ -29,6 +29,8 @@ fn start(speed_kmh: f32) -> Command {
         emergency: false,
         initial_speed_kmh: speed_kmh,
         track: false,
+        // A fresh board's setup: one rail, the default vehicle.
+        setup_digest: hils::decode::rig_core::digest::setup_digest(None, &Default::default()),
     }
 }
 
@@ -728,4 +730,68 @@ fn start_with_a_track_file_and_track_rejections() {
     ));
     let e = run_session(&mut s, &lines, false).unwrap_err();
     assert!(format!("{e:#}").contains("0.1 m grid"), "{e:#}");
+}
+
+/// A `Track` commit or `Vehicle` frame lost on the bus: the board keeps its earlier setup,
+/// the start (stamped by the host from all the frames it meant to send) is rejected with
+/// the reason, and the board does not run; resent in full, the start runs.
+#[test]
+fn a_lost_setup_frame_makes_the_start_rejected_not_a_wrong_run() {
+    use hils::decode::rig_core::can::{TrackCommand, VehicleKey, ZoneFrame};
+    use hils::rig::track::with_setup_digest;
+    use hils_plant::{Surface, Zone};
+    let zone = ZoneFrame::of(&Zone {
+        start_m: 20.0,
+        end_m: 40.0,
+        surface: Surface::Low,
+    })
+    .unwrap();
+    let setup = [
+        Command::Vehicle {
+            key: VehicleKey::Default,
+            value: 0.0,
+        },
+        Command::Vehicle {
+            key: VehicleKey::CarbodyMass,
+            value: 30_000.0,
+        },
+        Command::Track(TrackCommand::Clear),
+        Command::TrackZone { index: 0, zone },
+        Command::Track(TrackCommand::Commit {
+            base: Surface::Wet,
+            zones: 1,
+        }),
+    ];
+    let mut on_track = start(60.0);
+    if let Command::Start { track, .. } = &mut on_track {
+        *track = true;
+    }
+    let on_track = with_setup_digest(&setup, on_track).unwrap();
+    // Each frame that changes a fresh board's setup lost in turn: the variant's value, the
+    // zone (the commit is then refused: no track kept), the commit. (The Vehicle default
+    // and the Track clear change nothing on a fresh board: their loss is harmless here.)
+    for lost in [1, 3, 4] {
+        let mut s = session(SimFaults::default());
+        for (i, c) in setup.iter().enumerate() {
+            if i != lost {
+                s.command(*c).unwrap();
+            }
+        }
+        let o = s.command(on_track).unwrap();
+        assert!(!o.accepted, "frame {lost} lost: {o}");
+        assert!(
+            o.reason
+                .as_deref()
+                .unwrap()
+                .contains("differs from what was sent: a frame was lost; resend"),
+            "{o}"
+        );
+        assert_ne!(s.link.rig().state(), RigState::Running);
+        for c in &setup {
+            assert!(s.command(*c).unwrap().accepted);
+        }
+        assert!(s.command(on_track).unwrap().accepted);
+        assert_eq!(s.link.rig().state(), RigState::Running);
+        assert_eq!(s.link.rig().vehicle().0[0], Some(30_000.0));
+    }
 }

@@ -275,7 +275,8 @@ fn take_commands(rig: &mut StepRig) {
         }
     }
     while let Ok(c) = LOCAL_CMD.try_receive() {
-        if let Err(e) = rig.command(c) {
+        // A start made on the board (user button) runs on what the board keeps.
+        if let Err(e) = rig.command(rig.on_kept_setup(c)) {
             let _ = STEP_EVENTS.try_send(StepEvent::LocalCommandRejected(e));
         }
     }

@@ -519,6 +519,9 @@ pub mod command {
     pub const CONFIG_VALUE: Signal = Signal::raw("ConfigValue", 16, 16);
     /// Start: 1 = run on the track kept by `Track` commit (`StartRail` unused).
     pub const START_TRACK: Signal = Signal::raw("StartTrack", 13, 1);
+    /// Start: the setup digest ([`crate::digest::setup_digest`]) of the track and vehicle
+    /// the host sent; the board rejects the start when its own differs.
+    pub const START_DIGEST: Signal = Signal::raw("StartDigest", 32, 16);
     /// Brake: service brake step (BrakeDemand 3), 1-based.
     pub const SERVICE_STEP: Signal = Signal::raw("ServiceStep", 32, 8);
     /// Track zone: index 0-31 (the board keeps 0-15).
@@ -540,7 +543,7 @@ pub mod command {
     /// Vehicle: the value, IEEE f32 bits (SI units of the `[vehicle]` key).
     pub const VEHICLE_VALUE: Signal = Signal::raw("VehicleValue", 24, 32).signed();
     /// Every signal of the frame, multiplexed ones included.
-    pub const ALL: [Signal; 28] = [
+    pub const ALL: [Signal; 29] = [
         OPCODE,
         START_MODE,
         START_RAIL,
@@ -557,6 +560,7 @@ pub mod command {
         CONFIG_ITEM,
         CONFIG_VALUE,
         START_TRACK,
+        START_DIGEST,
         SERVICE_STEP,
         ZONE_INDEX,
         ZONE_SURFACE,
@@ -1031,6 +1035,10 @@ pub enum Command {
         initial_speed_kmh: f32,
         /// Run on the track kept by [`Command::Track`] commit (else one `rail` everywhere).
         track: bool,
+        /// [`crate::digest::setup_digest`] of the run's track (`None` unless `track`) and
+        /// vehicle as the sender set them up: a lost `Track` or `Vehicle` frame makes the
+        /// board's differ, and the start is rejected.
+        setup_digest: u16,
     },
     /// Opcode 2: stop the run (outputs to the safe state).
     Stop,
@@ -1073,7 +1081,9 @@ pub enum Command {
 }
 
 impl Command {
-    /// Start of the paper's scenario in self-test mode: 150 km/h, wet rail, EB at t = 0.
+    /// Start of the paper's scenario in self-test mode: 150 km/h, wet rail, EB at t = 0,
+    /// on the default vehicle (its [`crate::digest::setup_digest`]; the board's user button
+    /// stamps the kept vehicle's instead, [`crate::rig::Rig::on_kept_setup`]).
     pub fn paper_self_test(friction: FrictionModel) -> Command {
         Command::Start {
             mode: RigMode::SelfTest,
@@ -1082,6 +1092,7 @@ impl Command {
             emergency: true,
             initial_speed_kmh: 150.0,
             track: false,
+            setup_digest: crate::digest::setup_digest(None, &Default::default()),
         }
     }
 
@@ -1146,8 +1157,10 @@ impl CommandFrame {
                 emergency,
                 initial_speed_kmh,
                 track,
+                setup_digest,
             } => {
                 START_TRACK.put_raw(&mut d, track as u64);
+                START_DIGEST.put_raw(&mut d, setup_digest as u64);
                 START_MODE.put_raw(&mut d, u8::from(mode) as u64);
                 START_RAIL.put_raw(&mut d, rail_code(rail) as u64);
                 START_FRICTION.put_raw(&mut d, friction_code(friction) as u64);
@@ -1271,6 +1284,7 @@ fn decode_start(d: &[u8; 8]) -> Result<Command, DecodeError> {
         emergency: START_EMERGENCY.get_raw(d) == 1,
         initial_speed_kmh: START_SPEED.get(d),
         track: START_TRACK.get_raw(d) == 1,
+        setup_digest: START_DIGEST.get_raw(d) as u16,
     })
 }
 
@@ -1538,6 +1552,7 @@ mod tests {
                 emergency: true,
                 initial_speed_kmh: 150.0,
                 track: false,
+                setup_digest: 0,
             },
             Command::Start {
                 mode: RigMode::Rig,
@@ -1546,6 +1561,7 @@ mod tests {
                 emergency: false,
                 initial_speed_kmh: 80.25,
                 track: true,
+                setup_digest: 0xBEEF,
             },
             Command::Brake(BrakeCommand::ServiceStep { step: 7 }),
             Command::TrackZone {
@@ -1622,6 +1638,7 @@ mod tests {
                         friction,
                         emergency,
                         track,
+                        setup_digest,
                     },
                     Command::Start {
                         initial_speed_kmh: b,
@@ -1630,12 +1647,13 @@ mod tests {
                         friction: f2,
                         emergency: e2,
                         track: t2,
+                        setup_digest: d2,
                     },
                 ) => {
                     assert!((a - b).abs() < 0.006);
                     assert_eq!(
-                        (*mode, *rail, *friction, *emergency, *track),
-                        (m2, r2, f2, e2, t2)
+                        (*mode, *rail, *friction, *emergency, *track, *setup_digest),
+                        (m2, r2, f2, e2, t2, d2)
                     );
                 }
                 (

@@ -36,6 +36,7 @@ pub mod bus;
 pub mod can;
 pub mod can_timing;
 pub mod can_tx;
+pub mod digest;
 pub mod handoff;
 pub mod heartbeat;
 pub mod hw;

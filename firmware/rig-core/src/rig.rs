@@ -55,6 +55,7 @@ use crate::can::{
     DiagFrame, RigMode, RigState, StatusFrame, TrackCommand, VehicleKey, WHEEL_SPEED_MAX_KMH,
     WheelSpeedFrame, ZoneFrame, friction_code, rail_code, surface_code,
 };
+use crate::digest::setup_digest;
 use crate::hw::{RigIo, TelemetryEvent};
 use crate::pulse::{PulseRegisters, PulseTimer, wheel_frequency_hz};
 use crate::sensor::{CalibrationError, SensorChannel, SensorFault, SensorKind, split_sequence};
@@ -205,6 +206,13 @@ pub enum CommandError {
     },
     /// The calibration command was refused.
     Calibration(CalibrationError),
+    /// A `Start` whose `StartDigest` differs from the digest of the track and vehicle the
+    /// board keeps ([`crate::digest::setup_digest`]): a `Track` or `Vehicle` frame the
+    /// sender sent did not arrive. Nothing changes; the sender resends the setup.
+    SetupMismatch {
+        /// The digest of the board's setup.
+        kept: u16,
+    },
 }
 
 /// The simulation of a run.
@@ -296,6 +304,15 @@ impl TrackFrames {
 pub struct VehicleValues(pub [Option<f32>; 5]);
 
 impl VehicleValues {
+    /// What a `Vehicle` command does: sets `key`'s value, or all back to the default
+    /// (`VehicleKey::Default`).
+    pub fn set(&mut self, key: VehicleKey, value: f32) {
+        match VehicleKey::VALUES.iter().position(|k| *k == key) {
+            Some(i) => self.0[i] = Some(value),
+            None => *self = Self::default(),
+        }
+    }
+
     /// The default vehicle with these values.
     pub fn vehicle(&self) -> VehicleParams {
         let mut v = VehicleParams::default();
@@ -585,6 +602,25 @@ impl<S: SimStore> Rig<S> {
         &self.vehicle
     }
 
+    /// The setup digest of a run on the kept vehicle, on the kept track when `track`.
+    pub fn kept_setup_digest(&self, track: bool) -> u16 {
+        setup_digest(self.track.as_ref().filter(|_| track), &self.vehicle)
+    }
+
+    /// `command` with, if it is a `Start`, the digest of the kept setup: for starts made
+    /// on the board (user button), which run on whatever the board keeps.
+    pub fn on_kept_setup(&self, mut command: Command) -> Command {
+        if let Command::Start {
+            track,
+            setup_digest,
+            ..
+        } = &mut command
+        {
+            *setup_digest = self.kept_setup_digest(*track);
+        }
+        command
+    }
+
     /// `TrackZone`: keeps zone `index` for the next commit.
     fn track_zone(&mut self, index: u8, zone: ZoneFrame) -> Result<(), CommandError> {
         let slot = self
@@ -623,10 +659,7 @@ impl<S: SimStore> Rig<S> {
         if self.busy() {
             return Err(CommandError::NotNow(self.state));
         }
-        match VehicleKey::VALUES.iter().position(|k| *k == key) {
-            Some(i) => self.vehicle.0[i] = Some(value),
-            None => self.vehicle = VehicleValues::default(),
-        }
+        self.vehicle.set(key, value);
         Ok(())
     }
 
@@ -792,6 +825,7 @@ impl<S: SimStore> Rig<S> {
             emergency,
             initial_speed_kmh,
             track,
+            setup_digest,
         } = command
         else {
             return Ok(());
@@ -807,6 +841,11 @@ impl<S: SimStore> Rig<S> {
         }
         if mode == RigMode::Rig && self.sensors.iter().any(|s| s.fault().is_some()) {
             return Err(CommandError::SensorFaults);
+        }
+        // After the busy check: the CRC runs only on an idle board's step.
+        let kept = self.kept_setup_digest(track);
+        if setup_digest != kept {
+            return Err(CommandError::SetupMismatch { kept });
         }
         // The old run's simulation is no longer shown (plain data: nothing to drop).
         if let Some(sim) = self.sim_mut() {

@@ -91,6 +91,7 @@ pub fn cost_command(k: u32) -> Option<Command> {
             emergency: false,
             initial_speed_kmh: 120.0,
             track: false,
+            setup_digest: crate::digest::setup_digest(None, &Default::default()),
         },
         21_010 => inject(Some(InjectedFault::Open)),
         21_100 => inject(None),

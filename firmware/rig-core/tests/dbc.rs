@@ -293,7 +293,8 @@ proptest! {
     #[test]
     fn command_frame(pick in 0usize..12, a in 0u32..=16382, b in 0u32..=10000, ch in 0u8..4, k in 0u8..5,
                      flags in 0u8..32, gain in 0.001f32..1.0e6, counter in 0u8..16,
-                     zone in (0u32..(1 << 20), 0u32..(1 << 20), 0u8..32, 0u8..4, 1u8..=255)) {
+                     zone in (0u32..(1 << 20), 0u32..(1 << 20), 0u8..32, 0u8..4, 1u8..=255),
+                     digest in 0u16..=u16::MAX) {
         let surface = |c: u8| [Surface::Dry, Surface::Wet, Surface::Low, Surface::VeryLow][c as usize % 4];
         let command = match pick {
             0 => Command::Start {
@@ -303,6 +304,7 @@ proptest! {
                 emergency: flags & 8 != 0,
                 initial_speed_kmh: a as f32 * 0.01,
                 track: flags & 16 != 0,
+                setup_digest: digest,
             },
             1 => Command::Stop,
             2 => Command::Brake(match k % 4 {
@@ -336,8 +338,9 @@ proptest! {
             m.insert("CommandAlive", cf.counter as f64);
             m.insert("CommandChecksum", f.map(checksum_of).unwrap_or(0.0));
             match cf.command {
-                Command::Start { mode, rail, friction, emergency, initial_speed_kmh, track } => {
+                Command::Start { mode, rail, friction, emergency, initial_speed_kmh, track, setup_digest } => {
                     m.insert("StartTrack", track as u8 as f64);
+                    m.insert("StartDigest", setup_digest as f64);
                     m.insert("StartMode", mode as u8 as f64);
                     m.insert("StartRail", (rail == Rail::Dry) as u8 as f64);
                     m.insert("StartFriction", (friction == FrictionModel::Constant) as u8 as f64);

@@ -128,6 +128,11 @@ fn rig_run_started_at_3_kn() -> (Rig, MockBoard) {
     (rig, io)
 }
 
+/// The setup digest of a run on one rail with the default vehicle (a fresh rig's).
+fn default_setup_digest() -> u16 {
+    hils_rig_core::digest::setup_digest(None, &Default::default())
+}
+
 /// A rig-mode start (measured brake inputs) on the wet rail with Eq (2), no EB.
 fn rig_start(initial_speed_kmh: f32) -> Command {
     Command::Start {
@@ -137,6 +142,7 @@ fn rig_start(initial_speed_kmh: f32) -> Command {
         emergency: false,
         initial_speed_kmh,
         track: false,
+        setup_digest: default_setup_digest(),
     }
 }
 
@@ -475,6 +481,7 @@ fn each_plausibility_fault_stops_a_rig_run_and_self_test_only_reports() {
                     emergency: true,
                     initial_speed_kmh: 150.0,
                     track: false,
+                    setup_digest: default_setup_digest(),
                 },
             )
             .unwrap();
@@ -964,6 +971,7 @@ fn a_late_build_is_not_installed_under_a_later_start() {
         emergency,
         initial_speed_kmh: 80.0,
         track: false,
+        setup_digest: default_setup_digest(),
     };
     rig.command(first).unwrap();
     let req1 = rig.take_start_request().unwrap();

@@ -79,7 +79,15 @@ fn self_test_eb(speed_kmh: f32, track: bool) -> Command {
         emergency: true,
         initial_speed_kmh: speed_kmh,
         track,
+        setup_digest: 0,
     }
+}
+
+/// Sends a self-test EB start stamped with the digest of the rig's kept setup (the tests
+/// of tracks and vehicles; the digest's own tests send the digest of what they sent).
+fn start(rig: &mut Rig, n: &mut u8, speed_kmh: f32, track: bool) -> Result<(), CommandError> {
+    let c = rig.on_kept_setup(self_test_eb(speed_kmh, track));
+    send(rig, n, c)
 }
 
 /// Runs to standstill; the stopping distance (m, integrated from the vehicle speed) and
@@ -120,7 +128,7 @@ fn a_track_loaded_by_frames_puts_each_wheelset_on_its_zone() {
         .map(|z| z.zone())
         .collect();
     assert_eq!(kept, zones);
-    send(&mut rig, &mut n, self_test_eb(120.0, true)).unwrap();
+    start(&mut rig, &mut n, 120.0, true).unwrap();
     let (stop_change, seen) = run(&mut rig);
     // Wheelset 1 is on the dry zone from 120 m to 220 m (within one refresh, 4 steps), low
     // elsewhere; wheelset 4 (16.5 m behind: bogie base 14 m + wheel base 2.5 m) reaches
@@ -141,9 +149,9 @@ fn a_track_loaded_by_frames_puts_each_wheelset_on_its_zone() {
     // The same start on one low rail (the committed track, no zones), and on the dry rail
     // of the start frame (no track): the sudden change stops between the two.
     load(&mut rig, &mut n, Surface::Low, &[]).unwrap();
-    send(&mut rig, &mut n, self_test_eb(120.0, true)).unwrap();
+    start(&mut rig, &mut n, 120.0, true).unwrap();
     let (stop_low, _) = run(&mut rig);
-    send(&mut rig, &mut n, self_test_eb(120.0, false)).unwrap();
+    start(&mut rig, &mut n, 120.0, false).unwrap();
     let (stop_dry, seen_dry) = run(&mut rig);
     assert!(
         seen_dry
@@ -165,7 +173,7 @@ fn track_frames_are_refused_with_their_rule() {
     let mut n = 0;
     // Start on the kept track before one is kept.
     assert_eq!(
-        send(&mut rig, &mut n, self_test_eb(80.0, true)),
+        start(&mut rig, &mut n, 80.0, true),
         Err(CommandError::NoTrack)
     );
     // Zones out of order (the second starts before the first ends).
@@ -266,6 +274,98 @@ fn track_frames_are_refused_with_their_rule() {
     assert!(rig.track().is_none());
 }
 
+/// A `Track` commit or `Vehicle` frame lost on the bus leaves the board's kept setup as it
+/// was; the start, stamped with the digest of what the sender set up (`StartDigest`), is
+/// rejected (`SetupMismatch`) and nothing changes, instead of a run on the earlier setup
+/// with the previous command's `Accepted` showing.
+#[test]
+fn a_lost_commit_or_vehicle_frame_rejects_the_start() {
+    use hils_rig_core::digest::setup_digest;
+    use hils_rig_core::rig::{TrackFrames, VehicleValues};
+    let stamped = |track: Option<&TrackFrames>, vehicle: &VehicleValues| {
+        let mut c = self_test_eb(80.0, track.is_some());
+        if let Command::Start {
+            setup_digest: d, ..
+        } = &mut c
+        {
+            *d = setup_digest(track, vehicle);
+        }
+        c
+    };
+    // A rejected start changes nothing: no run requested, the kept setup as it was.
+    let rejected = |rig: &mut Rig, n: &mut u8, c: Command| {
+        let before = (rig.track().copied(), *rig.vehicle(), rig.state());
+        let on_track = matches!(c, Command::Start { track: true, .. });
+        let kept = setup_digest(before.0.as_ref().filter(|_| on_track), &before.1);
+        assert_eq!(send(rig, n, c), Err(CommandError::SetupMismatch { kept }));
+        assert_eq!(rig.take_start_request(), None);
+        assert_eq!((rig.track().copied(), *rig.vehicle(), rig.state()), before);
+    };
+    let stop = |rig: &mut Rig, n: &mut u8| {
+        send(rig, n, Command::Stop).unwrap();
+        rig.step(&mut Io); // the run's end record
+    };
+    let vehicle = |key, value| Command::Vehicle { key, value };
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut n = 0;
+    // Track A kept, vehicle variant 26 t.
+    load(
+        &mut rig,
+        &mut n,
+        Surface::Wet,
+        &[zone(10.0, 20.0, Surface::Low)],
+    )
+    .unwrap();
+    send(&mut rig, &mut n, vehicle(VehicleKey::CarbodyMass, 26_000.0)).unwrap();
+    // The host loads track B; its clear and its commit are lost: the board still has A.
+    let b = [
+        zone(30.0, 50.0, Surface::VeryLow),
+        zone(60.0, 70.0, Surface::Dry),
+    ];
+    let b_frames = b.map(|z| ZoneFrame::of(&z).unwrap());
+    for (i, zone) in b_frames.iter().enumerate() {
+        let c = Command::TrackZone {
+            index: i as u8,
+            zone: *zone,
+        };
+        send(&mut rig, &mut n, c).unwrap();
+    }
+    let track_b = TrackFrames::new(Surface::Dry, &b_frames).unwrap();
+    let mut sent = VehicleValues::default();
+    sent.set(VehicleKey::CarbodyMass, 26_000.0);
+    rejected(&mut rig, &mut n, stamped(Some(&track_b), &sent));
+    // Only the commit lost (the clear arrived): no track kept, rejected too.
+    let mut fresh = Rig::new(RigConfig::nucleo_g474re());
+    send(&mut fresh, &mut n, Command::Track(TrackCommand::Clear)).unwrap();
+    assert_eq!(
+        send(&mut fresh, &mut n, stamped(Some(&track_b), &sent)),
+        Err(CommandError::NoTrack)
+    );
+    // Resent: accepted, the run is on B.
+    commit(&mut rig, &mut n, Surface::Dry, 2).unwrap();
+    assert_eq!(rig.track(), Some(&track_b));
+    send(&mut rig, &mut n, stamped(Some(&track_b), &sent)).unwrap();
+    assert_eq!(rig.state(), RigState::Running);
+    stop(&mut rig, &mut n);
+    // A Vehicle default lost: the board keeps 26 t, the host started on the default vehicle.
+    rejected(&mut rig, &mut n, stamped(None, &VehicleValues::default()));
+    // A variant's value lost: the board has the default, the host sent 30 t.
+    send(&mut rig, &mut n, vehicle(VehicleKey::Default, 0.0)).unwrap();
+    let mut v30 = VehicleValues::default();
+    v30.set(VehicleKey::CarbodyMass, 30_000.0);
+    rejected(&mut rig, &mut n, stamped(None, &v30));
+    rejected(&mut rig, &mut n, stamped(Some(&track_b), &v30));
+    // A one-rail start does not depend on the kept track; the button's start (stamped
+    // with the kept setup) runs on whatever the board keeps.
+    send(&mut rig, &mut n, stamped(None, &VehicleValues::default())).unwrap();
+    assert_eq!(rig.state(), RigState::Running);
+    stop(&mut rig, &mut n);
+    send(&mut rig, &mut n, vehicle(VehicleKey::WheelRadius, 0.43)).unwrap();
+    let button = rig.on_kept_setup(Command::paper_self_test(FrictionModel::Variable));
+    rig.command(button).unwrap();
+    assert_eq!(rig.state(), RigState::Starting);
+}
+
 #[test]
 fn a_vehicle_variant_by_command_sets_the_run_s_axle_loads() {
     let mut rig = Rig::new(RigConfig::nucleo_g474re());
@@ -287,7 +387,7 @@ fn a_vehicle_variant_by_command_sets_the_run_s_axle_loads() {
             },
         };
         send(&mut rig, &mut n, c).unwrap();
-        send(&mut rig, &mut n, self_test_eb(60.0, false)).unwrap();
+        start(&mut rig, &mut n, 60.0, false).unwrap();
         rig.step(&mut Io);
         let q: f64 = rig
             .outputs()
@@ -304,7 +404,7 @@ fn a_vehicle_variant_by_command_sets_the_run_s_axle_loads() {
         rig.step(&mut Io); // the run's end record
     }
     // Not while a run is active; a value outside the plant's range fails the start.
-    send(&mut rig, &mut n, self_test_eb(60.0, false)).unwrap();
+    start(&mut rig, &mut n, 60.0, false).unwrap();
     assert_eq!(
         send(&mut rig, &mut n, Command::Vehicle { key, value: 1.0 }),
         Err(CommandError::NotNow(RigState::Running))
@@ -313,7 +413,7 @@ fn a_vehicle_variant_by_command_sets_the_run_s_axle_loads() {
     rig.step(&mut Io);
     send(&mut rig, &mut n, Command::Vehicle { key, value: 1.0 }).unwrap();
     assert!(matches!(
-        send(&mut rig, &mut n, self_test_eb(60.0, false)),
+        start(&mut rig, &mut n, 60.0, false),
         Err(CommandError::Build(_))
     ));
     assert_ne!(rig.state(), RigState::Running);

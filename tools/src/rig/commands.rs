@@ -91,6 +91,11 @@ fn sensor_channels(faults: u16) -> Vec<String> {
         .collect()
 }
 
+/// Why the board rejects a `Start` whose `StartDigest` differs from its kept setup
+/// (`hils_rig_core::rig::CommandError::SetupMismatch`).
+const SETUP_MISMATCH: &str =
+    "the board's track/vehicle differs from what was sent: a frame was lost; resend";
+
 /// Why the board (`hils_rig_core::rig::Rig::command`) rejects `command` in the state the
 /// status frame `before` shows; `None` when no rule applies.
 pub fn rejection_reason(command: &Command, before: &StatusFrame) -> Option<String> {
@@ -114,9 +119,11 @@ pub fn rejection_reason(command: &Command, before: &StatusFrame) -> Option<Strin
                     sensor_channels(before.faults).join(", ")
                 ))
             } else if *track {
-                Some("no track kept on the board: send its zones and commit it first (`--track FILE`)".into())
+                Some(format!(
+                    "no track kept on the board (send its zones and commit it first, `--track FILE`), or {SETUP_MISMATCH}"
+                ))
             } else {
-                None
+                Some(SETUP_MISMATCH.into())
             }
         }
         Command::TrackZone { index, .. } if *index as usize >= MAX_ZONES => Some(format!(
@@ -125,7 +132,8 @@ pub fn rejection_reason(command: &Command, before: &StatusFrame) -> Option<Strin
         Command::Track(TrackCommand::Commit { zones, .. }) => Some(format!(
             "the board refused the track of {zones} zone(s): more than {MAX_ZONES}, a zone of 0..{zones} not received since the last commit, or zones empty, out of order or overlapping"
         )),
-        Command::Vehicle { .. } if running => Some("not allowed during a run".into()),
+        // The first frame of a `start` (its default vehicle): the start's wording.
+        Command::Vehicle { .. } if running => Some("a run is active: stop it first".into()),
         Command::Stop if !running => Some(format!(
             "no run to stop (state {})",
             state_name(before.state)

@@ -36,6 +36,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use hils_plant::{FrictionModel, Rail};
 use hils_rig_core::can::{
     BrakeCommand, Calibration, ClassicFrame, Command, ConfigItem, InjectedFault, RigMode, RigState,
+    VehicleKey,
 };
 use hils_rig_core::sensor::SensorKind;
 
@@ -258,16 +259,32 @@ fn channel(c: u8) -> Result<u8> {
     }
 }
 
-/// The `RIG_COMMAND`s of a line, in order (none for lines that send nothing): `start
-/// --track FILE` sends the track's zones and commit before the start.
+/// The `RIG_COMMAND`s of a line, in order (none for lines that send nothing): `start`
+/// sends the default vehicle (`Vehicle` default: no variant is asked for) and, with
+/// `--track FILE`, the track (clear, zones, commit) before the start, whose `StartDigest`
+/// is the digest of that setup ([`track::with_setup_digest`]).
 pub fn commands_of(line: &Line) -> Result<Vec<Command>> {
     let mut out = Vec::new();
-    if let Line::Start(StartArgs { track: Some(t), .. }) = line {
-        let (track, sets) = track::load_track_file(t)?;
-        out = track::track_commands(&track, &sets)
-            .with_context(|| format!("--track {}", t.display()))?;
+    if let Line::Start(a) = line {
+        out.push(Command::Vehicle {
+            key: VehicleKey::Default,
+            value: 0.0,
+        });
+        if let Some(t) = &a.track {
+            let (track, sets) = track::load_track_file(t)?;
+            out.extend(
+                track::track_commands(&track, &sets)
+                    .with_context(|| format!("--track {}", t.display()))?,
+            );
+        }
     }
-    out.extend(command_of(line)?);
+    match command_of(line)? {
+        Some(start @ Command::Start { .. }) => {
+            let start = track::with_setup_digest(&out, start)?;
+            out.push(start);
+        }
+        c => out.extend(c),
+    }
     Ok(out)
 }
 
@@ -284,6 +301,8 @@ fn command_of(line: &Line) -> Result<Option<Command>> {
             friction: a.friction.model(),
             emergency: a.eb,
             initial_speed_kmh: a.speed_kmh,
+            // Stamped by `commands_of` from the setup sent before it.
+            setup_digest: 0,
         },
         Line::Stop => Command::Stop,
         Line::Brake { demand, decel_mps2 } => Command::Brake(match (demand, decel_mps2) {

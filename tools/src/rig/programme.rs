@@ -261,6 +261,8 @@ fn run_one<T: Transport>(
         emergency: false,
         initial_speed_kmh: (run.speed_mps * hils_sil::KMH_PER_MPS) as f32,
         track: true,
+        // Stamped below from the setup sent before it.
+        setup_digest: 0,
     };
     let demand = plan.demand;
     let mut stop = None;
@@ -279,7 +281,7 @@ fn run_one<T: Transport>(
         for c in &plan.setup {
             send(s, *c)?;
         }
-        send(s, start)?;
+        send(s, super::track::with_setup_digest(&plan.setup, start)?)?;
         send(s, Command::Brake(demand))?;
         let mut running = true;
         s.run_for(args.max_run_s, |_, seen| match seen {

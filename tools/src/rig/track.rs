@@ -18,6 +18,8 @@ use hils_plant::{Params, Track};
 use hils_rig_core::can::{
     Command, TrackCommand, VehicleKey, ZONE_MAX_M, ZONE_RESOLUTION_M, ZoneFrame,
 };
+use hils_rig_core::digest::setup_digest;
+use hils_rig_core::rig::{TrackFrames, VehicleValues};
 use hils_sil::ParamFile;
 
 use crate::wsp::metrics::AvailableAdhesion;
@@ -39,7 +41,9 @@ pub fn load_track_file(path: &Path) -> Result<(Track, ContactSets)> {
     Ok((track, spec.sets))
 }
 
-/// The frames that put `track` on the board (zones, then the commit), or why it cannot go.
+/// The frames that put `track` on the board (a clear, the zones, then the commit), or why
+/// it cannot go. The clear first: zones left from an earlier, unfinished load are not
+/// committed with this track's.
 pub fn track_commands(track: &Track, sets: &ContactSets) -> Result<Vec<Command>> {
     if *sets != ContactSets::default() {
         bail!("the track's own low/very-low contact sets: the board has the documented ones only");
@@ -47,7 +51,8 @@ pub fn track_commands(track: &Track, sets: &ContactSets) -> Result<Vec<Command>>
     if track.zones().len() > MAX_ZONES {
         bail!("a track on the board holds at most {MAX_ZONES} zones");
     }
-    let mut out = Vec::with_capacity(track.zones().len() + 1);
+    let mut out = Vec::with_capacity(track.zones().len() + 2);
+    out.push(Command::Track(TrackCommand::Clear));
     for (i, z) in track.zones().iter().enumerate() {
         let zone = ZoneFrame::of(z).ok_or_else(|| {
             anyhow!(
@@ -67,6 +72,47 @@ pub fn track_commands(track: &Track, sets: &ContactSets) -> Result<Vec<Command>>
         zones: track.zones().len() as u8,
     }));
     Ok(out)
+}
+
+/// `start` with the setup digest of what `setup` (the frames sent before it, from a
+/// `Track` clear and a `Vehicle` default on) leaves on a board that received them all:
+/// the track and vehicle built by rig-core's own rules (`TrackFrames::new`,
+/// `VehicleValues::set`). A lost frame makes the board's digest differ: the start is
+/// rejected instead of running an earlier setup.
+pub fn with_setup_digest(setup: &[Command], mut start: Command) -> Result<Command> {
+    let mut zones = [ZoneFrame::default(); MAX_ZONES];
+    let mut kept: Option<TrackFrames> = None;
+    let mut vehicle = VehicleValues::default();
+    for c in setup {
+        match *c {
+            Command::TrackZone { index, zone } => {
+                *zones
+                    .get_mut(index as usize)
+                    .ok_or_else(|| anyhow!("zone index {index} above {MAX_ZONES}"))? = zone;
+            }
+            Command::Track(TrackCommand::Clear) => kept = None,
+            Command::Track(TrackCommand::Commit { base, zones: n }) => {
+                let sent = zones
+                    .get(..n as usize)
+                    .ok_or_else(|| anyhow!("a track of {n} zones: at most {MAX_ZONES}"))?;
+                kept = Some(TrackFrames::new(base, sent).map_err(|e| anyhow!("track: {e}"))?);
+            }
+            Command::Vehicle { key, value } => vehicle.set(key, value),
+            _ => {}
+        }
+    }
+    if let Command::Start {
+        track,
+        setup_digest: digest,
+        ..
+    } = &mut start
+    {
+        if *track && kept.is_none() {
+            bail!("a start on a track, but no track commit is sent before it");
+        }
+        *digest = setup_digest(kept.as_ref().filter(|_| *track), &vehicle);
+    }
+    Ok(start)
 }
 
 /// The frames that set the board's vehicle to `vehicle` (the default vehicle, then each
