@@ -404,7 +404,7 @@ pub fn summary_table(rig: &[RigRun], sil: &[Outcome]) -> String {
                 if !r.not_measured.is_empty() {
                     let _ = writeln!(
                         not_judged,
-                        "- {} (rig): not measured (the log has no WSP vent commands): {}",
+                        "- {} (rig): not measured, not judged (the log has no WSP valve states; a hold shows in no pressure): {}",
                         r.name,
                         r.not_measured.join(", ")
                     );
