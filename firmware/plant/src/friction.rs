@@ -12,6 +12,8 @@ pub struct DiscPadFriction<F> {
     variable: bool,
     /// c mu_d0 (variable model) or mu_d0 (constant).
     c_mu_d0: F,
+    /// c mu_d0 n_T (variable model): the temperature bracket with c mu_d0 folded in.
+    c_mu_d0_n_t: F,
     n_v: F,
     m_v: F,
     n_t: F,
@@ -31,6 +33,7 @@ impl<F: Real> DiscPadFriction<F> {
             } else {
                 p.mu_d0
             }),
+            c_mu_d0_n_t: F::of(p.correction_c * p.mu_d0 * p.n_t),
             n_v: F::of(if variable { p.n_v } else { 0.0 }),
             m_v: F::of(if variable { p.m_v } else { 0.0 }),
             n_t: F::of(p.n_t),
@@ -70,6 +73,17 @@ impl<F: Real> DiscPadFriction<F> {
         }
     }
 
+    /// c mu_d0 times [`Self::temperature_factor_tracked`] (c mu_d0 folded in: the plant's
+    /// refresh in turn), mu_d0 with the constant model; for [`Self::mu_d_scaled_tracked`].
+    #[inline(always)]
+    pub fn scaled_temperature_factor_tracked(&self, t_d: F, decay: &mut TrackedExp<F>) -> F {
+        if self.variable {
+            self.c_mu_d0_n_t * decay.exp(-self.m_t * t_d) + self.c_mu_d0
+        } else {
+            self.c_mu_d0
+        }
+    }
+
     /// The tracker of the temperature factor's e^(-m_T T_d), anchored at `t_d` (degC).
     pub fn temperature_decay_at(&self, t_d: F) -> TrackedExp<F> {
         TrackedExp::at(-self.m_t * t_d)
@@ -98,6 +112,20 @@ impl<F: Real> DiscPadFriction<F> {
         decay: &mut TrackedExp<F>,
     ) -> F {
         self.mu_d_with_decay(|x: F| decay.exp(x), v_d, temperature_factor, f_clamp)
+    }
+
+    /// [`Self::mu_d_tracked`] with the temperature factor times c mu_d0 given
+    /// ([`Self::scaled_temperature_factor_tracked`]): one product less per call.
+    #[inline(always)]
+    pub fn mu_d_scaled_tracked(
+        &self,
+        v_d: F,
+        scaled_temperature_factor: F,
+        f_clamp: F,
+        decay: &mut TrackedExp<F>,
+    ) -> F {
+        let speed_factor = self.n_v * decay.exp(-self.m_v * v_d.abs()) + F::ONE;
+        speed_factor * scaled_temperature_factor * (F::ONE + self.k_p_per_n * f_clamp)
     }
 
     /// Eq (2) with the speed factor's e^x from `exp`.

@@ -214,6 +214,8 @@ pub struct Energy {
 struct Constants<F> {
     dt: F,
     g_along: F,
+    /// dt g_along: the gradient's velocity increment over a step, m/s.
+    dt_g_along: F,
     /// Gradient force on the carbody, one bogie and one wheelset, m g_along, N.
     grade_force_c: F,
     grade_force_b: F,
@@ -227,10 +229,8 @@ struct Constants<F> {
     dt_inv_m_b: F,
     dt_inv_i_b: F,
     m_b: F,
-    inv_m_b: F,
     inv_i_b: F,
     m_w: F,
-    inv_m_w: F,
     i_w: F,
     r: F,
     inv_r: F,
@@ -275,6 +275,8 @@ struct Constants<F> {
     caliper: Caliper<F>,
     thermal: DiscThermal<F>,
     friction_radius: F,
+    /// dt / (c_p m_disc): disc temperature rise per step per watt (Eqs 3, 6).
+    dt_inv_disc_heat_capacity: F,
 }
 
 /// The integrated state.
@@ -312,8 +314,9 @@ struct WheelsetStep<F> {
     /// Primary vertical force deviation on the bogie and longitudinal force, N.
     f_pv: F,
     f_pl: F,
-    /// Wheelset acceleration, m/s^2, and brake torque, N m.
-    a_w: F,
+    /// Wheelset velocity increment over the step (dt times its acceleration), m/s, and
+    /// brake torque, N m.
+    dv_w: F,
     brake_torque: F,
 }
 
@@ -328,7 +331,7 @@ struct WheelsetState<F: Real> {
     disc_temp: F,
     /// Pad force state of the actuator-lag extension.
     pad_force: F,
-    /// Eq (2) temperature bracket (refreshed in turn).
+    /// Eq (2) temperature bracket times c mu_d0 (refreshed in turn).
     temperature_factor: F,
     /// Eq (5) loss coefficient alpha + beta v_w^0.8, W/K (refreshed in turn).
     heat_loss: F,
@@ -503,6 +506,7 @@ impl<F: Real> Plant<F> {
         Ok(Constants {
             dt: F::of(dt),
             g_along: F::of(g_along),
+            dt_g_along: F::of(dt * g_along),
             grade_force_c: F::of(g_along * v.carbody_mass),
             grade_force_b: F::of(g_along * v.bogie_mass),
             grade_force_w: F::of(g_along * v.wheelset_mass),
@@ -514,10 +518,8 @@ impl<F: Real> Plant<F> {
             dt_inv_m_b: F::of(dt / v.bogie_mass),
             dt_inv_i_b: F::of(dt / v.bogie_pitch_inertia),
             m_b: F::of(v.bogie_mass),
-            inv_m_b: F::of(1.0 / v.bogie_mass),
             inv_i_b: F::of(1.0 / v.bogie_pitch_inertia),
             m_w: F::of(v.wheelset_mass),
-            inv_m_w: F::of(1.0 / v.wheelset_mass),
             i_w: F::of(v.wheelset_spin_inertia),
             r: F::of(r),
             inv_r: F::of(1.0 / r),
@@ -555,6 +557,7 @@ impl<F: Real> Plant<F> {
             caliper,
             thermal: DiscThermal::new(&p.thermal),
             friction_radius: F::of(p.brake.friction_radius),
+            dt_inv_disc_heat_capacity: DiscThermal::step_gain(&p.thermal, dt),
         })
     }
 
@@ -565,8 +568,11 @@ impl<F: Real> Plant<F> {
         self.s.v_c = v0;
         for w in self.s.w.iter_mut() {
             w.disc_temp = disc_temp;
-            w.temperature_factor = self.k.friction.temperature_factor(disc_temp);
             w.temperature_decay = self.k.friction.temperature_decay_at(disc_temp);
+            w.temperature_factor = self
+                .k
+                .friction
+                .scaled_temperature_factor_tracked(disc_temp, &mut w.temperature_decay);
             w.heat_loss = self.k.thermal.loss_coefficient(v0);
             w.speed_power = self.k.thermal.speed_power_at(v0);
             w.speed_decay = self
@@ -717,7 +723,7 @@ impl<F: Real> Plant<F> {
                 q: F::ZERO,
                 f_pv: F::ZERO,
                 f_pl: F::ZERO,
-                a_w: F::ZERO,
+                dv_w: F::ZERO,
                 brake_torque: F::ZERO,
             }
         });
@@ -762,7 +768,7 @@ impl<F: Real> Plant<F> {
             let w = &mut s.w[slow];
             w.temperature_factor = k
                 .friction
-                .temperature_factor_tracked(w.disc_temp, &mut w.temperature_decay);
+                .scaled_temperature_factor_tracked(w.disc_temp, &mut w.temperature_decay);
         } else {
             let w = &mut s.w[slow];
             w.heat_loss = k
@@ -793,7 +799,7 @@ impl<F: Real> Plant<F> {
             if !(ws[j].q > F::ZERO) {
                 flags |= Flags::wheelset_bit(Flags::WHEEL_UNLOADED, j);
             }
-            let mu_d = k.friction.mu_d_tracked(
+            let mu_d = k.friction.mu_d_scaled_tracked(
                 ws[j].omega * k.friction_radius,
                 s.w[j].temperature_factor,
                 ws[j].clamp,
@@ -808,10 +814,11 @@ impl<F: Real> Plant<F> {
             // The brake torque T opposes the spin up to the kinetic torque and holds the
             // wheel (omega' = 0) when that suffices.
             let chord = contact.chord;
-            let a_explicit = ws[j].f_pl * k.inv_m_w - k.g_along;
+            // dt times the explicit acceleration (dt folded into 1/m_w and g_along).
+            let dv_explicit = ws[j].f_pl * k.dt_inv_m_w - k.dt_g_along;
             let d = F::ONE + chord * k.dt_spin_compliance;
             let inv_d = F::ONE / d;
-            let u0 = (s.w[j].slip + dt * a_explicit) * inv_d;
+            let u0 = (s.w[j].slip + dv_explicit) * inv_d;
             let omega0 = ws[j].omega + chord * u0 * k.dt_r_inv_i_w;
             let g = k.dt_inv_i_w * (F::ONE + chord * k.dt_inv_m_w) * inv_d;
             let limit = g * torque_kinetic;
@@ -824,12 +831,12 @@ impl<F: Real> Plant<F> {
             };
             let u_new = u0 + torque * k.dt_r_inv_i_w * inv_d;
             let force = chord * u_new;
-            ws[j].a_w = a_explicit - force * k.inv_m_w;
+            ws[j].dv_w = dv_explicit - force * k.dt_inv_m_w;
             ws[j].brake_torque = torque;
 
             let w = &mut self.out.wheelsets[j];
             w.omega = omega_new;
-            w.speed = ws[j].v_w + dt * ws[j].a_w;
+            w.speed = ws[j].v_w + ws[j].dv_w;
             w.slip_velocity = u_new;
             w.creepage = contact.creepage;
             w.axle_load = ws[j].q;
@@ -845,10 +852,10 @@ impl<F: Real> Plant<F> {
             s.w[j].slip = u_new;
 
             // Disc heat balance, Eqs (3)-(6) (explicit: time constant of minutes).
-            let rate = k
-                .thermal
-                .rate_with(w.brake_power, s.w[j].disc_temp, s.w[j].heat_loss);
-            s.w[j].disc_temp += dt * rate;
+            let heat_flow =
+                k.thermal
+                    .net_heat_flow(w.brake_power, s.w[j].disc_temp, s.w[j].heat_loss);
+            s.w[j].disc_temp += heat_flow * k.dt_inv_disc_heat_capacity;
             w.disc_temp = s.w[j].disc_temp;
         }
 
@@ -868,12 +875,13 @@ impl<F: Real> Plant<F> {
         }
         let dpitch_rate_c = moment_c * k.dt_inv_i_c;
 
-        let mut a_b = [F::ZERO; 2];
+        // Bogie velocity increments over the step (dt/m_b and dt g_along folded).
+        let mut dv_b = [F::ZERO; 2];
         let mut dvz_b = [F::ZERO; 2];
         let mut dpitch_rate_b = [F::ZERO; 2];
         for i in 0..2 {
             let (j0, j1) = (2 * i, 2 * i + 1);
-            a_b[i] = (f_sl[i] - ws[j0].f_pl - ws[j1].f_pl) * k.inv_m_b - k.g_along;
+            dv_b[i] = (f_sl[i] - ws[j0].f_pl - ws[j1].f_pl) * k.dt_inv_m_b - k.dt_g_along;
             dvz_b[i] = (ws[j0].f_pv + ws[j1].f_pv - f_sv[i]) * k.dt_inv_m_b;
             // Moments: primary vertical at +-b/2, primary longitudinal (-f_pl on the bogie)
             // at pz_pl, secondary longitudinal at pz_sl, brake reactions -T_b.
@@ -887,7 +895,8 @@ impl<F: Real> Plant<F> {
         }
 
         // ---- Integrate (symplectic Euler: velocities, then positions) ----
-        kahan_add(&mut s.v_c, &mut s.v_c_comp, a_c * dt);
+        let dv_c = a_c * dt;
+        kahan_add(&mut s.v_c, &mut s.v_c_comp, dv_c);
         let v_c_new = s.v_c;
         kahan_add(&mut s.x_c, &mut s.x_c_comp, v_c_new * dt);
         s.vz_c += dvz_c;
@@ -895,7 +904,7 @@ impl<F: Real> Plant<F> {
         s.pitch_rate_c += dpitch_rate_c;
         s.pitch_c += s.pitch_rate_c * dt;
         for i in 0..2 {
-            s.dv_b[i] += (a_b[i] - a_c) * dt;
+            s.dv_b[i] += dv_b[i] - dv_c;
             s.dx_b[i] += s.dv_b[i] * dt;
             s.vz_b[i] += dvz_b[i];
             s.z_b[i] += s.vz_b[i] * dt;
@@ -903,7 +912,7 @@ impl<F: Real> Plant<F> {
             s.pitch_b[i] += s.pitch_rate_b[i] * dt;
         }
         for j in 0..WHEELSETS {
-            s.w[j].dv += (ws[j].a_w - a_b[j / 2]) * dt;
+            s.w[j].dv += ws[j].dv_w - dv_b[j / 2];
             s.w[j].dx += s.w[j].dv * dt;
         }
 

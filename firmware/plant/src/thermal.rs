@@ -63,6 +63,18 @@ impl<F: Real> DiscThermal<F> {
     /// dT_d/dt with a precomputed [`Self::loss_coefficient`].
     #[inline(always)]
     pub fn rate_with(&self, brake_power: F, t_d: F, loss_coefficient: F) -> F {
-        (self.heat_partition * brake_power - loss_coefficient * t_d) * self.inv_heat_capacity
+        self.net_heat_flow(brake_power, t_d, loss_coefficient) * self.inv_heat_capacity
+    }
+
+    /// E_br - Q_cond - Q_conv of Eq (3), W, with a precomputed [`Self::loss_coefficient`]
+    /// (the plant multiplies it by dt / (c_p m_disc), folded: [`Self::step_gain`]).
+    #[inline(always)]
+    pub fn net_heat_flow(&self, brake_power: F, t_d: F, loss_coefficient: F) -> F {
+        self.heat_partition * brake_power - loss_coefficient * t_d
+    }
+
+    /// dt / (c_p m_disc), K/(W step): the temperature rise over a step `dt_s` per watt.
+    pub fn step_gain(p: &ThermalParams, dt_s: f64) -> F {
+        F::of(dt_s / (p.specific_heat * p.disc_mass))
     }
 }
