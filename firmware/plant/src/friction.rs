@@ -114,17 +114,30 @@ impl<F: Real> DiscPadFriction<F> {
         self.mu_d_with_decay(|x: F| decay.exp(x), v_d, temperature_factor, f_clamp)
     }
 
+    /// -m_v l_p, s: the exponent of Eq (2)'s speed factor per rad/s of wheel spin (friction
+    /// radius `friction_radius_m` folded in; 0 with the constant model).
+    pub fn speed_exponent_per_spin(p: &FrictionParams, friction_radius_m: f64) -> F {
+        let variable = p.model == FrictionModel::Variable;
+        F::of(if variable {
+            -p.m_v * friction_radius_m
+        } else {
+            0.0
+        })
+    }
+
     /// [`Self::mu_d_tracked`] with the temperature factor times c mu_d0 given
-    /// ([`Self::scaled_temperature_factor_tracked`]): one product less per call.
+    /// ([`Self::scaled_temperature_factor_tracked`]) and the speed factor's exponent
+    /// -m_v |v_d| given ([`Self::speed_exponent_per_spin`] times |omega|): two products
+    /// less per call.
     #[inline(always)]
     pub fn mu_d_scaled_tracked(
         &self,
-        v_d: F,
+        speed_exponent: F,
         scaled_temperature_factor: F,
         f_clamp: F,
         decay: &mut TrackedExp<F>,
     ) -> F {
-        let speed_factor = self.n_v * decay.exp(-self.m_v * v_d.abs()) + F::ONE;
+        let speed_factor = self.n_v * decay.exp(speed_exponent) + F::ONE;
         speed_factor * scaled_temperature_factor * (F::ONE + self.k_p_per_n * f_clamp)
     }
 

@@ -275,6 +275,8 @@ struct Constants<F> {
     caliper: Caliper<F>,
     thermal: DiscThermal<F>,
     friction_radius: F,
+    /// -m_v l_p: Eq (2)'s speed exponent per rad/s of wheel spin, s.
+    speed_exponent_per_spin: F,
     /// dt / (c_p m_disc): disc temperature rise per step per watt (Eqs 3, 6).
     dt_inv_disc_heat_capacity: F,
 }
@@ -557,6 +559,10 @@ impl<F: Real> Plant<F> {
             caliper,
             thermal: DiscThermal::new(&p.thermal),
             friction_radius: F::of(p.brake.friction_radius),
+            speed_exponent_per_spin: DiscPadFriction::speed_exponent_per_spin(
+                &p.friction,
+                p.brake.friction_radius,
+            ),
             dt_inv_disc_heat_capacity: DiscThermal::step_gain(&p.thermal, dt),
         })
     }
@@ -800,7 +806,7 @@ impl<F: Real> Plant<F> {
                 flags |= Flags::wheelset_bit(Flags::WHEEL_UNLOADED, j);
             }
             let mu_d = k.friction.mu_d_scaled_tracked(
-                ws[j].omega * k.friction_radius,
+                k.speed_exponent_per_spin * ws[j].omega.abs(),
                 s.w[j].temperature_factor,
                 ws[j].clamp,
                 &mut s.w[j].speed_decay,
