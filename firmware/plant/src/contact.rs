@@ -15,11 +15,14 @@ pub struct Polach<F> {
     /// mu_0 A = mu_inf (Eq 11).
     mu_inf: F,
     b_exp: F,
-    /// (2/3) C pi a^2 b, N: Eq (10) reads eps = stiffness s / (Q mu).
-    stiffness: F,
     creep_speed_floor: F,
-    /// (2/pi) times `stiffness`, N (Eq 9 times Eq 10, folded).
-    two_over_pi_stiffness: F,
+    /// k_A and k_s times the stiffness (2/3) C pi a^2 b, N (Eq 10 reads
+    /// eps = stiffness s / (Q mu)): k_A eps and k_s eps from s / (Q mu) (Eq 10 folded).
+    k_a_stiffness: F,
+    k_s_stiffness: F,
+    /// (2/pi) `stiffness` k_A and k_s, N (Eq 9 times Eq 10, folded into the chord's terms).
+    two_over_pi_stiffness_k_a: F,
+    two_over_pi_stiffness_k_s: F,
 }
 
 /// The contact of one wheelset (two wheels lumped: Q is the axle load).
@@ -63,9 +66,11 @@ impl<F: Real> Polach<F> {
             mu_decaying: F::of(set.mu_0 * (1.0 - set.a_ratio)),
             mu_inf: F::of(set.mu_0 * set.a_ratio),
             b_exp: F::of(set.b_exp),
-            stiffness: F::of(stiffness),
             creep_speed_floor: F::of(contact.creep_speed_floor),
-            two_over_pi_stiffness: F::of(2.0 / core::f64::consts::PI * stiffness),
+            k_a_stiffness: F::of(set.k_a * stiffness),
+            k_s_stiffness: F::of(set.k_s * stiffness),
+            two_over_pi_stiffness_k_a: F::of(2.0 / core::f64::consts::PI * stiffness * set.k_a),
+            two_over_pi_stiffness_k_s: F::of(2.0 / core::f64::consts::PI * stiffness * set.k_s),
         }
     }
 
@@ -114,13 +119,13 @@ impl<F: Real> Polach<F> {
         let inv_v_load_mu = F::ONE / (v_floor * load_mu);
         let inv_v_floor = load_mu * inv_v_load_mu;
         let creepage = slip_velocity * inv_v_floor;
-        let eps = self.stiffness * slip_velocity * inv_v_load_mu;
-        let x_a = self.k_a * eps;
-        let x_s = self.k_s * eps;
-        let adhesion_part = self.k_a / (F::ONE + x_a * x_a);
+        // k_A eps and k_s eps (Eq 10 with the stiffness folded into k_A and k_s).
+        let slip_per_v_load_mu = slip_velocity * inv_v_load_mu;
+        let x_a = self.k_a_stiffness * slip_per_v_load_mu;
+        let x_s = self.k_s_stiffness * slip_per_v_load_mu;
+        let adhesion_part = self.two_over_pi_stiffness_k_a / (F::ONE + x_a * x_a);
         let atan_over_x = x_s.atan_over_x();
-        let chord =
-            self.two_over_pi_stiffness * inv_v_floor * (adhesion_part + self.k_s * atan_over_x);
+        let chord = (adhesion_part + self.two_over_pi_stiffness_k_s * atan_over_x) * inv_v_floor;
         ContactForce {
             force: chord * slip_velocity,
             chord,
