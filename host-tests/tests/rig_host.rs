@@ -416,15 +416,28 @@ fn programme_runs_each_run_on_the_board_and_reports() {
         runs[0]["estimated_from_cylinder_pressure"],
         serde_json::json!(["air_consumption_l"])
     );
-    assert_eq!(runs[0]["not_measured"], serde_json::json!(["wsp_timer_actions"]));
+    assert_eq!(
+        runs[0]["not_measured"],
+        serde_json::json!(["wsp_timer_actions"])
+    );
     assert_eq!(runs[0]["passed"], false, "{}", runs[0]);
     let criteria = runs[0]["criteria"].as_array().unwrap();
     let timer = criteria
         .iter()
-        .find(|c| c["criterion"].as_str().unwrap().starts_with("wsp_timer_actions"))
+        .find(|c| {
+            c["criterion"]
+                .as_str()
+                .unwrap()
+                .starts_with("wsp_timer_actions")
+        })
         .unwrap();
     assert_eq!(timer["passed"], false);
-    assert!(timer["criterion"].as_str().unwrap().ends_with("(not measured: not judged)"));
+    assert!(
+        timer["criterion"]
+            .as_str()
+            .unwrap()
+            .ends_with("(not measured: not judged)")
+    );
     // The low-adhesion track runs on the board.
     assert_eq!(runs[1]["on_rig"], true, "{}", runs[1]);
     assert_eq!(runs[1]["end"], "finished");

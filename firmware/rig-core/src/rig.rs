@@ -503,6 +503,16 @@ pub struct Rig<S: SimStore = Simulation> {
     start_seq: u32,
     /// Builds that came back for a request no longer pending (not installed).
     stale_builds: u32,
+    /// The track and vehicle kept for the following runs.
+    setup: KeptSetup,
+}
+
+/// What the board keeps for the following runs from `TrackZone`, `Track` and `Vehicle`
+/// commands: the zones received since the last commit or clear, the committed track and the
+/// vehicle values. The rig holds one; the host replays the frames it sent through one to
+/// stamp a `Start` with the digest the board will compute ([`KeptSetup::digest`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct KeptSetup {
     /// Track zones received since the last commit or clear, and which (bit i: zone i).
     zones: [ZoneFrame; MAX_ZONES],
     zones_received: u16,
@@ -510,6 +520,69 @@ pub struct Rig<S: SimStore = Simulation> {
     track: Option<TrackFrames>,
     /// The vehicle of the following runs.
     vehicle: VehicleValues,
+}
+
+impl KeptSetup {
+    /// The track kept by the last commit (None: cleared or never committed).
+    pub fn track(&self) -> Option<&TrackFrames> {
+        self.track.as_ref()
+    }
+
+    /// The vehicle values of the following runs.
+    pub fn vehicle(&self) -> &VehicleValues {
+        &self.vehicle
+    }
+
+    /// The setup digest of a run on the kept vehicle, on the kept track when `track`.
+    pub fn digest(&self, track: bool) -> u16 {
+        setup_digest(self.track.as_ref().filter(|_| track), &self.vehicle)
+    }
+
+    /// Carries out a `TrackZone`, `Track` or `Vehicle` command (others change nothing).
+    pub fn apply(&mut self, command: &Command) -> Result<(), CommandError> {
+        match *command {
+            Command::TrackZone { index, zone } => self.track_zone(index, zone),
+            Command::Track(t) => self.track_command(t),
+            Command::Vehicle { key, value } => {
+                self.vehicle.set(key, value);
+                Ok(())
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// `TrackZone`: keeps zone `index` for the next commit.
+    fn track_zone(&mut self, index: u8, zone: ZoneFrame) -> Result<(), CommandError> {
+        let slot = self
+            .zones
+            .get_mut(index as usize)
+            .ok_or(CommandError::Track(TrackError::TooManyZones))?;
+        *slot = zone;
+        self.zones_received |= 1 << index;
+        Ok(())
+    }
+
+    /// `Track`: commit checks the zones received (all of 0..n, ordered, disjoint, not
+    /// empty) and keeps the track; clear forgets it. A refused commit keeps the last track;
+    /// every commit, refused or not, forgets the zones received, so a later commit cannot
+    /// pick up a refused attempt's zones.
+    fn track_command(&mut self, command: TrackCommand) -> Result<(), CommandError> {
+        let received = core::mem::take(&mut self.zones_received);
+        let TrackCommand::Commit { base, zones } = command else {
+            self.track = None;
+            return Ok(());
+        };
+        let n = zones as usize;
+        if n > MAX_ZONES {
+            return Err(CommandError::Track(TrackError::TooManyZones));
+        }
+        if let Some(index) = (0..n).find(|&i| received & (1 << i) == 0) {
+            return Err(CommandError::TrackIncomplete { index: index as u8 });
+        }
+        let track = TrackFrames::new(base, &self.zones[..n]).map_err(CommandError::Track)?;
+        self.track = Some(track);
+        Ok(())
+    }
 }
 
 impl Rig<Simulation> {
@@ -585,26 +658,23 @@ impl<S: SimStore> Rig<S> {
             state_before_start: RigState::Idle,
             start_seq: 0,
             stale_builds: 0,
-            zones: [ZoneFrame::default(); MAX_ZONES],
-            zones_received: 0,
-            track: None,
-            vehicle: VehicleValues::default(),
+            setup: KeptSetup::default(),
         }
     }
 
     /// The track kept by the last commit (None: cleared or never committed).
     pub fn track(&self) -> Option<&TrackFrames> {
-        self.track.as_ref()
+        self.setup.track()
     }
 
     /// The vehicle values of the following runs.
     pub fn vehicle(&self) -> &VehicleValues {
-        &self.vehicle
+        self.setup.vehicle()
     }
 
     /// The setup digest of a run on the kept vehicle, on the kept track when `track`.
     pub fn kept_setup_digest(&self, track: bool) -> u16 {
-        setup_digest(self.track.as_ref().filter(|_| track), &self.vehicle)
+        self.setup.digest(track)
     }
 
     /// `command` with, if it is a `Start`, the digest of the kept setup: for starts made
@@ -621,46 +691,13 @@ impl<S: SimStore> Rig<S> {
         command
     }
 
-    /// `TrackZone`: keeps zone `index` for the next commit.
-    fn track_zone(&mut self, index: u8, zone: ZoneFrame) -> Result<(), CommandError> {
-        let slot = self
-            .zones
-            .get_mut(index as usize)
-            .ok_or(CommandError::Track(TrackError::TooManyZones))?;
-        *slot = zone;
-        self.zones_received |= 1 << index;
-        Ok(())
-    }
-
-    /// `Track`: commit checks the zones received (all of 0..n, ordered, disjoint, not
-    /// empty) and keeps the track; clear forgets it. A refused commit keeps the last track;
-    /// every commit, refused or not, forgets the zones received, so a later commit cannot
-    /// pick up a refused attempt's zones.
-    fn track_command(&mut self, command: TrackCommand) -> Result<(), CommandError> {
-        let received = core::mem::take(&mut self.zones_received);
-        let TrackCommand::Commit { base, zones } = command else {
-            self.track = None;
-            return Ok(());
-        };
-        let n = zones as usize;
-        if n > MAX_ZONES {
-            return Err(CommandError::Track(TrackError::TooManyZones));
-        }
-        if let Some(index) = (0..n).find(|&i| received & (1 << i) == 0) {
-            return Err(CommandError::TrackIncomplete { index: index as u8 });
-        }
-        let track = TrackFrames::new(base, &self.zones[..n]).map_err(CommandError::Track)?;
-        self.track = Some(track);
-        Ok(())
-    }
-
-    /// `Vehicle`: one value of the following runs' vehicle (checked when a run is built).
-    fn vehicle_command(&mut self, key: VehicleKey, value: f32) -> Result<(), CommandError> {
+    /// `Vehicle`: one value of the following runs' vehicle (checked when a run is built;
+    /// only while no run is active).
+    fn vehicle_command(&mut self, command: &Command) -> Result<(), CommandError> {
         if self.busy() {
             return Err(CommandError::NotNow(self.state));
         }
-        self.vehicle.set(key, value);
-        Ok(())
+        self.setup.apply(command)
     }
 
     /// State of the rig.
@@ -830,7 +867,7 @@ impl<S: SimStore> Rig<S> {
         else {
             return Ok(());
         };
-        if track && self.track.is_none() {
+        if track && self.setup.track().is_none() {
             return Err(CommandError::NoTrack);
         }
         if self.busy() {
@@ -859,8 +896,8 @@ impl<S: SimStore> Rig<S> {
             friction,
             emergency,
             initial_speed_kmh,
-            track: if track { self.track } else { None },
-            vehicle: self.vehicle,
+            track: self.setup.track().filter(|_| track).copied(),
+            vehicle: *self.setup.vehicle(),
         });
         self.start_request_new = true;
         self.state_before_start = self.state;
@@ -1027,9 +1064,8 @@ impl<S: SimStore> Rig<S> {
                 }
                 Ok(())
             }
-            Command::TrackZone { index, zone } => self.track_zone(index, zone),
-            Command::Track(t) => self.track_command(t),
-            Command::Vehicle { key, value } => self.vehicle_command(key, value),
+            Command::TrackZone { .. } | Command::Track(_) => self.setup.apply(&command),
+            Command::Vehicle { .. } => self.vehicle_command(&command),
         }
     }
 

@@ -18,8 +18,7 @@ use hils_plant::{Params, Track};
 use hils_rig_core::can::{
     Command, TrackCommand, VehicleKey, ZONE_MAX_M, ZONE_RESOLUTION_M, ZoneFrame,
 };
-use hils_rig_core::digest::setup_digest;
-use hils_rig_core::rig::{TrackFrames, VehicleValues};
+use hils_rig_core::rig::KeptSetup;
 use hils_sil::ParamFile;
 
 use crate::wsp::metrics::AvailableAdhesion;
@@ -76,30 +75,13 @@ pub fn track_commands(track: &Track, sets: &ContactSets) -> Result<Vec<Command>>
 
 /// `start` with the setup digest of what `setup` (the frames sent before it, from a
 /// `Track` clear and a `Vehicle` default on) leaves on a board that received them all:
-/// the track and vehicle built by rig-core's own rules (`TrackFrames::new`,
-/// `VehicleValues::set`). A lost frame makes the board's digest differ: the start is
+/// the frames replayed through rig-core's own [`KeptSetup`], the board's rules. A lost frame makes the board's digest differ: the start is
 /// rejected instead of running an earlier setup.
 pub fn with_setup_digest(setup: &[Command], mut start: Command) -> Result<Command> {
-    let mut zones = [ZoneFrame::default(); MAX_ZONES];
-    let mut kept: Option<TrackFrames> = None;
-    let mut vehicle = VehicleValues::default();
+    let mut kept = KeptSetup::default();
     for c in setup {
-        match *c {
-            Command::TrackZone { index, zone } => {
-                *zones
-                    .get_mut(index as usize)
-                    .ok_or_else(|| anyhow!("zone index {index} above {MAX_ZONES}"))? = zone;
-            }
-            Command::Track(TrackCommand::Clear) => kept = None,
-            Command::Track(TrackCommand::Commit { base, zones: n }) => {
-                let sent = zones
-                    .get(..n as usize)
-                    .ok_or_else(|| anyhow!("a track of {n} zones: at most {MAX_ZONES}"))?;
-                kept = Some(TrackFrames::new(base, sent).map_err(|e| anyhow!("track: {e}"))?);
-            }
-            Command::Vehicle { key, value } => vehicle.set(key, value),
-            _ => {}
-        }
+        kept.apply(c)
+            .map_err(|e| anyhow!("{c:?} would be refused by the board: {e:?}"))?;
     }
     if let Command::Start {
         track,
@@ -107,10 +89,10 @@ pub fn with_setup_digest(setup: &[Command], mut start: Command) -> Result<Comman
         ..
     } = &mut start
     {
-        if *track && kept.is_none() {
+        if *track && kept.track().is_none() {
             bail!("a start on a track, but no track commit is sent before it");
         }
-        *digest = setup_digest(kept.as_ref().filter(|_| *track), &vehicle);
+        *digest = kept.digest(*track);
     }
     Ok(start)
 }
