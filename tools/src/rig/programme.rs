@@ -210,17 +210,6 @@ const PRESSURE_METRICS: [&str; 1] = ["air_consumption_l"];
 /// Of those, what needs the hold states (module doc).
 const HOLD_METRICS: [&str; 1] = ["wsp_timer_actions"];
 
-/// Fails each criterion of `verdict` on a metric in `metrics` as not judged (module doc).
-fn not_judged(verdict: &mut Verdict, metrics: &[&str]) {
-    for c in &mut verdict.criteria {
-        if metrics.iter().any(|m| c.criterion.starts_with(m)) {
-            c.passed = false;
-            c.criterion += " (not measured: not judged)";
-        }
-    }
-    verdict.passed = verdict.criteria.iter().all(|c| c.passed);
-}
-
 impl RigRun {
     /// The JSON entry (module doc).
     fn json(&self) -> serde_json::Value {
@@ -368,7 +357,7 @@ pub fn run_programme<T: Transport>(
                             }
                         }
                         let mut outcome = judge_trace(run.clone(), trace, criteria);
-                        not_judged(&mut outcome.verdict, &rig.not_measured);
+                        outcome.verdict.not_judged(&rig.not_measured);
                         rig.outcome = Some(outcome);
                     }
                     Err(e) => rig.end = format!("{}; not judged: {e:#}", rig.end),

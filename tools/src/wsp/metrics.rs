@@ -300,6 +300,20 @@ pub struct Verdict {
     pub criteria: Vec<Criterion>,
 }
 
+impl Verdict {
+    /// Fails each criterion on a metric of `metrics` (JSON keys, which the criteria are
+    /// named after) as not judged: the metric was not measured, so nothing passes on it.
+    pub fn not_judged(&mut self, metrics: &[&str]) {
+        for c in &mut self.criteria {
+            if metrics.iter().any(|m| c.criterion.starts_with(m)) {
+                c.passed = false;
+                c.criterion += " (not measured: not judged)";
+            }
+        }
+        self.passed = self.criteria.iter().all(|c| c.passed);
+    }
+}
+
 /// One pass criterion of a run.
 #[derive(Clone, Debug, Serialize)]
 pub struct Criterion {
