@@ -1676,61 +1676,48 @@ mod tests {
             d[..7].copy_from_slice(&bytes);
             seal(ID_COMMAND, d, 1).unwrap()
         };
-        assert_eq!(
-            CommandFrame::decode(&raw([0, 0, 0, 0, 0, 0, 0])),
-            Err(DecodeError::UnknownOpcode(0))
-        );
-        assert_eq!(
-            CommandFrame::decode(&raw([99, 0, 0, 0, 0, 0, 0])),
-            Err(DecodeError::UnknownOpcode(99))
-        );
-        assert_eq!(
-            CommandFrame::decode(&raw([4, 4, 1, 0, 0, 0, 0])),
-            Err(DecodeError::BadValue("Channel"))
-        );
-        assert_eq!(
-            CommandFrame::decode(&raw([4, 0, 9, 0, 0, 0, 0])),
-            Err(DecodeError::BadValue("InjectedFault"))
-        );
-        assert_eq!(
-            CommandFrame::decode(&raw([1, 3, 0, 0, 0, 0, 0])),
-            Err(DecodeError::BadValue("StartMode"))
-        );
         let nan = f32::NAN.to_bits().to_le_bytes();
-        assert_eq!(
-            CommandFrame::decode(&raw([5, 0, 1, nan[0], nan[1], nan[2], nan[3]])),
-            Err(DecodeError::BadValue("CalibrationValue"))
-        );
-        assert_eq!(
-            CommandFrame::decode(&raw([7, 0, 0, 0, 0, 0, 0])),
-            Err(DecodeError::BadValue("ConfigValue"))
-        );
-        assert_eq!(
-            CommandFrame::decode(&raw([7, 5, 1, 0, 0, 0, 0])),
-            Err(DecodeError::BadValue("ConfigItem"))
-        );
-        // Surface code 5 in a zone (bits 13-15 of byte 1), and as a track's base.
-        assert_eq!(
-            CommandFrame::decode(&raw([8, 5 << 5, 0, 0, 0, 0, 0])),
-            Err(DecodeError::BadValue("ZoneSurface"))
-        );
-        assert_eq!(
-            CommandFrame::decode(&raw([9, 1 | (6 << 1), 0, 0, 0, 0, 0])),
-            Err(DecodeError::BadValue("TrackBase"))
-        );
-        assert_eq!(
-            CommandFrame::decode(&raw([10, 7, 0, 0, 0, 0x80, 0x3F])),
-            Err(DecodeError::BadValue("VehicleKey"))
-        );
-        let nan = f32::NAN.to_bits().to_le_bytes();
-        assert_eq!(
-            CommandFrame::decode(&raw([10, 0, 0, nan[0], nan[1], nan[2], nan[3]])),
-            Err(DecodeError::BadValue("VehicleValue"))
-        );
-        assert_eq!(
-            CommandFrame::decode(&raw([3, 3, 0, 0, 0, 0, 0])),
-            Err(DecodeError::BadValue("ServiceStep"))
-        );
+        let cases: [([u8; 7], DecodeError); 13] = [
+            ([0, 0, 0, 0, 0, 0, 0], DecodeError::UnknownOpcode(0)),
+            ([99, 0, 0, 0, 0, 0, 0], DecodeError::UnknownOpcode(99)),
+            ([4, 4, 1, 0, 0, 0, 0], DecodeError::BadValue("Channel")),
+            (
+                [4, 0, 9, 0, 0, 0, 0],
+                DecodeError::BadValue("InjectedFault"),
+            ),
+            ([1, 3, 0, 0, 0, 0, 0], DecodeError::BadValue("StartMode")),
+            (
+                [5, 0, 1, nan[0], nan[1], nan[2], nan[3]],
+                DecodeError::BadValue("CalibrationValue"),
+            ),
+            ([7, 0, 0, 0, 0, 0, 0], DecodeError::BadValue("ConfigValue")),
+            ([7, 5, 1, 0, 0, 0, 0], DecodeError::BadValue("ConfigItem")),
+            // Surface code 5 in a zone (bits 13-15 of byte 1), and as a track's base.
+            (
+                [8, 5 << 5, 0, 0, 0, 0, 0],
+                DecodeError::BadValue("ZoneSurface"),
+            ),
+            (
+                [9, 1 | (6 << 1), 0, 0, 0, 0, 0],
+                DecodeError::BadValue("TrackBase"),
+            ),
+            (
+                [10, 7, 0, 0, 0, 0x80, 0x3F],
+                DecodeError::BadValue("VehicleKey"),
+            ),
+            (
+                [10, 0, 0, nan[0], nan[1], nan[2], nan[3]],
+                DecodeError::BadValue("VehicleValue"),
+            ),
+            ([3, 3, 0, 0, 0, 0, 0], DecodeError::BadValue("ServiceStep")),
+        ];
+        for (bytes, error) in cases {
+            assert_eq!(
+                CommandFrame::decode(&raw(bytes)),
+                Err(error),
+                "bytes {bytes:?}"
+            );
+        }
     }
 
     #[test]

@@ -71,6 +71,24 @@ fn commit(rig: &mut Rig, n: &mut u8, base: Surface, zones: u8) -> Result<(), Com
     send(rig, n, Command::Track(TrackCommand::Commit { base, zones }))
 }
 
+/// Zone 0 of a track: 0-10 m on `surface`.
+fn first_zone(surface: Surface) -> Command {
+    Command::TrackZone {
+        index: 0,
+        zone: ZoneFrame::of(&zone(0.0, 10.0, surface)).unwrap(),
+    }
+}
+
+/// Sends zone 0 ([`first_zone`]) alone and then a commit of two zones: it is refused,
+/// naming zone 1 as missing.
+fn commit_without_zone_1(rig: &mut Rig, n: &mut u8, surface: Surface) {
+    send(rig, n, first_zone(surface)).unwrap();
+    assert_eq!(
+        commit(rig, n, Surface::Wet, 2),
+        Err(CommandError::TrackIncomplete { index: 1 })
+    );
+}
+
 fn self_test_eb(speed_kmh: f32, track: bool) -> Command {
     Command::Start {
         mode: RigMode::SelfTest,
@@ -212,19 +230,7 @@ fn track_frames_are_refused_with_their_rule() {
     load(&mut rig, &mut n, Surface::Wet, &many[..16]).unwrap();
     assert_eq!(rig.track().unwrap().zones().len(), 16);
     // A commit of zones not all received since the last commit: which one is missing.
-    send(
-        &mut rig,
-        &mut n,
-        Command::TrackZone {
-            index: 0,
-            zone: ZoneFrame::of(&zone(0.0, 10.0, Surface::Low)).unwrap(),
-        },
-    )
-    .unwrap();
-    assert_eq!(
-        commit(&mut rig, &mut n, Surface::Wet, 2),
-        Err(CommandError::TrackIncomplete { index: 1 })
-    );
+    commit_without_zone_1(&mut rig, &mut n, Surface::Low);
     assert_eq!(
         rig.track().unwrap().zones().len(),
         16,
@@ -232,10 +238,7 @@ fn track_frames_are_refused_with_their_rule() {
     );
     // An unknown surface code (4-7) in a zone frame: the frame is refused, naming the field.
     let mut f: ClassicFrame = CommandFrame {
-        command: Command::TrackZone {
-            index: 0,
-            zone: ZoneFrame::of(&zone(0.0, 10.0, Surface::Low)).unwrap(),
-        },
+        command: first_zone(Surface::Low),
         counter: 9,
     }
     .encode()
@@ -258,19 +261,7 @@ fn track_frames_are_refused_with_their_rule() {
     // A refused commit forgets its zones: a later commit whose zone 1 was lost on the bus is
     // refused, not completed with the refused attempt's zone 1.
     assert!(load(&mut rig, &mut n, Surface::Low, &unordered).is_err());
-    send(
-        &mut rig,
-        &mut n,
-        Command::TrackZone {
-            index: 0,
-            zone: ZoneFrame::of(&zone(0.0, 10.0, Surface::Dry)).unwrap(),
-        },
-    )
-    .unwrap();
-    assert_eq!(
-        commit(&mut rig, &mut n, Surface::Wet, 2),
-        Err(CommandError::TrackIncomplete { index: 1 })
-    );
+    commit_without_zone_1(&mut rig, &mut n, Surface::Dry);
     assert!(rig.track().is_none());
 }
 
