@@ -30,28 +30,10 @@ fn host_events() -> Vec<TelemetryEvent> {
     events
 }
 
+/// Every field's bits, in the order of the line (floats as IEEE bits).
 fn bits(r: &TelemetryRecord) -> Vec<u32> {
-    let mut v = vec![
-        r.step,
-        r.state as u32,
-        r.mode as u32,
-        r.cmd as u32,
-        r.wsp as u32,
-        r.v_ref.to_bits(),
-        r.a_x.to_bits(),
-        r.step_max_cycles,
-        r.step_mean_cycles,
-        r.overruns,
-        r.missed_ticks,
-        r.faults,
-        r.sensor_faults as u32,
-        r.seq,
-    ];
-    for a in [
-        r.omega, r.p_cyl, r.f_clamp, r.f_brake, r.t_disc, r.q, r.mu_d,
-    ] {
-        v.extend(a.iter().map(|x| x.to_bits()));
-    }
+    let mut v = Vec::new();
+    r.for_each_value(|x| v.push(x.bits()));
     v
 }
 

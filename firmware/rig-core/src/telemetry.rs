@@ -337,47 +337,115 @@ fn crc32_update(mut crc: u32, bytes: &[u8]) -> u32 {
     crc
 }
 
+/// The value of one field of a `tlm1` line, in the type the line carries it in.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum FieldValue {
+    /// A code or bit set of 8 bits.
+    U8(u8),
+    /// A bit set of 16 bits.
+    U16(u16),
+    /// A count or bit set of 32 bits.
+    U32(u32),
+    /// A float (SI units; NaN = not measured).
+    F32(f32),
+}
+
+impl FieldValue {
+    /// The value's bits (a float's IEEE bits, NaN payload included): equal bits, equal value.
+    pub fn bits(self) -> u32 {
+        match self {
+            FieldValue::U8(x) => x as u32,
+            FieldValue::U16(x) => x as u32,
+            FieldValue::U32(x) => x,
+            FieldValue::F32(x) => x.to_bits(),
+        }
+    }
+
+    /// The value the CRC covers and its width in bytes (little-endian): a float's bit
+    /// pattern, every NaN as the canonical quiet NaN.
+    fn crc_word(self) -> (u32, usize) {
+        match self {
+            FieldValue::U8(x) => (x as u32, 1),
+            FieldValue::U16(x) => (x as u32, 2),
+            FieldValue::U32(x) => (x, 4),
+            FieldValue::F32(x) => (if x.is_nan() { f32::NAN } else { x }.to_bits(), 4),
+        }
+    }
+}
+
+/// The value as the decoder prints it (defmt's text of `{=u8}`, `{=f32}`, ...: the shortest
+/// text that reads back to the same value).
+impl core::fmt::Display for FieldValue {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            FieldValue::F32(x) => write!(f, "{x}"),
+            integer => write!(f, "{}", integer.bits()),
+        }
+    }
+}
+
 impl TelemetryRecord {
+    /// Calls `visit` with the value of every field but the CRC, in the order of [`FIELDS`]
+    /// (the one walk over the fields, used by [`TelemetryRecord::crc32`]).
+    pub fn for_each_value(&self, mut visit: impl FnMut(FieldValue)) {
+        // Every field named: a new one does not compile until it has its place here.
+        let TelemetryRecord {
+            step,
+            state,
+            mode,
+            cmd,
+            wsp,
+            v_ref,
+            omega,
+            p_cyl,
+            f_clamp,
+            f_brake,
+            t_disc,
+            q,
+            mu_d,
+            a_x,
+            step_max_cycles,
+            step_mean_cycles,
+            overruns,
+            missed_ticks,
+            faults,
+            sensor_faults,
+            surfaces,
+            seq,
+        } = self;
+        visit(FieldValue::U32(*step));
+        for code in [state, mode, cmd, wsp] {
+            visit(FieldValue::U8(*code));
+        }
+        visit(FieldValue::F32(*v_ref));
+        for values in [omega, p_cyl, f_clamp, f_brake, t_disc, q, mu_d] {
+            values.iter().for_each(|&x| visit(FieldValue::F32(x)));
+        }
+        visit(FieldValue::F32(*a_x));
+        for count in [
+            step_max_cycles,
+            step_mean_cycles,
+            overruns,
+            missed_ticks,
+            faults,
+        ] {
+            visit(FieldValue::U32(*count));
+        }
+        visit(FieldValue::U16(*sensor_faults));
+        visit(FieldValue::U8(*surfaces));
+        visit(FieldValue::U32(*seq));
+    }
+
     /// CRC-32 over the little-endian bytes of every field but the CRC itself, in the order
     /// of [`FIELDS`]; floats as their bit patterns, every NaN as the canonical quiet NaN
     /// (the text line says only `NaN`, whatever the payload).
     pub fn crc32(&self) -> u32 {
-        let bits = |x: f32| {
-            if x.is_nan() {
-                f32::NAN.to_bits().to_le_bytes()
-            } else {
-                x.to_bits().to_le_bytes()
-            }
-        };
-        let mut c = crc32_update(!0, &self.step.to_le_bytes());
-        c = crc32_update(c, &[self.state, self.mode, self.cmd, self.wsp]);
-        c = crc32_update(c, &bits(self.v_ref));
-        for a in [
-            self.omega,
-            self.p_cyl,
-            self.f_clamp,
-            self.f_brake,
-            self.t_disc,
-            self.q,
-            self.mu_d,
-        ] {
-            for x in a {
-                c = crc32_update(c, &bits(x));
-            }
-        }
-        c = crc32_update(c, &bits(self.a_x));
-        for x in [
-            self.step_max_cycles,
-            self.step_mean_cycles,
-            self.overruns,
-            self.missed_ticks,
-            self.faults,
-        ] {
-            c = crc32_update(c, &x.to_le_bytes());
-        }
-        c = crc32_update(c, &self.sensor_faults.to_le_bytes());
-        c = crc32_update(c, &[self.surfaces]);
-        !crc32_update(c, &self.seq.to_le_bytes())
+        let mut c = !0;
+        self.for_each_value(|v| {
+            let (word, len) = v.crc_word();
+            c = crc32_update(c, &word.to_le_bytes()[..len]);
+        });
+        !c
     }
 
     /// The state as a [`RigState`] (`None` for an unknown code).
@@ -483,31 +551,9 @@ mod tests {
 
     /// Writes a record as the decoder prints the defmt line (Rust `Display` of each value).
     fn text(r: &TelemetryRecord) -> String {
-        let mut s = format!(
-            "tlm1 {} {} {} {} {} {}",
-            r.step, r.state, r.mode, r.cmd, r.wsp, r.v_ref
-        );
-        for a in [
-            r.omega, r.p_cyl, r.f_clamp, r.f_brake, r.t_disc, r.q, r.mu_d,
-        ] {
-            for x in a {
-                s += &format!(" {x}");
-            }
-        }
-        s += &format!(
-            " {} {} {} {} {} {} {} {} {} {}",
-            r.a_x,
-            r.step_max_cycles,
-            r.step_mean_cycles,
-            r.overruns,
-            r.missed_ticks,
-            r.faults,
-            r.sensor_faults,
-            r.surfaces,
-            r.seq,
-            r.crc32()
-        );
-        s
+        let mut s = String::from(RECORD_TAG);
+        r.for_each_value(|v| s += &format!(" {v}"));
+        s + &format!(" {}", r.crc32())
     }
 
     fn sample() -> TelemetryRecord {
@@ -538,35 +584,12 @@ mod tests {
     }
 
     fn same_bits(a: &TelemetryRecord, b: &TelemetryRecord) -> bool {
-        let fa = |r: &TelemetryRecord| {
-            let mut v = std::vec![r.v_ref.to_bits(), r.a_x.to_bits()];
-            for arr in [
-                r.omega, r.p_cyl, r.f_clamp, r.f_brake, r.t_disc, r.q, r.mu_d,
-            ] {
-                v.extend(arr.iter().map(|x| x.to_bits()));
-            }
+        let bits = |r: &TelemetryRecord| {
+            let mut v = std::vec::Vec::new();
+            r.for_each_value(|x| v.push(x.bits()));
             v
         };
-        fa(a) == fa(b)
-            && (a.step, a.state, a.mode, a.cmd, a.wsp, a.seq)
-                == (b.step, b.state, b.mode, b.cmd, b.wsp, b.seq)
-            && (
-                a.step_max_cycles,
-                a.step_mean_cycles,
-                a.overruns,
-                a.missed_ticks,
-                a.faults,
-                a.sensor_faults,
-                a.surfaces,
-            ) == (
-                b.step_max_cycles,
-                b.step_mean_cycles,
-                b.overruns,
-                b.missed_ticks,
-                b.faults,
-                b.sensor_faults,
-                b.surfaces,
-            )
+        bits(a) == bits(b)
     }
 
     #[test]
