@@ -5,7 +5,9 @@
 
 use std::path::PathBuf;
 
-use hils::decode::rig_core::can::{Command, InjectedFault, RigMode, RigState, WHEEL_SPEED_MAX_KMH};
+use hils::decode::rig_core::can::{
+    Command, InjectedFault, RigMode, RigState, StartCommand, WHEEL_SPEED_MAX_KMH,
+};
 use hils::decode::rig_core::rig::Faults;
 use hils::decode::rig_core::sensor::SensorFault;
 use hils::rig::commands::Session;
@@ -22,7 +24,7 @@ fn session(faults: SimFaults) -> Session<SimBoard> {
 }
 
 fn start(speed_kmh: f32) -> Command {
-    Command::Start {
+    Command::Start(StartCommand {
         mode: RigMode::Rig,
         rail: Rail::Wet,
         friction: FrictionModel::Variable,
@@ -31,7 +33,7 @@ fn start(speed_kmh: f32) -> Command {
         track: false,
         // A fresh board's setup: one rail, the default vehicle.
         setup_digest: hils::decode::rig_core::digest::setup_digest(None, &Default::default()),
-    }
+    })
 }
 
 fn out_dir(name: &str) -> PathBuf {
@@ -667,8 +669,8 @@ fn start_with_a_track_file_and_track_rejections() {
     .unwrap();
     let mut s = session(SimFaults::default());
     let mut no_track = start(60.0);
-    if let Command::Start { track, .. } = &mut no_track {
-        *track = true;
+    if let Command::Start(s) = &mut no_track {
+        s.track = true;
     }
     let o = s.command(no_track).unwrap();
     assert!(!o.accepted);
@@ -776,8 +778,8 @@ fn a_lost_setup_frame_makes_the_start_rejected_not_a_wrong_run() {
         }),
     ];
     let mut on_track = start(60.0);
-    if let Command::Start { track, .. } = &mut on_track {
-        *track = true;
+    if let Command::Start(s) = &mut on_track {
+        s.track = true;
     }
     let on_track = with_setup_digest(&setup, on_track).unwrap();
     // Each frame that changes a fresh board's setup lost in turn: the variant's value, the

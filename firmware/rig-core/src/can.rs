@@ -1016,30 +1016,34 @@ pub enum ConfigItem {
     Teeth(u16),
 }
 
+/// The values of a `Start` command (the signals `Start*` of opcode 1).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StartCommand {
+    /// Self-test (simulated brake unit) or rig (measured brake inputs).
+    pub mode: RigMode,
+    /// Rail condition: the Polach set (paper Table 2 wet, `[contact.dry]`).
+    pub rail: Rail,
+    /// Disc-pad friction law (paper Eq (2) or constant mu_d0).
+    pub friction: FrictionModel,
+    /// The simulated brake unit gets the EB command at t = 0.
+    pub emergency: bool,
+    /// Initial speed, km/h.
+    pub initial_speed_kmh: f32,
+    /// Run on the track kept by [`Command::Track`] commit (else one `rail` everywhere).
+    pub track: bool,
+    /// [`crate::digest::setup_digest`] of the run's track (`None` unless `track`) and
+    /// vehicle as the sender set them up: a lost `Track` or `Vehicle` frame makes the
+    /// board's differ, and the start is rejected.
+    pub setup_digest: u16,
+}
+
 /// A command received in `RIG_COMMAND` (0x200).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Command {
     /// Opcode 1: start a run from `initial_speed_kmh` (0.01 km/h per bit; the board
     /// accepts 0-655.34, the wheel-speed frames' range). `emergency`: the self-test's
     /// simulated brake unit gets the EB command at t = 0 (the paper's scenario).
-    Start {
-        /// Self-test (simulated brake unit) or rig (measured brake inputs).
-        mode: RigMode,
-        /// Rail condition: the Polach set (paper Table 2 wet, `[contact.dry]`).
-        rail: Rail,
-        /// Disc-pad friction law (paper Eq (2) or constant mu_d0).
-        friction: FrictionModel,
-        /// The simulated brake unit gets the EB command at t = 0.
-        emergency: bool,
-        /// Initial speed, km/h.
-        initial_speed_kmh: f32,
-        /// Run on the track kept by [`Command::Track`] commit (else one `rail` everywhere).
-        track: bool,
-        /// [`crate::digest::setup_digest`] of the run's track (`None` unless `track`) and
-        /// vehicle as the sender set them up: a lost `Track` or `Vehicle` frame makes the
-        /// board's differ, and the start is rejected.
-        setup_digest: u16,
-    },
+    Start(StartCommand),
     /// Opcode 2: stop the run (outputs to the safe state).
     Stop,
     /// Opcode 3: brake command of the self-test mode.
@@ -1085,7 +1089,7 @@ impl Command {
     /// on the default vehicle (its [`crate::digest::setup_digest`]; the board's user button
     /// stamps the kept vehicle's instead, [`crate::rig::Rig::on_kept_setup`]).
     pub fn paper_self_test(friction: FrictionModel) -> Command {
-        Command::Start {
+        Command::Start(StartCommand {
             mode: RigMode::SelfTest,
             rail: Rail::Wet,
             friction,
@@ -1093,7 +1097,7 @@ impl Command {
             initial_speed_kmh: 150.0,
             track: false,
             setup_digest: crate::digest::setup_digest(None, &Default::default()),
-        }
+        })
     }
 
     /// The opcode of the command (byte 0 of `RIG_COMMAND`).
@@ -1104,7 +1108,7 @@ impl Command {
     /// The command's [`Opcode`].
     pub fn kind(&self) -> Opcode {
         match self {
-            Command::Start { .. } => Opcode::Start,
+            Command::Start(_) => Opcode::Start,
             Command::Stop => Opcode::Stop,
             Command::Brake(_) => Opcode::Brake,
             Command::InjectFault { .. } => Opcode::InjectFault,
@@ -1150,22 +1154,14 @@ impl CommandFrame {
         let mut d = [0u8; 8];
         OPCODE.put_raw(&mut d, self.command.opcode() as u64);
         match self.command {
-            Command::Start {
-                mode,
-                rail,
-                friction,
-                emergency,
-                initial_speed_kmh,
-                track,
-                setup_digest,
-            } => {
-                START_TRACK.put_raw(&mut d, track as u64);
-                START_DIGEST.put_raw(&mut d, setup_digest as u64);
-                START_MODE.put_raw(&mut d, u8::from(mode) as u64);
-                START_RAIL.put_raw(&mut d, rail_code(rail) as u64);
-                START_FRICTION.put_raw(&mut d, friction_code(friction) as u64);
-                START_EMERGENCY.put_raw(&mut d, emergency as u64);
-                START_SPEED.put(&mut d, initial_speed_kmh);
+            Command::Start(start) => {
+                START_TRACK.put_raw(&mut d, start.track as u64);
+                START_DIGEST.put_raw(&mut d, start.setup_digest as u64);
+                START_MODE.put_raw(&mut d, u8::from(start.mode) as u64);
+                START_RAIL.put_raw(&mut d, rail_code(start.rail) as u64);
+                START_FRICTION.put_raw(&mut d, friction_code(start.friction) as u64);
+                START_EMERGENCY.put_raw(&mut d, start.emergency as u64);
+                START_SPEED.put(&mut d, start.initial_speed_kmh);
             }
             Command::Stop | Command::ClearFaults => {}
             Command::Brake(b) => {
@@ -1277,7 +1273,7 @@ fn decode_start(d: &[u8; 8]) -> Result<Command, DecodeError> {
     } else {
         FrictionModel::Constant
     };
-    Ok(Command::Start {
+    Ok(Command::Start(StartCommand {
         mode,
         rail,
         friction,
@@ -1285,7 +1281,7 @@ fn decode_start(d: &[u8; 8]) -> Result<Command, DecodeError> {
         initial_speed_kmh: START_SPEED.get(d),
         track: START_TRACK.get_raw(d) == 1,
         setup_digest: START_DIGEST.get_raw(d) as u16,
-    })
+    }))
 }
 
 /// Whether a position fits `ZoneStart`/`ZoneEnd` (0 to [`ZONE_MAX_M`]).
@@ -1545,7 +1541,7 @@ mod tests {
     #[test]
     fn every_command_roundtrips() {
         let cmds = [
-            Command::Start {
+            Command::Start(StartCommand {
                 mode: RigMode::SelfTest,
                 rail: Rail::Dry,
                 friction: FrictionModel::Constant,
@@ -1553,8 +1549,8 @@ mod tests {
                 initial_speed_kmh: 150.0,
                 track: false,
                 setup_digest: 0,
-            },
-            Command::Start {
+            }),
+            Command::Start(StartCommand {
                 mode: RigMode::Rig,
                 rail: Rail::Wet,
                 friction: FrictionModel::Variable,
@@ -1562,7 +1558,7 @@ mod tests {
                 initial_speed_kmh: 80.25,
                 track: true,
                 setup_digest: 0xBEEF,
-            },
+            }),
             Command::Brake(BrakeCommand::ServiceStep { step: 7 }),
             Command::TrackZone {
                 index: 15,
@@ -1630,31 +1626,14 @@ mod tests {
             let back = CommandFrame::decode(&frame).unwrap();
             assert_eq!(back.counter, (i as u8) & 0x0F);
             match (c, back.command) {
-                (
-                    Command::Start {
-                        initial_speed_kmh: a,
-                        mode,
-                        rail,
-                        friction,
-                        emergency,
-                        track,
-                        setup_digest,
-                    },
-                    Command::Start {
-                        initial_speed_kmh: b,
-                        mode: m2,
-                        rail: r2,
-                        friction: f2,
-                        emergency: e2,
-                        track: t2,
-                        setup_digest: d2,
-                    },
-                ) => {
-                    assert!((a - b).abs() < 0.006);
-                    assert_eq!(
-                        (*mode, *rail, *friction, *emergency, *track, *setup_digest),
-                        (m2, r2, f2, e2, t2, d2)
-                    );
+                (Command::Start(a), Command::Start(b)) => {
+                    assert!((a.initial_speed_kmh - b.initial_speed_kmh).abs() < 0.006);
+                    // Every other value as sent.
+                    let speed_as_received = StartCommand {
+                        initial_speed_kmh: b.initial_speed_kmh,
+                        ..*a
+                    };
+                    assert_eq!(speed_as_received, b);
                 }
                 (
                     Command::Brake(BrakeCommand::Service {

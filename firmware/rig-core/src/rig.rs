@@ -52,8 +52,8 @@ use hils_sil::{ClosedLoop, LoopError};
 use crate::Code;
 use crate::can::{
     BrakeCommand, Calibration, Command, CommandFrame, CommandResult, ConfigItem, DecodeError,
-    DiagFrame, RigMode, RigState, StatusFrame, TrackCommand, VehicleKey, WHEEL_SPEED_MAX_KMH,
-    WheelSpeedFrame, ZoneFrame, friction_code, rail_code, surface_code,
+    DiagFrame, RigMode, RigState, StartCommand, StatusFrame, TrackCommand, VehicleKey,
+    WHEEL_SPEED_MAX_KMH, WheelSpeedFrame, ZoneFrame, friction_code, rail_code, surface_code,
 };
 use crate::digest::setup_digest;
 use crate::hw::{RigIo, TelemetryEvent};
@@ -680,13 +680,8 @@ impl<S: SimStore> Rig<S> {
     /// `command` with, if it is a `Start`, the digest of the kept setup: for starts made
     /// on the board (user button), which run on whatever the board keeps.
     pub fn on_kept_setup(&self, mut command: Command) -> Command {
-        if let Command::Start {
-            track,
-            setup_digest,
-            ..
-        } = &mut command
-        {
-            *setup_digest = self.kept_setup_digest(*track);
+        if let Command::Start(start) = &mut command {
+            start.setup_digest = self.kept_setup_digest(start.track);
         }
         command
     }
@@ -854,19 +849,13 @@ impl<S: SimStore> Rig<S> {
     /// The `Start` command: checks it and requests the run (`Starting`); the simulation is
     /// built outside the step ([`Rig::take_start_request`], [`StartRequest::build`]) and
     /// the run begins when it is installed ([`Rig::install`]).
-    fn start(&mut self, command: Command) -> Result<(), CommandError> {
-        let Command::Start {
+    fn start(&mut self, start: StartCommand) -> Result<(), CommandError> {
+        let StartCommand {
             mode,
-            rail,
-            friction,
-            emergency,
-            initial_speed_kmh,
             track,
-            setup_digest,
-        } = command
-        else {
-            return Ok(());
-        };
+            initial_speed_kmh,
+            ..
+        } = start;
         if track && self.setup.track().is_none() {
             return Err(CommandError::NoTrack);
         }
@@ -881,7 +870,7 @@ impl<S: SimStore> Rig<S> {
         }
         // After the busy check: the CRC runs only on an idle board's step.
         let kept = self.kept_setup_digest(track);
-        if setup_digest != kept {
+        if start.setup_digest != kept {
             return Err(CommandError::SetupMismatch { kept });
         }
         // The old run's simulation is no longer shown (plain data: nothing to drop).
@@ -892,9 +881,9 @@ impl<S: SimStore> Rig<S> {
         self.start_request = Some(StartRequest {
             seq: self.start_seq,
             mode,
-            rail,
-            friction,
-            emergency,
+            rail: start.rail,
+            friction: start.friction,
+            emergency: start.emergency,
             initial_speed_kmh,
             track: self.setup.track().filter(|_| track).copied(),
             vehicle: *self.setup.vehicle(),
@@ -988,7 +977,7 @@ impl<S: SimStore> Rig<S> {
     /// Carries out a command (also from the board's user button).
     pub fn command(&mut self, command: Command) -> Result<(), CommandError> {
         match command {
-            Command::Start { .. } => self.start(command),
+            Command::Start(start) => self.start(start),
             Command::Stop => match self.state {
                 RigState::Running => {
                     self.end_run(RigState::Stopped);

@@ -13,7 +13,7 @@
 
 use hils_plant::{FrictionModel, Rail};
 
-use crate::can::{Calibration, ClassicFrame, Command, RigMode};
+use crate::can::{Calibration, ClassicFrame, Command, RigMode, StartCommand};
 use crate::hw::{RigIo, TelemetryEvent};
 use crate::pulse::PulseRegisters;
 use crate::rig::{Rig, RigConfig};
@@ -84,7 +84,7 @@ pub fn cost_command(k: u32) -> Option<Command> {
     Some(match k {
         0 => Command::paper_self_test(FrictionModel::Variable),
         20_000 => Command::Stop,
-        20_010 => Command::Start {
+        20_010 => Command::Start(StartCommand {
             mode: RigMode::Rig,
             rail: Rail::Dry,
             friction: FrictionModel::Constant,
@@ -92,7 +92,7 @@ pub fn cost_command(k: u32) -> Option<Command> {
             initial_speed_kmh: 120.0,
             track: false,
             setup_digest: crate::digest::setup_digest(None, &Default::default()),
-        },
+        }),
         21_010 => inject(Some(InjectedFault::Open)),
         21_100 => inject(None),
         21_200 => Command::ClearFaults,

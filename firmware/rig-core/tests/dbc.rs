@@ -18,8 +18,8 @@ use hils_plant::{FrictionModel, Rail, Surface};
 use hils_rig_core::Code;
 use hils_rig_core::can::{
     self, BrakeCommand, Calibration, Command, CommandFrame, CommandResult, ConfigItem, DiagFrame,
-    InjectedFault, RigMode, RigState, StatusFrame, TrackCommand, VehicleKey, WheelSpeedFrame,
-    ZoneFrame,
+    InjectedFault, RigMode, RigState, StartCommand, StatusFrame, TrackCommand, VehicleKey,
+    WheelSpeedFrame, ZoneFrame,
 };
 use hils_rig_core::sensor::{SensorFault, SensorKind};
 use proptest::prelude::*;
@@ -297,7 +297,7 @@ proptest! {
                      digest in 0u16..=u16::MAX) {
         let surface = |c: u8| [Surface::Dry, Surface::Wet, Surface::Low, Surface::VeryLow][c as usize % 4];
         let command = match pick {
-            0 => Command::Start {
+            0 => Command::Start(StartCommand {
                 mode: if flags & 1 == 0 { RigMode::Rig } else { RigMode::SelfTest },
                 rail: if flags & 2 == 0 { Rail::Wet } else { Rail::Dry },
                 friction: if flags & 4 == 0 { FrictionModel::Variable } else { FrictionModel::Constant },
@@ -305,7 +305,7 @@ proptest! {
                 initial_speed_kmh: a as f32 * 0.01,
                 track: flags & 16 != 0,
                 setup_digest: digest,
-            },
+            }),
             1 => Command::Stop,
             2 => Command::Brake(match k % 4 {
                 0 => BrakeCommand::Release,
@@ -338,7 +338,7 @@ proptest! {
             m.insert("CommandAlive", cf.counter as f64);
             m.insert("CommandChecksum", f.map(checksum_of).unwrap_or(0.0));
             match cf.command {
-                Command::Start { mode, rail, friction, emergency, initial_speed_kmh, track, setup_digest } => {
+                Command::Start(StartCommand { mode, rail, friction, emergency, initial_speed_kmh, track, setup_digest }) => {
                     m.insert("StartTrack", track as u8 as f64);
                     m.insert("StartDigest", setup_digest as f64);
                     m.insert("StartMode", mode as u8 as f64);

@@ -8,7 +8,7 @@ use hils_rig_core::Code;
 use hils_rig_core::can::{
     BrakeCommand, Calibration, ClassicFrame, Command, CommandFrame, CommandResult, ConfigItem,
     DiagFrame, ID_DIAG, ID_STATUS, ID_WHEEL_SPEED_12, ID_WHEEL_SPEED_34, InjectedFault, RigMode,
-    RigState, StatusFrame, WheelSpeedFrame,
+    RigState, StartCommand, StatusFrame, WheelSpeedFrame,
 };
 use hils_rig_core::hw::{RigIo, TelemetryEvent};
 use hils_rig_core::pulse::PulseRegisters;
@@ -135,7 +135,7 @@ fn default_setup_digest() -> u16 {
 
 /// A rig-mode start (measured brake inputs) on the wet rail with Eq (2), no EB.
 fn rig_start(initial_speed_kmh: f32) -> Command {
-    Command::Start {
+    Command::Start(StartCommand {
         mode: RigMode::Rig,
         rail: Rail::Wet,
         friction: FrictionModel::Variable,
@@ -143,7 +143,7 @@ fn rig_start(initial_speed_kmh: f32) -> Command {
         initial_speed_kmh,
         track: false,
         setup_digest: default_setup_digest(),
-    }
+    })
 }
 
 /// The four speeds of the last wheel-speed cycle (both frames, same alive counter).
@@ -474,7 +474,7 @@ fn each_plausibility_fault_stops_a_rig_run_and_self_test_only_reports() {
             command(
                 &mut rig,
                 1,
-                Command::Start {
+                Command::Start(StartCommand {
                     mode,
                     rail: Rail::Wet,
                     friction: FrictionModel::Constant,
@@ -482,7 +482,7 @@ fn each_plausibility_fault_stops_a_rig_run_and_self_test_only_reports() {
                     initial_speed_kmh: 150.0,
                     track: false,
                     setup_digest: default_setup_digest(),
-                },
+                }),
             )
             .unwrap();
             rig.step(&mut io);
@@ -599,14 +599,9 @@ fn a_350_kmh_run_is_sent_unsaturated_at_0_01_kmh() {
     let mut rig = Rig::new(RigConfig::nucleo_g474re());
     let mut io = MockBoard::new();
     let mut start = paper_start(FrictionModel::Variable);
-    if let Command::Start {
-        initial_speed_kmh,
-        emergency,
-        ..
-    } = &mut start
-    {
-        *initial_speed_kmh = 350.0;
-        *emergency = false;
+    if let Command::Start(s) = &mut start {
+        s.initial_speed_kmh = 350.0;
+        s.emergency = false;
     }
     command(&mut rig, 1, start).unwrap();
     for _ in 0..100 {
@@ -772,11 +767,8 @@ fn commands_are_checked_and_results_reported() {
     );
     // Speed beyond the wheel-speed frame's range.
     let mut too_fast = paper_start(FrictionModel::Variable);
-    if let Command::Start {
-        initial_speed_kmh, ..
-    } = &mut too_fast
-    {
-        *initial_speed_kmh = 700.0;
+    if let Command::Start(s) = &mut too_fast {
+        s.initial_speed_kmh = 700.0;
     }
     assert_eq!(
         command(&mut rig, 3, too_fast),
@@ -954,25 +946,15 @@ fn a_late_build_is_not_installed_under_a_later_start() {
     let mut rig = Rig::new(RigConfig::nucleo_g474re());
     let mut io = MockBoard::new();
     let first = paper_start(FrictionModel::Variable);
-    let Command::Start {
-        mode,
-        rail,
-        friction,
-        emergency,
-        ..
-    } = first
-    else {
+    let Command::Start(first_values) = first else {
         unreachable!()
     };
-    let second = Command::Start {
-        mode,
-        rail,
-        friction,
-        emergency,
+    let second = Command::Start(StartCommand {
         initial_speed_kmh: 80.0,
         track: false,
         setup_digest: default_setup_digest(),
-    };
+        ..first_values
+    });
     rig.command(first).unwrap();
     let req1 = rig.take_start_request().unwrap();
     rig.command(Command::Stop).unwrap();

@@ -5,8 +5,8 @@
 use hils_plant::track::TrackError;
 use hils_plant::{FrictionModel, Params, Rail, Surface, Zone};
 use hils_rig_core::can::{
-    ClassicFrame, Command, CommandFrame, DecodeError, RigMode, RigState, TrackCommand, VehicleKey,
-    ZoneFrame, surface_code,
+    ClassicFrame, Command, CommandFrame, DecodeError, RigMode, RigState, StartCommand,
+    TrackCommand, VehicleKey, ZoneFrame, surface_code,
 };
 use hils_rig_core::hw::{RigIo, TelemetryEvent};
 use hils_rig_core::pulse::PulseRegisters;
@@ -90,7 +90,7 @@ fn commit_without_zone_1(rig: &mut Rig, n: &mut u8, surface: Surface) {
 }
 
 fn self_test_eb(speed_kmh: f32, track: bool) -> Command {
-    Command::Start {
+    Command::Start(StartCommand {
         mode: RigMode::SelfTest,
         rail: Rail::Dry,
         friction: FrictionModel::Variable,
@@ -98,7 +98,7 @@ fn self_test_eb(speed_kmh: f32, track: bool) -> Command {
         initial_speed_kmh: speed_kmh,
         track,
         setup_digest: 0,
-    }
+    })
 }
 
 /// Sends a self-test EB start stamped with the digest of the rig's kept setup (the tests
@@ -275,18 +275,15 @@ fn a_lost_commit_or_vehicle_frame_rejects_the_start() {
     use hils_rig_core::rig::{TrackFrames, VehicleValues};
     let stamped = |track: Option<&TrackFrames>, vehicle: &VehicleValues| {
         let mut c = self_test_eb(80.0, track.is_some());
-        if let Command::Start {
-            setup_digest: d, ..
-        } = &mut c
-        {
-            *d = setup_digest(track, vehicle);
+        if let Command::Start(start) = &mut c {
+            start.setup_digest = setup_digest(track, vehicle);
         }
         c
     };
     // A rejected start changes nothing: no run requested, the kept setup as it was.
     let rejected = |rig: &mut Rig, n: &mut u8, c: Command| {
         let before = (rig.track().copied(), *rig.vehicle(), rig.state());
-        let on_track = matches!(c, Command::Start { track: true, .. });
+        let on_track = matches!(c, Command::Start(StartCommand { track: true, .. }));
         let kept = setup_digest(before.0.as_ref().filter(|_| on_track), &before.1);
         assert_eq!(send(rig, n, c), Err(CommandError::SetupMismatch { kept }));
         assert_eq!(rig.take_start_request(), None);

@@ -20,7 +20,7 @@
 use hils_plant::track::MAX_ZONES;
 use hils_rig_core::can::{
     Calibration, ClassicFrame, Command, CommandFrame, CommandResult, RigMode, RigState,
-    StatusFrame, TrackCommand, WHEEL_SPEED_MAX_KMH,
+    StartCommand, StatusFrame, TrackCommand, WHEEL_SPEED_MAX_KMH,
 };
 use hils_rig_core::rig::Faults;
 
@@ -101,12 +101,12 @@ const SETUP_MISMATCH: &str =
 pub fn rejection_reason(command: &Command, before: &StatusFrame) -> Option<String> {
     let running = before.state == RigState::Running;
     match command {
-        Command::Start {
+        Command::Start(StartCommand {
             mode,
             initial_speed_kmh,
             track,
             ..
-        } => {
+        }) => {
             if running {
                 Some("a run is active: stop it first".into())
             } else if !(0.0..=WHEEL_SPEED_MAX_KMH).contains(initial_speed_kmh) {

@@ -36,7 +36,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use hils_plant::{FrictionModel, Rail};
 use hils_rig_core::can::{
     BrakeCommand, Calibration, ClassicFrame, Command, ConfigItem, InjectedFault, RigMode, RigState,
-    VehicleKey,
+    StartCommand, VehicleKey,
 };
 use hils_rig_core::sensor::SensorKind;
 
@@ -291,7 +291,7 @@ pub fn commands_of(line: &Line) -> Result<Vec<Command>> {
 /// The `RIG_COMMAND` of a line (None for lines that send nothing).
 fn command_of(line: &Line) -> Result<Option<Command>> {
     Ok(Some(match line {
-        Line::Start(a) => Command::Start {
+        Line::Start(a) => Command::Start(StartCommand {
             track: a.track.is_some(),
             mode: match a.mode {
                 ModeArg::Rig => RigMode::Rig,
@@ -303,7 +303,7 @@ fn command_of(line: &Line) -> Result<Option<Command>> {
             initial_speed_kmh: a.speed_kmh,
             // Stamped by `commands_of` from the setup sent before it.
             setup_digest: 0,
-        },
+        }),
         Line::Stop => Command::Stop,
         Line::Brake { demand, decel_mps2 } => Command::Brake(match (demand, decel_mps2) {
             (BrakeKind::Eb, None) => BrakeCommand::Emergency,

@@ -57,7 +57,8 @@ use clap::Args;
 use hils_brake_unit::BrakeDemand;
 use hils_plant::Rail;
 use hils_rig_core::can::{
-    BrakeCommand, Command, RigMode, RigState, WHEEL_SPEED_MAX_KMH, WHEEL_SPEED_RESOLUTION_KMH,
+    BrakeCommand, Command, RigMode, RigState, StartCommand, WHEEL_SPEED_MAX_KMH,
+    WHEEL_SPEED_RESOLUTION_KMH,
 };
 use rayon::prelude::*;
 
@@ -243,7 +244,7 @@ fn run_one<T: Transport>(
     log: &Path,
 ) -> (String, Option<Stop>) {
     s.recorder = Some(Recorder::default());
-    let start = Command::Start {
+    let start = Command::Start(StartCommand {
         mode: RigMode::Rig,
         rail: Rail::Wet,
         friction: args.friction.model(),
@@ -252,7 +253,7 @@ fn run_one<T: Transport>(
         track: true,
         // Stamped below from the setup sent before it.
         setup_digest: 0,
-    };
+    });
     let demand = plan.demand;
     let mut stop = None;
     let mut steps = || -> Result<String, Stop> {

@@ -27,7 +27,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use hils_plant::{Params, Surface, WHEELSETS};
 use hils_rig_core::KMH_PER_MPS;
-use hils_rig_core::can::{Command, DiagFrame, RigState, StatusFrame};
+use hils_rig_core::can::{Command, DiagFrame, RigState, StartCommand, StatusFrame};
 use hils_rig_core::hw::TelemetryEvent;
 use hils_sil::Cmd;
 use hils_sil::record::Channel;
@@ -97,14 +97,14 @@ fn latest<T: Copy>(samples: &[(f64, T)], t: f64) -> Option<T> {
 
 /// Run metadata from a start command.
 fn start_metadata(start: Option<Command>) -> Vec<(&'static str, String)> {
-    let Some(Command::Start {
+    let Some(Command::Start(StartCommand {
         rail,
         friction,
         initial_speed_kmh,
         mode,
         track,
         ..
-    }) = start
+    })) = start
     else {
         return vec![(
             "notes_run",

@@ -83,16 +83,11 @@ pub fn with_setup_digest(setup: &[Command], mut start: Command) -> Result<Comman
         kept.apply(c)
             .map_err(|e| anyhow!("{c:?} would be refused by the board: {e:?}"))?;
     }
-    if let Command::Start {
-        track,
-        setup_digest: digest,
-        ..
-    } = &mut start
-    {
-        if *track && kept.track().is_none() {
+    if let Command::Start(start) = &mut start {
+        if start.track && kept.track().is_none() {
             bail!("a start on a track, but no track commit is sent before it");
         }
-        *digest = kept.digest(*track);
+        start.setup_digest = kept.digest(start.track);
     }
     Ok(start)
 }
