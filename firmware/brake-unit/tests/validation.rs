@@ -18,11 +18,19 @@ fn key_of(e: UnitError) -> &'static str {
     }
 }
 
+/// `(key, field)` rows of WSP values: the file's key is `wsp.` and the field's name.
+macro_rules! wsp_fields {
+    ($($field:ident),* $(,)?) => {
+        [$((concat!("wsp.", stringify!($field)), |c| &mut c.wsp.$field)),*]
+    };
+}
+
 #[test]
 fn every_brake_unit_and_wsp_value_is_checked() {
     let p = Params::default();
     type Field = (&'static str, fn(&mut UnitConfig) -> &mut f64);
-    let fields: [Field; 16] = [
+    // `[brake_unit]`: the file's keys are the fields' names without their unit.
+    let brake_unit: [Field; 4] = [
         ("brake_unit.eb_deceleration", |c| {
             &mut c.params.eb_deceleration_mps2
         }),
@@ -33,19 +41,12 @@ fn every_brake_unit_and_wsp_value_is_checked() {
             &mut c.params.vent_time_constant_s
         }),
         ("brake_unit.dead_time", |c| &mut c.params.dead_time_s),
-        ("wsp.deficit_min", |c| &mut c.wsp.deficit_min),
-        ("wsp.deficit_ratio", |c| &mut c.wsp.deficit_ratio),
-        ("wsp.reapply_ratio", |c| &mut c.wsp.reapply_ratio),
-        ("wsp.decel_threshold", |c| &mut c.wsp.decel_threshold),
-        ("wsp.recover_accel", |c| &mut c.wsp.recover_accel),
-        ("wsp.caught_up_accel", |c| &mut c.wsp.caught_up_accel),
-        ("wsp.lock_ratio", |c| &mut c.wsp.lock_ratio),
-        ("wsp.vent_max", |c| &mut c.wsp.vent_max),
-        ("wsp.hold_max", |c| &mut c.wsp.hold_max),
-        ("wsp.min_speed", |c| &mut c.wsp.min_speed),
-        ("wsp.ref_max_decel", |c| &mut c.wsp.ref_max_decel),
-        ("wsp.accel_filter", |c| &mut c.wsp.accel_filter),
     ];
+    let wsp: [Field; 12] = wsp_fields! {
+        deficit_min, deficit_ratio, reapply_ratio, decel_threshold, recover_accel,
+        caught_up_accel, lock_ratio, vent_max, hold_max, min_speed, ref_max_decel, accel_filter,
+    };
+    let fields = brake_unit.into_iter().chain(wsp);
     assert!(build(&p, &UnitConfig::new(1e-4)).is_ok());
     for (key, field) in fields {
         for bad in BAD {
