@@ -110,7 +110,7 @@ fn rejections_are_reported_with_the_board_rule() {
             .contains("no run to stop (state idle)"),
         "{o}"
     );
-    assert!(o.status.faults as u32 & Faults::COMMAND_REJECTED != 0);
+    assert!(o.status.faults as u32 & Faults::COMMAND_REJECTED.bits() != 0);
     let o = s.command(start(WHEEL_SPEED_MAX_KMH + 10.0)).unwrap();
     assert!(!o.accepted);
     assert!(
@@ -161,7 +161,7 @@ fn injected_sensor_fault_ends_the_run_and_blocks_a_start_until_cleared() {
         "sensor 2 flagged: {:#x}",
         st.faults
     );
-    assert!(st.faults as u32 & Faults::FAULT_INJECTED != 0);
+    assert!(st.faults as u32 & Faults::FAULT_INJECTED.bits() != 0);
     s.run_for(0.2, |_, _| hils::rig::commands::Flow::Continue)
         .unwrap();
     assert_eq!(

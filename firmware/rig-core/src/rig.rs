@@ -105,44 +105,40 @@ struct DiagWindow {
     steps: u32,
 }
 
-/// Fault flags (bit set). The low 16 bits go into `RIG_STATUS`; all 32 into telemetry.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Faults(pub u32);
-
-impl Faults {
-    /// Bits 0-3: sensor channel 1-4 has a latched fault.
-    pub const SENSOR: u32 = 0x000F;
-    /// A step overran its period (sticky until cleared).
-    pub const OVERRUN: u32 = 0x0010;
-    /// The CAN controller is error passive now.
-    pub const CAN_ERROR_PASSIVE: u32 = 0x0020;
-    /// The CAN controller is or was bus-off since faults were cleared.
-    pub const CAN_BUS_OFF: u32 = 0x0040;
-    /// A plant brake input was clamped or not finite (plant flags).
-    pub const PLANT_INPUT: u32 = 0x0080;
-    /// The plant's state became non-finite; it put itself at rest.
-    pub const PLANT_NUMERIC: u32 = 0x0100;
-    /// A wheel speed was above the frame's 655.34 km/h and was sent saturated.
-    pub const SPEED_SATURATED: u32 = 0x0200;
-    /// A command was rejected (sticky until cleared; the last result is in the status frame).
-    pub const COMMAND_REJECTED: u32 = 0x0400;
-    /// A telemetry event was dropped (logging queue full).
-    pub const TELEMETRY_DROPPED: u32 = 0x0800;
-    /// A fault injection is active on some channel.
-    pub const FAULT_INJECTED: u32 = 0x1000;
-    /// No fresh ADC sequence for at least one tick (sticky); latches the run in rig mode
-    /// after 10 ticks.
-    pub const ADC_STALE: u32 = 0x2000;
-    /// A CAN frame was dropped (transmit queue full).
-    pub const CAN_TX_DROPPED: u32 = 0x4000;
-    /// Ticks were lost (sticky): the simulated time lags the wall clock.
-    pub const MISSED_TICKS: u32 = 0x8000;
-    /// Bits 16-19 (telemetry only): sensor channel 1-4 has a pending (not yet latched) condition.
-    pub const SENSOR_PENDING: u32 = 0x000F_0000;
-
-    /// Whether any bit of `mask` (one of the constants above) is set.
-    pub fn contains(self, mask: u32) -> bool {
-        self.0 & mask != 0
+bitflags::bitflags! {
+    /// Fault flags (bit set). The low 16 bits go into `RIG_STATUS`; all 32 into telemetry.
+    /// `intersects(mask)`: whether any bit of `mask` is set.
+    #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+    pub struct Faults: u32 {
+        /// Bits 0-3: sensor channel 1-4 has a latched fault.
+        const SENSOR = 0x000F;
+        /// A step overran its period (sticky until cleared).
+        const OVERRUN = 0x0010;
+        /// The CAN controller is error passive now.
+        const CAN_ERROR_PASSIVE = 0x0020;
+        /// The CAN controller is or was bus-off since faults were cleared.
+        const CAN_BUS_OFF = 0x0040;
+        /// A plant brake input was clamped or not finite (plant flags).
+        const PLANT_INPUT = 0x0080;
+        /// The plant's state became non-finite; it put itself at rest.
+        const PLANT_NUMERIC = 0x0100;
+        /// A wheel speed was above the frame's 655.34 km/h and was sent saturated.
+        const SPEED_SATURATED = 0x0200;
+        /// A command was rejected (sticky until cleared; the last result is in the status frame).
+        const COMMAND_REJECTED = 0x0400;
+        /// A telemetry event was dropped (logging queue full).
+        const TELEMETRY_DROPPED = 0x0800;
+        /// A fault injection is active on some channel.
+        const FAULT_INJECTED = 0x1000;
+        /// No fresh ADC sequence for at least one tick (sticky); latches the run in rig mode
+        /// after 10 ticks.
+        const ADC_STALE = 0x2000;
+        /// A CAN frame was dropped (transmit queue full).
+        const CAN_TX_DROPPED = 0x4000;
+        /// Ticks were lost (sticky): the simulated time lags the wall clock.
+        const MISSED_TICKS = 0x8000;
+        /// Bits 16-19 (telemetry only): sensor channel 1-4 has a pending (not yet latched) condition.
+        const SENSOR_PENDING = 0x000F_0000;
     }
 }
 
@@ -470,8 +466,8 @@ pub struct Rig<S: SimStore = Simulation> {
     tick: u32,
     /// Plant steps of the run.
     run_steps: u32,
-    sticky: u32,
-    bus_flags: u32,
+    sticky: Faults,
+    bus_flags: Faults,
     /// Bus-off events since power-up (saturates at 255; `RIG_DIAG` carries up to 15).
     pub bus_off_count: u8,
     last_command_counter: Option<u8>,
@@ -637,8 +633,8 @@ impl<S: SimStore> Rig<S> {
             timing: StepTiming::new(config.cpu_hz, STEP_RATE_HZ),
             tick: 0,
             run_steps: 0,
-            sticky: 0,
-            bus_flags: 0,
+            sticky: Faults::empty(),
+            bus_flags: Faults::empty(),
             bus_off_count: 0,
             last_command_counter: None,
             last_result: CommandResult::None,
@@ -756,22 +752,20 @@ impl<S: SimStore> Rig<S> {
         let mut f = self.sticky | self.bus_flags;
         for (j, s) in self.sensors.iter().enumerate() {
             if s.fault().is_some() {
-                f |= 1 << j;
+                f |= Faults::from_bits_retain(1 << j);
             }
             if s.injected().is_some() {
                 f |= Faults::FAULT_INJECTED;
             }
         }
-        Faults(f)
+        f
     }
 
     /// Bus state from the CAN task (error passive now; bus-off now or seen; bus-off count).
     pub fn set_bus(&mut self, error_passive: bool, bus_off: bool, bus_off_count: u32) {
-        self.bus_flags = (if error_passive {
-            Faults::CAN_ERROR_PASSIVE
-        } else {
-            0
-        }) | (if bus_off { Faults::CAN_BUS_OFF } else { 0 });
+        self.bus_flags = Faults::empty();
+        self.bus_flags.set(Faults::CAN_ERROR_PASSIVE, error_passive);
+        self.bus_flags.set(Faults::CAN_BUS_OFF, bus_off);
         self.bus_off_count = bus_off_count.min(255) as u8;
     }
 
@@ -1036,7 +1030,11 @@ impl<S: SimStore> Rig<S> {
                 // A flag whose cause is present stays: ADC still stale, bus still off (the
                 // board's monitor clears "bus-off seen" only if it is back on the bus).
                 let stale = self.stale_ticks > 0;
-                self.sticky = if stale { Faults::ADC_STALE } else { 0 };
+                self.sticky = if stale {
+                    Faults::ADC_STALE
+                } else {
+                    Faults::empty()
+                };
                 self.bus_clear_requested = true;
                 if self.state == RigState::Fault && all_clear && !stale {
                     self.state = RigState::Stopped;
@@ -1194,7 +1192,7 @@ impl<S: SimStore> Rig<S> {
     /// The telemetry record of now (None without a run); takes the timing window.
     pub fn record(&mut self) -> Option<TelemetryRecord> {
         let window = self.timing.take_window();
-        let faults = self.faults().0 | self.pending_bits();
+        let faults = self.faults().bits() | self.pending_bits();
         let mut sensor_faults = 0u16;
         for (j, s) in self.sensors.iter().enumerate() {
             sensor_faults |= (SensorFault::code(s.fault()) as u16) << (4 * j);
@@ -1337,7 +1335,7 @@ impl<S: SimStore> Rig<S> {
                 state: self.state,
                 mode: self.mode,
                 command_result: self.last_result,
-                faults: self.faults().0 as u16,
+                faults: self.faults().bits() as u16,
                 counter: self.counters[1],
             };
             self.counters[1] = (self.counters[1] + 1) & 0x0F;

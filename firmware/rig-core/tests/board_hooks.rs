@@ -9,20 +9,20 @@ fn downstream_drops_set_sticky_flags_until_cleared() {
     let mut rig = Rig::new(RigConfig::nucleo_g474re());
     assert!(
         !rig.faults()
-            .contains(Faults::TELEMETRY_DROPPED | Faults::CAN_TX_DROPPED)
+            .intersects(Faults::TELEMETRY_DROPPED | Faults::CAN_TX_DROPPED)
     );
     rig.note_downstream_drops(true, false);
-    assert!(rig.faults().contains(Faults::TELEMETRY_DROPPED));
-    assert!(!rig.faults().contains(Faults::CAN_TX_DROPPED));
+    assert!(rig.faults().intersects(Faults::TELEMETRY_DROPPED));
+    assert!(!rig.faults().intersects(Faults::CAN_TX_DROPPED));
     rig.note_downstream_drops(false, true);
-    assert!(rig.faults().contains(Faults::CAN_TX_DROPPED));
+    assert!(rig.faults().intersects(Faults::CAN_TX_DROPPED));
     rig.note_downstream_drops(false, false);
     assert!(
         rig.faults()
-            .contains(Faults::TELEMETRY_DROPPED | Faults::CAN_TX_DROPPED),
+            .intersects(Faults::TELEMETRY_DROPPED | Faults::CAN_TX_DROPPED),
         "sticky"
     );
     rig.command(Command::ClearFaults).unwrap();
-    assert!(!rig.faults().contains(Faults::TELEMETRY_DROPPED));
-    assert!(!rig.faults().contains(Faults::CAN_TX_DROPPED));
+    assert!(!rig.faults().intersects(Faults::TELEMETRY_DROPPED));
+    assert!(!rig.faults().intersects(Faults::CAN_TX_DROPPED));
 }

@@ -419,8 +419,8 @@ fn latched_sensor_fault_puts_a_rig_run_in_the_safe_state() {
     let st = StatusFrame::decode(&st).unwrap();
     assert_eq!(st.state, RigState::Fault);
     assert_eq!(
-        st.faults as u32 & (Faults::SENSOR | Faults::FAULT_INJECTED),
-        0b10 | Faults::FAULT_INJECTED
+        st.faults as u32 & (Faults::SENSOR | Faults::FAULT_INJECTED).bits(),
+        0b10 | Faults::FAULT_INJECTED.bits()
     );
     assert!(matches!(
         io.telemetry.last(),
@@ -454,7 +454,7 @@ fn latched_sensor_fault_puts_a_rig_run_in_the_safe_state() {
     rig.step(&mut io);
     command(&mut rig, 8, Command::ClearFaults).unwrap();
     assert_eq!(rig.state(), RigState::Stopped);
-    assert_eq!(rig.faults().0 & 0xFFFF, 0);
+    assert_eq!(rig.faults().bits() & 0xFFFF, 0);
     command(&mut rig, 9, start).unwrap();
     assert_eq!(rig.state(), RigState::Running);
 }
@@ -498,7 +498,7 @@ fn each_plausibility_fault_stops_a_rig_run_and_self_test_only_reports() {
             for _ in 0..6000 {
                 rig.step(&mut io);
             }
-            assert!(rig.faults().contains(1 << 3), "{fault:?} {mode:?}");
+            assert!(rig.faults().bits() & (1 << 3) != 0, "{fault:?} {mode:?}");
             let want = if mode == RigMode::Rig {
                 RigState::Fault
             } else {
@@ -519,7 +519,7 @@ fn stale_adc_stops_a_rig_run_after_ten_ticks() {
     for k in 1..=9 {
         rig.step(&mut io);
         assert_eq!(rig.state(), RigState::Running, "tick {k}");
-        assert!(rig.faults().contains(Faults::ADC_STALE));
+        assert!(rig.faults().intersects(Faults::ADC_STALE));
     }
     rig.step(&mut io);
     assert_eq!(rig.state(), RigState::Fault);
@@ -591,7 +591,7 @@ fn start_is_built_outside_the_step_and_handed_over() {
         Err(CommandError::SpeedOutOfRange)
     );
     assert_eq!(rig.state(), RigState::Stopped);
-    assert!(rig.faults().contains(Faults::COMMAND_REJECTED));
+    assert!(rig.faults().intersects(Faults::COMMAND_REJECTED));
 }
 
 #[test]
@@ -607,7 +607,7 @@ fn a_350_kmh_run_is_sent_unsaturated_at_0_01_kmh() {
     for _ in 0..100 {
         rig.step(&mut io);
     }
-    assert!(!rig.faults().contains(Faults::SPEED_SATURATED));
+    assert!(!rig.faults().intersects(Faults::SPEED_SATURATED));
     let sent = last_wheel_speeds(&io);
     for j in 0..4 {
         let v = rig.wheel_speeds_kmh()[j].unwrap();
@@ -641,7 +641,7 @@ fn an_open_wire_on_nine_ticks_of_ten_faults_a_rig_run_in_bounded_time() {
     }
     // Score +9 per open tick, -1 per clean one, latch at 90: tick 12 (independent count).
     assert_eq!(fault_tick, Some(12));
-    assert!(rig.faults().contains(1));
+    assert!(rig.faults().bits() & (1) != 0);
     assert!(io.pulses.iter().all(|p| p.unwrap().is_silent()));
 }
 
@@ -655,11 +655,17 @@ fn set_kind_clears_no_fault_and_a_rig_start_stays_refused() {
     for _ in 0..20 {
         rig.step(&mut io);
     }
-    assert!(rig.faults().contains(1 << 2));
+    assert!(rig.faults().bits() & (1 << 2) != 0);
     make_pressure_channel(&mut rig, 1, 2);
-    assert!(rig.faults().contains(1 << 2), "SetKind cleared the fault");
+    assert!(
+        rig.faults().bits() & (1 << 2) != 0,
+        "SetKind cleared the fault"
+    );
     command(&mut rig, 2, Command::ClearFaults).unwrap();
-    assert!(rig.faults().contains(1 << 2), "cleared with the wire open");
+    assert!(
+        rig.faults().bits() & (1 << 2) != 0,
+        "cleared with the wire open"
+    );
     assert_eq!(
         command(&mut rig, 3, rig_start(80.0)),
         Err(CommandError::SensorFaults)
@@ -670,7 +676,7 @@ fn set_kind_clears_no_fault_and_a_rig_start_stays_refused() {
         rig.step(&mut io);
     }
     command(&mut rig, 4, Command::ClearFaults).unwrap();
-    assert!(!rig.faults().contains(Faults::SENSOR));
+    assert!(!rig.faults().intersects(Faults::SENSOR));
     command(&mut rig, 5, rig_start(80.0)).unwrap();
 }
 
@@ -686,8 +692,8 @@ fn a_stalled_dma_in_self_test_is_adc_stale_not_four_stuck_sensors() {
         rig.step(&mut io);
     }
     let f = rig.faults();
-    assert!(f.contains(Faults::ADC_STALE));
-    assert!(!f.contains(Faults::SENSOR), "{:#x}", f.0);
+    assert!(f.intersects(Faults::ADC_STALE));
+    assert!(!f.intersects(Faults::SENSOR), "{:#x}", f.bits());
     assert_eq!(
         rig.state(),
         RigState::Running,
@@ -695,11 +701,11 @@ fn a_stalled_dma_in_self_test_is_adc_stale_not_four_stuck_sensors() {
     );
     // The cause is present: ClearFaults keeps ADC_STALE.
     command(&mut rig, 2, Command::ClearFaults).unwrap();
-    assert!(rig.faults().contains(Faults::ADC_STALE));
+    assert!(rig.faults().intersects(Faults::ADC_STALE));
     io.adc_counts = Some([409.5; 4]);
     rig.step(&mut io);
     command(&mut rig, 3, Command::ClearFaults).unwrap();
-    assert!(!rig.faults().contains(Faults::ADC_STALE));
+    assert!(!rig.faults().intersects(Faults::ADC_STALE));
 }
 
 #[test]
@@ -713,7 +719,7 @@ fn stale_adc_fault_is_not_cleared_while_the_adc_is_stale() {
     assert_eq!(rig.state(), RigState::Fault);
     command(&mut rig, 2, Command::ClearFaults).unwrap();
     assert_eq!(rig.state(), RigState::Fault);
-    assert!(rig.faults().contains(Faults::ADC_STALE));
+    assert!(rig.faults().intersects(Faults::ADC_STALE));
     io.adc_counts = Some([load_cell_counts(3000.0); 4]);
     rig.step(&mut io);
     command(&mut rig, 3, Command::ClearFaults).unwrap();
@@ -725,28 +731,28 @@ fn bus_state_reaches_flags_and_diag_and_clear_is_passed_to_the_board() {
     let (mut rig, mut io) = paper_self_test_started(FrictionModel::Variable);
     rig.set_bus(true, false, 0);
     rig.step(&mut io);
-    assert!(rig.faults().contains(Faults::CAN_ERROR_PASSIVE));
-    assert!(!rig.faults().contains(Faults::CAN_BUS_OFF));
+    assert!(rig.faults().intersects(Faults::CAN_ERROR_PASSIVE));
+    assert!(!rig.faults().intersects(Faults::CAN_BUS_OFF));
     rig.set_bus(false, true, 3);
     for _ in 0..1000 {
         rig.step(&mut io);
     }
     let f = rig.faults();
-    assert!(f.contains(Faults::CAN_BUS_OFF) && !f.contains(Faults::CAN_ERROR_PASSIVE));
+    assert!(f.intersects(Faults::CAN_BUS_OFF) && !f.intersects(Faults::CAN_ERROR_PASSIVE));
     let (_, d) = io.frames_with(ID_DIAG).last().copied().unwrap().clone();
     assert_eq!(DiagFrame::decode(&d).unwrap().bus_off_count, 3);
     // Bus faults are flagged, the run goes on.
     assert_eq!(rig.state(), RigState::Running);
     let (_, st) = io.frames_with(ID_STATUS).last().copied().unwrap().clone();
-    assert!(StatusFrame::decode(&st).unwrap().faults as u32 & Faults::CAN_BUS_OFF != 0);
+    assert!(StatusFrame::decode(&st).unwrap().faults as u32 & Faults::CAN_BUS_OFF.bits() != 0);
     // ClearFaults asks the board's monitor once; the flag goes only when the board says so.
     assert!(!rig.take_bus_clear());
     command(&mut rig, 2, Command::ClearFaults).unwrap();
     assert!(rig.take_bus_clear());
     assert!(!rig.take_bus_clear());
-    assert!(rig.faults().contains(Faults::CAN_BUS_OFF));
+    assert!(rig.faults().intersects(Faults::CAN_BUS_OFF));
     rig.set_bus(false, false, 3);
-    assert!(!rig.faults().contains(Faults::CAN_BUS_OFF));
+    assert!(!rig.faults().intersects(Faults::CAN_BUS_OFF));
 }
 
 #[test]
@@ -757,9 +763,9 @@ fn commands_are_checked_and_results_reported() {
         command(&mut rig, 1, Command::Stop),
         Err(CommandError::NotNow(RigState::Idle))
     );
-    assert!(rig.faults().contains(Faults::COMMAND_REJECTED));
+    assert!(rig.faults().intersects(Faults::COMMAND_REJECTED));
     command(&mut rig, 2, Command::ClearFaults).unwrap();
-    assert!(!rig.faults().contains(Faults::COMMAND_REJECTED));
+    assert!(!rig.faults().intersects(Faults::COMMAND_REJECTED));
     // Repeated counter: ignored.
     assert_eq!(
         command(&mut rig, 2, Command::ClearFaults),
@@ -857,7 +863,7 @@ fn commands_are_checked_and_results_reported() {
     let (_, st) = io.frames_with(ID_STATUS).last().copied().unwrap().clone();
     let st = StatusFrame::decode(&st).unwrap();
     assert_eq!(st.command_result, CommandResult::Rejected);
-    assert!(st.faults as u32 & Faults::COMMAND_REJECTED != 0);
+    assert!(st.faults as u32 & Faults::COMMAND_REJECTED.bits() != 0);
 }
 
 #[test]
@@ -877,7 +883,7 @@ fn idle_outputs_are_safe_and_frames_keep_coming() {
     assert_eq!((st.state, st.vehicle_speed_kmh), (RigState::Idle, 0.0));
     assert!(io.telemetry.is_empty(), "no run, no telemetry");
     // Without a rig the ADC is stale: flagged, but Idle stays Idle.
-    assert!(rig.faults().contains(Faults::ADC_STALE));
+    assert!(rig.faults().intersects(Faults::ADC_STALE));
 }
 
 #[test]
@@ -893,10 +899,10 @@ fn full_queues_and_overruns_are_counted_and_flagged() {
         rig.record_timing(entry, entry + dur, false);
     }
     let f = rig.faults();
-    assert!(f.contains(Faults::CAN_TX_DROPPED));
-    assert!(f.contains(Faults::TELEMETRY_DROPPED));
-    assert!(f.contains(Faults::OVERRUN));
-    assert!(f.contains(Faults::MISSED_TICKS));
+    assert!(f.intersects(Faults::CAN_TX_DROPPED));
+    assert!(f.intersects(Faults::TELEMETRY_DROPPED));
+    assert!(f.intersects(Faults::OVERRUN));
+    assert!(f.intersects(Faults::MISSED_TICKS));
     assert_eq!(rig.timing().overruns, 1);
     assert_eq!(rig.timing().missed_ticks, 2);
     assert_eq!(rig.timing().run_max_cycles, 18_000);

@@ -86,7 +86,7 @@ pub fn state_name(s: RigState) -> &'static str {
 /// The sensor channels (1-based) flagged in the status frame's fault bits.
 fn sensor_channels(faults: u16) -> Vec<String> {
     (0..4)
-        .filter(|j| faults as u32 & (1 << j) & Faults::SENSOR != 0)
+        .filter(|j| faults as u32 & (1 << j) & Faults::SENSOR.bits() != 0)
         .map(|j| (j + 1).to_string())
         .collect()
 }
@@ -113,7 +113,7 @@ pub fn rejection_reason(command: &Command, before: &StatusFrame) -> Option<Strin
                 Some(format!(
                     "initial speed {initial_speed_kmh} km/h is outside 0-{WHEEL_SPEED_MAX_KMH:.2} km/h (the wheel-speed frame's range)"
                 ))
-            } else if *mode == RigMode::Rig && before.faults as u32 & Faults::SENSOR != 0 {
+            } else if *mode == RigMode::Rig && before.faults as u32 & Faults::SENSOR.bits() != 0 {
                 Some(format!(
                     "sensor fault latched on channel(s) {}: clear faults first (`hils rig clear-faults`)",
                     sensor_channels(before.faults).join(", ")
@@ -219,7 +219,7 @@ impl<T: Transport> Session<T> {
         }
         let seen = seen?;
         if let Seen::Status(s) = seen {
-            if s.faults as u32 & Faults::CAN_BUS_OFF != 0 {
+            if s.faults as u32 & Faults::CAN_BUS_OFF.bits() != 0 {
                 return Err(Alarm::BoardBusOff);
             }
         }

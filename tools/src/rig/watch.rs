@@ -11,34 +11,19 @@ use hils_rig_core::rig::Faults;
 use super::commands::state_name;
 use super::monitor::{BoardView, Seen};
 
-/// The fault flags of `RIG_STATUS` (low 16 bits of [`Faults`]) by name.
-const FAULT_NAMES: [(u32, &str); 12] = [
-    (Faults::OVERRUN, "overrun"),
-    (Faults::CAN_ERROR_PASSIVE, "can-error-passive"),
-    (Faults::CAN_BUS_OFF, "can-bus-off"),
-    (Faults::PLANT_INPUT, "plant-input"),
-    (Faults::PLANT_NUMERIC, "plant-numeric"),
-    (Faults::SPEED_SATURATED, "speed-saturated"),
-    (Faults::COMMAND_REJECTED, "command-rejected"),
-    (Faults::TELEMETRY_DROPPED, "telemetry-dropped"),
-    (Faults::FAULT_INJECTED, "fault-injected"),
-    (Faults::ADC_STALE, "adc-stale"),
-    (Faults::CAN_TX_DROPPED, "can-tx-dropped"),
-    (Faults::MISSED_TICKS, "missed-ticks"),
-];
-
-/// The names of the fault bits set (sensor channels as `sensorN`).
+/// The names of the fault bits set (sensor channels as `sensorN`, the other flags of
+/// `RIG_STATUS` by their [`Faults`] name in kebab case: `CAN_BUS_OFF` -> `can-bus-off`).
 pub fn fault_names(faults: u16) -> Vec<String> {
     let f = faults as u32;
     let mut names: Vec<String> = (0..4)
         .filter(|j| f & (1 << j) != 0)
         .map(|j| format!("sensor{}", j + 1))
         .collect();
+    let flags = Faults::from_bits_truncate(f).difference(Faults::SENSOR);
     names.extend(
-        FAULT_NAMES
-            .iter()
-            .filter(|(bit, _)| f & bit != 0)
-            .map(|(_, n)| n.to_string()),
+        flags
+            .iter_names()
+            .map(|(name, _)| name.to_lowercase().replace('_', "-")),
     );
     names
 }
@@ -177,5 +162,22 @@ impl<W: Write> Watcher<W> {
             writeln!(self.out, "{text}")
         };
         let _ = self.out.flush();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fault_names_are_the_status_flags_in_kebab_case() {
+        assert_eq!(
+            fault_names(0xFFFF).join(" "),
+            "sensor1 sensor2 sensor3 sensor4 overrun can-error-passive can-bus-off plant-input \
+             plant-numeric speed-saturated command-rejected telemetry-dropped fault-injected \
+             adc-stale can-tx-dropped missed-ticks"
+        );
+        assert_eq!(fault_names(0b10 | 0x0040), ["sensor2", "can-bus-off"]);
+        assert!(fault_names(0).is_empty());
     }
 }
