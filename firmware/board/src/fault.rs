@@ -34,13 +34,14 @@ use embassy_stm32::pac::timer::vals::Ocm;
 
 use crate::pulse::PULSE_PINS;
 
-/// What ended the last run.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format)]
+/// What ended the last run (an unknown stored code reads as `UnexpectedInterrupt`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format, num_enum::FromPrimitive)]
 #[repr(u32)]
 pub enum FaultKind {
     Panic = 1,
     HardFault = 2,
     ClockFailure = 3,
+    #[num_enum(default)]
     UnexpectedInterrupt = 4,
     /// NMI from a flash double ECC error (FLASH_ECCR.ECCD).
     FlashEcc = 5,
@@ -89,17 +90,8 @@ pub fn take_last_fault() -> Option<FaultRecord> {
     if s.magic != MAGIC {
         return None;
     }
-    let kind = match s.kind {
-        1 => FaultKind::Panic,
-        2 => FaultKind::HardFault,
-        3 => FaultKind::ClockFailure,
-        5 => FaultKind::FlashEcc,
-        6 => FaultKind::SramParity,
-        7 => FaultKind::UnknownNmi,
-        _ => FaultKind::UnexpectedInterrupt,
-    };
     Some(FaultRecord {
-        kind,
+        kind: FaultKind::from(s.kind),
         pc_or_line: s.pc_or_line,
         lr_or_irq: s.lr_or_irq,
         detail: s.detail,

@@ -23,11 +23,12 @@
 
 use core::sync::atomic::{AtomicU8, Ordering};
 
-/// State of a slot.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// State of a slot (an unknown code reads as `Free`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, num_enum::FromPrimitive)]
 #[repr(u8)]
 pub enum SlotState {
     /// Never used, or a build was abandoned: holds no value.
+    #[num_enum(default)]
     Free = 0,
     /// The builder owns it and is writing a value.
     Building = 1,
@@ -37,18 +38,6 @@ pub enum SlotState {
     Active = 3,
     /// The step gave it back: holds an old value the builder may drop.
     Retired = 4,
-}
-
-impl SlotState {
-    fn from_raw(raw: u8) -> Self {
-        match raw {
-            1 => Self::Building,
-            2 => Self::Ready,
-            3 => Self::Active,
-            4 => Self::Retired,
-            _ => Self::Free,
-        }
-    }
 }
 
 /// A slot the builder claimed: its index and whether it holds an old value to drop.
@@ -82,7 +71,7 @@ impl<const N: usize> SlotStates<N> {
     /// State of slot `i` now.
     pub fn state(&self, i: usize) -> SlotState {
         self.states.get(i).map_or(SlotState::Free, |s| {
-            SlotState::from_raw(s.load(Ordering::Acquire))
+            SlotState::from(s.load(Ordering::Acquire))
         })
     }
 
