@@ -363,8 +363,10 @@ fn programme_args(
     std::fs::write(&file, PROGRAMME).unwrap();
     let run = hils::rig::programme::RunArgs {
         programme: file,
-        json: Some(dir.join("out.json")),
-        report: Some(dir.join("report")),
+        out: hils::outputs::Outputs {
+            json: Some(dir.join("out.json")),
+            report: Some(dir.join("report")),
+        },
         friction: hils::rig::FrictionArg::Variable,
         max_run_s: 120.0,
         settle_s: 3.0,

@@ -79,6 +79,10 @@ pub enum RigCommand {
         file: PathBuf,
     },
     /// Run a programme of runs on the rig, recording each (see `hils rig run --help`).
+    ///
+    /// `--json FILE`: the per-run results (the `hils wsp-test --json` keys, with `on_rig`
+    /// and `end`). `--report DIR`: report.md, the plots and each run's log (NAME.csv);
+    /// without it the logs go to the current directory and no report is written.
     Run(programme::RunArgs),
 }
 

@@ -78,14 +78,9 @@ pub struct RunArgs {
     /// The programme (the `hils wsp-test --programme` format).
     #[arg(long)]
     pub programme: PathBuf,
-    /// Write the per-run results as JSON here (the `hils wsp-test --json` keys, with
-    /// `on_rig` and `end`).
-    #[arg(long)]
-    pub json: Option<PathBuf>,
-    /// Write report.md, the plots and each run's log (NAME.csv) into this directory
-    /// (default: the current directory for the logs, no report).
-    #[arg(long)]
-    pub report: Option<PathBuf>,
+    /// `--json FILE` and `--report DIR` (what they hold: `hils rig run --help`).
+    #[command(flatten)]
+    pub out: crate::outputs::Outputs,
     /// Friction model of the board's plant (and of the SIL runs) for every run.
     #[arg(long, value_enum, default_value_t = FrictionArg::Variable)]
     pub friction: FrictionArg,
@@ -432,7 +427,11 @@ pub fn main(rig: &RigArgs, args: &RunArgs) -> Result<()> {
     if let Some(only) = &args.only {
         runs.retain(|r| r.run.name.contains(only.as_str()));
     }
-    let log_dir = args.report.clone().unwrap_or_else(|| PathBuf::from("."));
+    let log_dir = args
+        .out
+        .report
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("."));
     std::fs::create_dir_all(&log_dir)
         .with_context(|| format!("cannot create {}", log_dir.display()))?;
     let mut s = Session::new(open(rig)?, rig.lost_after_s);
@@ -452,12 +451,9 @@ pub fn main(rig: &RigArgs, args: &RunArgs) -> Result<()> {
         "{on_rig}/{} runs on the rig, {passed} passed",
         rig_runs.len()
     );
-    if let Some(out) = &args.json {
-        let json: Vec<serde_json::Value> = rig_runs.iter().map(RigRun::json).collect();
-        std::fs::write(out, serde_json::to_string_pretty(&json)?)
-            .with_context(|| format!("cannot write {}", out.display()))?;
-    }
-    if let Some(dir) = &args.report {
+    let json: Vec<serde_json::Value> = rig_runs.iter().map(RigRun::json).collect();
+    args.out.write_json(&json)?;
+    args.out.write_report(|dir| {
         let heading = format!(
             "# Rig runs of {}\n\nInterface: {}. Each run's log is `NAME.csv` here (spec run-log schema, `# run: NAME`), judged from its brake command as `hils wsp-test --programme {} --log NAME.csv` judges it; `(SIL)` rows: the same run simulated with the simulated brake unit.\n\n",
             args.programme.display(),
@@ -470,8 +466,8 @@ pub fn main(rig: &RigArgs, args: &RunArgs) -> Result<()> {
             outcomes.push(tagged(o, "sil"));
         }
         report::write_with(dir, &heading, &table, &outcomes, &criteria)?;
-        println!("report: {}", dir.join("report.md").display());
-    }
+        Ok(vec![dir.join("report.md")])
+    })?;
     match stopped {
         Some(e) => Err(anyhow!("programme ended early: {e}")),
         None => Ok(()),
