@@ -213,11 +213,11 @@ impl<T: Transport> Session<T> {
             }
             return Ok(None);
         };
-        let seen = self.board.feed(&r);
-        if let (Some(rec), Ok(s)) = (&mut self.recorder, &seen) {
-            rec.push(r.t_s, s);
+        let fed = self.board.feed(&r);
+        if let (Some(rec), Ok((s, cycle))) = (&mut self.recorder, &fed) {
+            rec.push(r.t_s, s, *cycle);
         }
-        let seen = seen?;
+        let (seen, _) = fed?;
         if let Seen::Status(s) = seen {
             if s.faults as u32 & Faults::CAN_BUS_OFF.bits() != 0 {
                 return Err(Alarm::BoardBusOff);

@@ -182,14 +182,17 @@ pub struct BoardView {
 }
 
 impl BoardView {
-    /// Takes a received frame; an alarm when an alive counter is stuck.
-    pub fn feed(&mut self, r: &Received) -> Result<Seen, Alarm> {
+    /// Takes a received frame: what it is and, for the second frame of a wheel-speed
+    /// cycle, the whole cycle; an alarm when an alive counter is stuck.
+    pub fn feed(&mut self, r: &Received) -> Result<(Seen, Option<WheelSpeeds>), Alarm> {
         self.last_frame_s = Some(r.t_s);
         let seen = decode(&r.frame);
+        let mut cycle = None;
         match seen {
             Seen::WheelSpeed(w) => {
                 self.counts.wheel_speed += 1;
-                if let Some(c) = self.wheel_pairing.take(w) {
+                cycle = self.wheel_pairing.take(w);
+                if let Some(c) = cycle {
                     self.wheel_speed = Some((r.t_s, c));
                     check_alive(&mut self.wheel_alive, c.counter, "RIG_WHEEL_SPEED")?;
                 }
@@ -209,7 +212,7 @@ impl BoardView {
                 self.last_bad = Some(e);
             }
         }
-        Ok(seen)
+        Ok((seen, cycle))
     }
 
     /// The latest status frame.

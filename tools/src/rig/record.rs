@@ -34,7 +34,7 @@ use hils_sil::record::Channel;
 use hils_sil::record::run_log::*;
 
 use super::commands::state_name;
-use super::monitor::{Pairing, Seen, WheelSpeeds};
+use super::monitor::{Seen, WheelSpeeds};
 use super::transport::ProbeEvent;
 use crate::runlog;
 
@@ -42,8 +42,6 @@ use crate::runlog;
 #[derive(Clone, Debug, Default)]
 pub struct Recorder {
     pub wheel_speed: Vec<(f64, WheelSpeeds)>,
-    /// Pairs the two wheel-speed frames of a cycle.
-    pub wheel_pairing: Pairing,
     pub status: Vec<(f64, StatusFrame)>,
     pub diag: Vec<(f64, DiagFrame)>,
     pub probe: Vec<ProbeEvent>,
@@ -130,13 +128,11 @@ fn start_metadata(start: Option<Command>) -> Vec<(&'static str, String)> {
 }
 
 impl Recorder {
-    pub fn push(&mut self, t_s: f64, seen: &Seen) {
+    /// Takes a received frame at `t_s`; `cycle`: the wheel-speed cycle it completed (the
+    /// session's [`super::monitor::BoardView`] pairs the two frames of a cycle).
+    pub fn push(&mut self, t_s: f64, seen: &Seen, cycle: Option<WheelSpeeds>) {
         match *seen {
-            Seen::WheelSpeed(w) => {
-                if let Some(c) = self.wheel_pairing.take(w) {
-                    self.wheel_speed.push((t_s, c))
-                }
-            }
+            Seen::WheelSpeed(_) => self.wheel_speed.extend(cycle.map(|c| (t_s, c))),
             Seen::Status(s) => self.status.push((t_s, s)),
             Seen::Diag(d) => self.diag.push((t_s, d)),
             Seen::Command(c) => self.commands.push((t_s, c.command)),
