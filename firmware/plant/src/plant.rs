@@ -655,29 +655,36 @@ impl<F: Real> Plant<F> {
         flags: &mut u32,
     ) -> F {
         let cal = &k.caliper;
-        let (value, limit, low) = match input {
-            BrakeInput::CylinderPressure(p) => (p, cal.pressure_limit, k.pressure_low),
-            BrakeInput::ClampForce(f) => (f, cal.clamp_force_limit, k.clamp_force_low),
-        };
-        // The usual case, a reading within [0, limit], by one integer compare; the
-        // detailed checks only when it fails.
-        let value = if value.within_zero_and(limit) {
-            value
-        } else {
-            if !value.is_finite() {
-                *flags |= Flags::wheelset_bit(Flags::INPUT_NOT_FINITE, j);
-                return *last_clamp;
-            }
-            // Below zero by more than 2 % of the range, or above the limit: out of range.
-            // Small negative readings are sensor noise around zero and clamp silently to 0.
-            if value > limit || value < low {
-                *flags |= Flags::wheelset_bit(Flags::INPUT_OUT_OF_RANGE, j);
-            }
-            value.clamp_to(F::ZERO, limit)
-        };
+        // The usual case, a reading within [0, limit], by one integer compare (one per
+        // input kind); the detailed checks only when it fails.
         let clamp = match input {
-            BrakeInput::CylinderPressure(_) => cal.clamp_force(value).min(cal.clamp_force_limit),
-            BrakeInput::ClampForce(_) => value,
+            BrakeInput::CylinderPressure(p) if p.within_zero_and(cal.pressure_limit) => {
+                cal.clamp_force(p).min(cal.clamp_force_limit)
+            }
+            BrakeInput::ClampForce(f) if f.within_zero_and(cal.clamp_force_limit) => f,
+            _ => {
+                let (value, limit, low) = match input {
+                    BrakeInput::CylinderPressure(p) => (p, cal.pressure_limit, k.pressure_low),
+                    BrakeInput::ClampForce(f) => (f, cal.clamp_force_limit, k.clamp_force_low),
+                };
+                if !value.is_finite() {
+                    *flags |= Flags::wheelset_bit(Flags::INPUT_NOT_FINITE, j);
+                    return *last_clamp;
+                }
+                // Below zero by more than 2 % of the range, or above the limit: out of
+                // range. Small negative readings are sensor noise around zero and clamp
+                // silently to 0.
+                if value > limit || value < low {
+                    *flags |= Flags::wheelset_bit(Flags::INPUT_OUT_OF_RANGE, j);
+                }
+                let value = value.clamp_to(F::ZERO, limit);
+                match input {
+                    BrakeInput::CylinderPressure(_) => {
+                        cal.clamp_force(value).min(cal.clamp_force_limit)
+                    }
+                    BrakeInput::ClampForce(_) => value,
+                }
+            }
         };
         *last_clamp = clamp;
         clamp
