@@ -322,6 +322,27 @@ struct WheelsetStep<F> {
     brake_torque: F,
 }
 
+/// What a step leaves of one wheelset besides its state: the values of
+/// [`WheelsetOutput`] that the state does not hold (the rest, and the derived ones, are
+/// computed on demand by [`Plant::outputs`], so the 10 kHz step stores 11 values per
+/// wheelset instead of 15).
+#[derive(Clone, Copy, Debug, Default)]
+struct WheelsetRecord<F> {
+    omega: F,
+    speed: F,
+    creepage: F,
+    axle_load: F,
+    adhesion_force: F,
+    /// 1/Q of the contact (0 unloaded): the adhesion coefficient F/Q of Eq (13) is
+    /// `adhesion_force * inv_load`.
+    inv_load: F,
+    rail_mu: F,
+    mu_d: F,
+    brake_torque: F,
+    brake_power: F,
+    contact_power: F,
+}
+
 /// The state of one wheelset.
 #[derive(Clone, Copy, Debug, Default)]
 struct WheelsetState<F: Real> {
@@ -354,7 +375,16 @@ struct WheelsetState<F: Real> {
 pub struct Plant<F: Real> {
     k: Constants<F>,
     s: State<F>,
-    out: Outputs<F>,
+    /// Steps taken since start.
+    steps: u32,
+    /// Flags of the last step.
+    flags: Flags,
+    /// What the last step left of each wheelset besides its state.
+    record: [WheelsetRecord<F>; WHEELSETS],
+    /// Carbody acceleration, damper power and external power of the last step.
+    carbody_accel: F,
+    damper_power: F,
+    external_power: F,
     sticky: Flags,
     initial_speed: F,
     /// Adhesion along the track ([`crate::track`]): one surface everywhere unless set.
@@ -403,7 +433,12 @@ impl<F: Real> Plant<F> {
         let mut plant = Plant {
             k,
             s: State::default(),
-            out: Outputs::default(),
+            steps: 0,
+            flags: Flags::default(),
+            record: Default::default(),
+            carbody_accel: F::ZERO,
+            damper_power: F::ZERO,
+            external_power: F::ZERO,
             sticky: Flags::default(),
             initial_speed: F::ZERO,
             track,
@@ -425,7 +460,7 @@ impl<F: Real> Plant<F> {
         plant.initial_speed = v0;
         plant.reset_state(F::of(params.thermal.ambient_rise));
         plant.sticky = Flags(flags);
-        plant.out.flags = Flags(flags);
+        plant.flags = Flags(flags);
         Ok(plant)
     }
 
@@ -586,24 +621,20 @@ impl<F: Real> Plant<F> {
                 .friction
                 .speed_decay_at(v0 * self.k.inv_r * self.k.friction_radius);
         }
-        self.out.steps = 0;
-        self.out.vehicle_speed = v0;
-        self.out.distance = F::ZERO;
-        self.out.carbody_accel = F::ZERO;
-        self.out.carbody_pitch = F::ZERO;
-        for w in self.out.wheelsets.iter_mut() {
-            *w = WheelsetOutput {
+        self.steps = 0;
+        self.carbody_accel = F::ZERO;
+        for w in self.record.iter_mut() {
+            *w = WheelsetRecord {
                 omega: v0 * self.k.inv_r,
                 speed: v0,
                 axle_load: self.k.q_static,
-                disc_temp,
                 mu_d: self.k.friction.mu_d(
                     v0 * self.k.inv_r * self.k.friction_radius,
                     disc_temp,
                     F::ZERO,
                 ),
                 rail_mu: self.k.polach.friction(F::ZERO),
-                ..WheelsetOutput::default()
+                ..WheelsetRecord::default()
             };
         }
     }
@@ -611,7 +642,27 @@ impl<F: Real> Plant<F> {
     /// Wheel circumferential speeds r omega, m/s (what axle speed sensors measure).
     pub fn wheel_speeds(&self) -> [F; WHEELSETS] {
         let r = self.k.r;
-        self.out.wheelsets.map(|w| w.omega * r)
+        self.record.map(|w| w.omega * r)
+    }
+
+    /// Wheelset spin speeds omega, rad/s (positive rolling forward), of the last step.
+    pub fn spin_speeds(&self) -> [F; WHEELSETS] {
+        self.record.map(|w| w.omega)
+    }
+
+    /// Carbody (vehicle) speed, m/s.
+    pub fn vehicle_speed(&self) -> F {
+        self.s.v_c
+    }
+
+    /// Carbody longitudinal acceleration of the last step, m/s^2.
+    pub fn carbody_accel(&self) -> F {
+        self.carbody_accel
+    }
+
+    /// Steps taken since start.
+    pub fn steps(&self) -> u32 {
+        self.steps
     }
 
     /// Wheel radius, m.
@@ -619,9 +670,44 @@ impl<F: Real> Plant<F> {
         self.k.r
     }
 
-    /// Outputs of the last step (or of the initial state).
-    pub fn outputs(&self) -> &Outputs<F> {
-        &self.out
+    /// Outputs of the last step (or of the initial state), built on demand: the step
+    /// keeps only what its state does not hold (one record per wheelset), and the values
+    /// here come from that record and the state. Board code that needs a few values every
+    /// step uses [`Self::spin_speeds`], [`Self::wheel_speeds`], [`Self::vehicle_speed`] and
+    /// [`Self::carbody_accel`] instead.
+    pub fn outputs(&self) -> Outputs<F> {
+        let s = &self.s;
+        Outputs {
+            steps: self.steps,
+            vehicle_speed: s.v_c,
+            distance: s.x_c,
+            carbody_accel: self.carbody_accel,
+            carbody_pitch: s.pitch_c,
+            wheelsets: core::array::from_fn(|j| {
+                let r = &self.record[j];
+                let w = &s.w[j];
+                WheelsetOutput {
+                    omega: r.omega,
+                    speed: r.speed,
+                    slip_velocity: w.slip,
+                    creepage: r.creepage,
+                    axle_load: r.axle_load,
+                    adhesion_force: r.adhesion_force,
+                    adhesion: r.adhesion_force * r.inv_load,
+                    rail_mu: r.rail_mu,
+                    mu_d: r.mu_d,
+                    clamp_force: w.pad_force,
+                    brake_torque: r.brake_torque,
+                    brake_force: self.k.caliper.friction_force(r.mu_d, w.pad_force),
+                    disc_temp: w.disc_temp,
+                    brake_power: r.brake_power,
+                    contact_power: r.contact_power,
+                }
+            }),
+            damper_power: self.damper_power,
+            external_power: self.external_power,
+            flags: self.flags,
+        }
     }
 
     /// Flags of every step so far, or-ed.
@@ -636,7 +722,7 @@ impl<F: Real> Plant<F> {
 
     /// Time since start, s.
     pub fn time(&self) -> F {
-        F::of(self.out.steps as f64) * self.k.dt
+        F::of(self.steps as f64) * self.k.dt
     }
 
     /// Static axle load (all four equal), N.
@@ -714,8 +800,9 @@ impl<F: Real> Plant<F> {
         *pad
     }
 
-    /// Advances the plant by one fixed step with the brake inputs of the four wheelsets.
-    pub fn step(&mut self, inputs: &[BrakeInput<F>; WHEELSETS]) -> &Outputs<F> {
+    /// Advances the plant by one fixed step with the brake inputs of the four wheelsets;
+    /// returns the step's flags ([`Self::outputs`] gives the values).
+    pub fn step(&mut self, inputs: &[BrakeInput<F>; WHEELSETS]) -> Flags {
         let mut flags = 0u32;
         let half = F::of(0.5);
         let k = &self.k;
@@ -775,7 +862,7 @@ impl<F: Real> Plant<F> {
         }
 
         // ---- Slow factors: one per step, in turn (each every 8 steps) ----
-        let turn = self.out.steps % (2 * WHEELSETS as u32);
+        let turn = self.steps % (2 * WHEELSETS as u32);
         let slow = (turn % WHEELSETS as u32) as usize;
         if turn < WHEELSETS as u32 {
             let w = &mut s.w[slow];
@@ -796,7 +883,7 @@ impl<F: Real> Plant<F> {
                 slow,
                 s.x_c + self.track_offset[slow],
                 ws[slow].v_w,
-                self.out.wheelsets[slow].contact_power,
+                self.record[slow].contact_power,
                 F::of(WHEELSETS as f64) * dt,
             );
         }
@@ -847,19 +934,18 @@ impl<F: Real> Plant<F> {
             ws[j].dv_w = dv_explicit - force * k.dt_inv_m_w;
             ws[j].brake_torque = torque;
 
-            let w = &mut self.out.wheelsets[j];
+            // The pad force and the disc temperature are the state's; the outputs
+            // derive the rest (Plant::outputs).
+            let w = &mut self.record[j];
             w.omega = omega_new;
             w.speed = ws[j].v_w + ws[j].dv_w;
-            w.slip_velocity = u_new;
             w.creepage = contact.creepage;
             w.axle_load = ws[j].q;
             w.adhesion_force = force;
-            w.adhesion = force * contact.inv_load;
+            w.inv_load = contact.inv_load;
             w.rail_mu = contact.mu;
             w.mu_d = mu_d;
-            w.clamp_force = ws[j].clamp;
             w.brake_torque = torque;
-            w.brake_force = k.caliper.friction_force(mu_d, ws[j].clamp);
             w.brake_power = torque * half * (ws[j].omega + omega_new);
             w.contact_power = force * half * (s.w[j].slip + u_new);
             s.w[j].slip = u_new;
@@ -869,7 +955,6 @@ impl<F: Real> Plant<F> {
                 k.thermal
                     .net_heat_flow(w.brake_power, s.w[j].disc_temp, s.w[j].heat_loss);
             s.w[j].disc_temp += heat_flow * k.dt_inv_disc_heat_capacity;
-            w.disc_temp = s.w[j].disc_temp;
         }
 
         // ---- Bodies ----
@@ -934,7 +1019,7 @@ impl<F: Real> Plant<F> {
         // wheelsets summed first (one product per body kind).
         let v_mid = half * (v_c + v_c_new);
         let bogie_speeds = (v_mid + s.dv_b[0]) + (v_mid + s.dv_b[1]);
-        let wo = &self.out.wheelsets;
+        let wo = &self.record;
         let wheelset_speeds = (wo[0].speed + wo[1].speed) + (wo[2].speed + wo[3].speed);
         let external = -(resistance + k.grade_force_c) * v_mid
             - k.grade_force_b * bogie_speeds
@@ -948,28 +1033,24 @@ impl<F: Real> Plant<F> {
             sum += s.w[j].slip + s.w[j].disc_temp;
         }
         let finite = sum.is_finite();
-        let out = &mut self.out;
-        out.steps = out.steps.wrapping_add(1);
-        out.vehicle_speed = s.v_c;
-        out.distance = s.x_c;
-        out.carbody_accel = a_c;
-        out.carbody_pitch = s.pitch_c;
-        out.damper_power = damper_power;
-        out.external_power = external;
+        self.steps = self.steps.wrapping_add(1);
+        self.carbody_accel = a_c;
+        self.damper_power = damper_power;
+        self.external_power = external;
         if !finite {
             flags |= Flags::NUMERIC_FAULT;
             self.enter_safe_state();
         }
-        self.out.flags = Flags(flags);
+        self.flags = Flags(flags);
         self.sticky.0 |= flags;
-        &self.out
+        self.flags
     }
 
     /// Safe state after a numeric fault: vehicle at rest, brakes' effect nil, discs kept
     /// if finite. Outputs show standstill, so a brake controller sees a stopped train.
     fn enter_safe_state(&mut self) {
         let temps = self.s.w.map(|w| w.disc_temp);
-        let steps = self.out.steps;
+        let steps = self.steps;
         self.initial_speed = F::ZERO;
         self.reset_state(F::ZERO);
         for j in 0..WHEELSETS {
@@ -977,7 +1058,7 @@ impl<F: Real> Plant<F> {
                 self.s.w[j].disc_temp = temps[j];
             }
         }
-        self.out.steps = steps;
+        self.steps = steps;
     }
 
     /// Kinetic and spring energy (host-side check of the energy balance).
@@ -1017,7 +1098,7 @@ impl<F: Real> Plant<F> {
         for j in 0..WHEELSETS {
             let x = self.s.x_c + self.track_offset[j];
             self.track
-                .step(j, x, self.out.wheelsets[j].speed, F::ZERO, F::ZERO);
+                .step(j, x, self.record[j].speed, F::ZERO, F::ZERO);
         }
     }
 
