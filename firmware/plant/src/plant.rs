@@ -304,31 +304,16 @@ struct State<F: Real> {
     w: [WheelsetState<F>; WHEELSETS],
 }
 
-/// Values of one wheelset within a step (the step's temporaries, one record per wheelset).
-#[derive(Clone, Copy, Debug, Default)]
-struct WheelsetStep<F> {
-    /// Pad force acting, N per face.
-    clamp: F,
-    v_w: F,
-    omega: F,
-    /// Axle load Q, N.
-    q: F,
-    /// Primary vertical force deviation on the bogie and longitudinal force, N.
-    f_pv: F,
-    f_pl: F,
-    /// Wheelset velocity increment over the step (dt times its acceleration), m/s, and
-    /// brake torque, N m.
-    dv_w: F,
-    brake_torque: F,
-}
-
 /// What a step leaves of one wheelset besides its state: the values of
 /// [`WheelsetOutput`] that the state does not hold (the rest, and the derived ones, are
 /// computed on demand by [`Plant::outputs`], so the 10 kHz step stores 11 values per
-/// wheelset instead of 15).
+/// wheelset instead of 15), and the step's own values of the wheelset, written and read
+/// in place (no copy on the stack).
 #[derive(Clone, Copy, Debug, Default)]
 struct WheelsetRecord<F> {
+    /// Spin speed, rad/s: at the start of the step within it, after the step outside.
     omega: F,
+    /// Wheelset speed, m/s: at the start of the step within it, after the step outside.
     speed: F,
     creepage: F,
     axle_load: F,
@@ -341,6 +326,12 @@ struct WheelsetRecord<F> {
     brake_torque: F,
     brake_power: F,
     contact_power: F,
+    /// Primary vertical force deviation on the bogie and longitudinal force, N (the
+    /// step's, for the bodies' equations).
+    f_pv: F,
+    f_pl: F,
+    /// Wheelset velocity increment over the step (dt times its acceleration), m/s.
+    dv_w: F,
 }
 
 /// The state of one wheelset.
@@ -814,38 +805,17 @@ impl<F: Real> Plant<F> {
         // before it is read).
         let v_c = s.v_c;
         let v_b = [v_c + s.dv_b[0], v_c + s.dv_b[1]];
-        let mut ws: [WheelsetStep<F>; WHEELSETS] = core::array::from_fn(|j| {
+        let r = &mut self.record;
+        for j in 0..WHEELSETS {
+            // The pad force acting is the state's `pad_force` from here on.
+            Self::pad_force(k, &mut s.w[j], j, inputs[j], &mut flags);
             let v_w = v_b[j / 2] + s.w[j].dv;
-            WheelsetStep {
-                clamp: Self::pad_force(k, &mut s.w[j], j, inputs[j], &mut flags),
-                v_w,
-                omega: (v_w - s.w[j].slip) * k.inv_r,
-                q: F::ZERO,
-                f_pv: F::ZERO,
-                f_pl: F::ZERO,
-                dv_w: F::ZERO,
-                brake_torque: F::ZERO,
-            }
-        });
-
-        // ---- Suspension forces (deviation from the static preloads) ----
-        // Secondary vertical, bogie i: extension e = z_c + X_i theta_c - z_b;
-        // force deviation on the carbody, upward.
-        let mut f_sv = [F::ZERO; 2];
-        let mut f_sl = [F::ZERO; 2];
-        let mut damper_power = F::ZERO;
-        for i in 0..2 {
-            let e = s.z_c + k.x_bogie[i] * s.pitch_c - s.z_b[i];
-            let e_rate = s.vz_c + k.x_bogie[i] * s.pitch_rate_c - s.vz_b[i];
-            f_sv[i] = -(k.k_sv * e + k.c_sv * e_rate);
-            // Secondary longitudinal (springs + traction link), bogie relative to carbody at
-            // the element height; force on the bogie.
-            let d = s.dx_b[i] - k.pz_bogie_sl * s.pitch_b[i] + k.pz_carbody_sl * s.pitch_c;
-            let d_rate =
-                s.dv_b[i] - k.pz_bogie_sl * s.pitch_rate_b[i] + k.pz_carbody_sl * s.pitch_rate_c;
-            f_sl[i] = -(k.k_sl * d + k.c_sl * d_rate);
-            damper_power += k.c_sv * e_rate * e_rate + k.c_sl * d_rate * d_rate;
+            r[j].speed = v_w;
+            r[j].omega = (v_w - s.w[j].slip) * k.inv_r;
         }
+
+        // ---- Primary suspension (deviation from the static preloads) ----
+        let mut damper_power = F::ZERO;
         // Primary vertical (force deviation on the bogie, upward) and longitudinal (force on
         // the wheelset), wheelset j in bogie j/2.
         for j in 0..WHEELSETS {
@@ -853,11 +823,11 @@ impl<F: Real> Plant<F> {
             let xa = k.x_axle[j % 2];
             let e = s.z_b[i] + xa * s.pitch_b[i];
             let e_rate = s.vz_b[i] + xa * s.pitch_rate_b[i];
-            ws[j].f_pv = -(k.k_pv * e + k.c_pv * e_rate);
-            ws[j].q = k.q_static + ws[j].f_pv;
+            r[j].f_pv = -(k.k_pv * e + k.c_pv * e_rate);
+            r[j].axle_load = k.q_static + r[j].f_pv;
             let d = s.w[j].dx + k.pz_bogie_pl * s.pitch_b[i];
             let d_rate = s.w[j].dv + k.pz_bogie_pl * s.pitch_rate_b[i];
-            ws[j].f_pl = -(k.k_pl * d + k.c_pl * d_rate);
+            r[j].f_pl = -(k.k_pl * d + k.c_pl * d_rate);
             damper_power += k.c_pv * e_rate * e_rate + k.c_pl * d_rate * d_rate;
         }
 
@@ -873,7 +843,7 @@ impl<F: Real> Plant<F> {
             let w = &mut s.w[slow];
             w.heat_loss = k
                 .thermal
-                .loss_coefficient_tracked(k.r * ws[slow].omega, &mut w.speed_power);
+                .loss_coefficient_tracked(k.r * r[slow].omega, &mut w.speed_power);
         }
         // Zones and degraded adhesion along the track (crate::track): one wheelset per
         // step, in turn; nothing to do on a uniform track with degraded adhesion off.
@@ -882,8 +852,8 @@ impl<F: Real> Plant<F> {
             track.step(
                 slow,
                 s.x_c + self.track_offset[slow],
-                ws[slow].v_w,
-                self.record[slow].contact_power,
+                r[slow].speed,
+                r[slow].contact_power,
                 F::of(WHEELSETS as f64) * dt,
             );
         }
@@ -893,19 +863,20 @@ impl<F: Real> Plant<F> {
         for j in 0..core::hint::black_box(WHEELSETS) {
             let j = j & (WHEELSETS - 1);
             let (polach, mu_factor) = track.contact(j);
+            let w = &mut r[j];
+            let (v_w, omega, q, clamp) = (w.speed, w.omega, w.axle_load, s.w[j].pad_force);
             let mu = polach.friction_tracked(s.w[j].slip, &mut s.w[j].rail_decay) * mu_factor;
-            let contact: ContactForce<F> =
-                polach.evaluate_with_mu(s.w[j].slip, ws[j].v_w, ws[j].q, mu);
-            if !(ws[j].q > F::ZERO) {
+            let contact: ContactForce<F> = polach.evaluate_with_mu(s.w[j].slip, v_w, q, mu);
+            if !(q > F::ZERO) {
                 flags |= Flags::wheelset_bit(Flags::WHEEL_UNLOADED, j);
             }
             let mu_d = k.friction.mu_d_scaled_tracked(
-                k.speed_exponent_per_spin * ws[j].omega.abs(),
+                k.speed_exponent_per_spin * omega.abs(),
                 s.w[j].temperature_factor,
-                ws[j].clamp,
+                clamp,
                 &mut s.w[j].speed_decay,
             );
-            let torque_kinetic = k.caliper.torque(mu_d, ws[j].clamp);
+            let torque_kinetic = k.caliper.torque(mu_d, clamp);
 
             // Semi-implicit spin/slip update with the brake as a clutch. Unknowns at the
             // new step: u', omega', F' = chord u'. With D = 1 + dt chord (1/m + r^2/I):
@@ -915,11 +886,11 @@ impl<F: Real> Plant<F> {
             // wheel (omega' = 0) when that suffices.
             let chord = contact.chord;
             // dt times the explicit acceleration (dt folded into 1/m_w and g_along).
-            let dv_explicit = ws[j].f_pl * k.dt_inv_m_w - k.dt_g_along;
+            let dv_explicit = w.f_pl * k.dt_inv_m_w - k.dt_g_along;
             let d = F::ONE + chord * k.dt_spin_compliance;
             let inv_d = F::ONE / d;
             let u0 = (s.w[j].slip + dv_explicit) * inv_d;
-            let omega0 = ws[j].omega + chord * u0 * k.dt_r_inv_i_w;
+            let omega0 = omega + chord * u0 * k.dt_r_inv_i_w;
             let g = k.dt_inv_i_w * (F::ONE + chord * k.dt_inv_m_w) * inv_d;
             let limit = g * torque_kinetic;
             let (torque, omega_new) = if omega0 > limit {
@@ -931,22 +902,19 @@ impl<F: Real> Plant<F> {
             };
             let u_new = u0 + torque * k.dt_r_inv_i_w * inv_d;
             let force = chord * u_new;
-            ws[j].dv_w = dv_explicit - force * k.dt_inv_m_w;
-            ws[j].brake_torque = torque;
+            w.dv_w = dv_explicit - force * k.dt_inv_m_w;
 
             // The pad force and the disc temperature are the state's; the outputs
             // derive the rest (Plant::outputs).
-            let w = &mut self.record[j];
             w.omega = omega_new;
-            w.speed = ws[j].v_w + ws[j].dv_w;
+            w.speed = v_w + w.dv_w;
             w.creepage = contact.creepage;
-            w.axle_load = ws[j].q;
             w.adhesion_force = force;
             w.inv_load = contact.inv_load;
             w.rail_mu = contact.mu;
             w.mu_d = mu_d;
             w.brake_torque = torque;
-            w.brake_power = torque * half * (ws[j].omega + omega_new);
+            w.brake_power = torque * half * (omega + omega_new);
             w.contact_power = force * half * (s.w[j].slip + u_new);
             s.w[j].slip = u_new;
 
@@ -957,6 +925,24 @@ impl<F: Real> Plant<F> {
             s.w[j].disc_temp += heat_flow * k.dt_inv_disc_heat_capacity;
         }
 
+        // ---- Secondary suspension (deviation from the static preloads), after the
+        // wheelsets: its forces need not live across their loop ----
+        // Secondary vertical, bogie i: extension e = z_c + X_i theta_c - z_b;
+        // force deviation on the carbody, upward.
+        let mut f_sv = [F::ZERO; 2];
+        let mut f_sl = [F::ZERO; 2];
+        for i in 0..2 {
+            let e = s.z_c + k.x_bogie[i] * s.pitch_c - s.z_b[i];
+            let e_rate = s.vz_c + k.x_bogie[i] * s.pitch_rate_c - s.vz_b[i];
+            f_sv[i] = -(k.k_sv * e + k.c_sv * e_rate);
+            // Secondary longitudinal (springs + traction link), bogie relative to carbody at
+            // the element height; force on the bogie.
+            let d = s.dx_b[i] - k.pz_bogie_sl * s.pitch_b[i] + k.pz_carbody_sl * s.pitch_c;
+            let d_rate =
+                s.dv_b[i] - k.pz_bogie_sl * s.pitch_rate_b[i] + k.pz_carbody_sl * s.pitch_rate_c;
+            f_sl[i] = -(k.k_sl * d + k.c_sl * d_rate);
+            damper_power += k.c_sv * e_rate * e_rate + k.c_sl * d_rate * d_rate;
+        }
         // ---- Bodies ----
         // Running resistance on the carbody (Davis), faded in over +-1 cm/s so that the
         // vehicle never creeps backwards at rest.
@@ -979,16 +965,16 @@ impl<F: Real> Plant<F> {
         let mut dpitch_rate_b = [F::ZERO; 2];
         for i in 0..2 {
             let (j0, j1) = (2 * i, 2 * i + 1);
-            dv_b[i] = (f_sl[i] - ws[j0].f_pl - ws[j1].f_pl) * k.dt_inv_m_b - k.dt_g_along;
-            dvz_b[i] = (ws[j0].f_pv + ws[j1].f_pv - f_sv[i]) * k.dt_inv_m_b;
+            dv_b[i] = (f_sl[i] - r[j0].f_pl - r[j1].f_pl) * k.dt_inv_m_b - k.dt_g_along;
+            dvz_b[i] = (r[j0].f_pv + r[j1].f_pv - f_sv[i]) * k.dt_inv_m_b;
             // Moments: primary vertical at +-b/2, primary longitudinal (-f_pl on the bogie)
             // at pz_pl, secondary longitudinal at pz_sl, brake reactions -T_b.
-            let m = k.x_axle[0] * ws[j0].f_pv
-                + k.x_axle[1] * ws[j1].f_pv
-                + k.pz_bogie_pl * (ws[j0].f_pl + ws[j1].f_pl)
+            let m = k.x_axle[0] * r[j0].f_pv
+                + k.x_axle[1] * r[j1].f_pv
+                + k.pz_bogie_pl * (r[j0].f_pl + r[j1].f_pl)
                 - k.pz_bogie_sl * f_sl[i]
-                - ws[j0].brake_torque
-                - ws[j1].brake_torque;
+                - r[j0].brake_torque
+                - r[j1].brake_torque;
             dpitch_rate_b[i] = m * k.dt_inv_i_b;
         }
 
@@ -1010,7 +996,7 @@ impl<F: Real> Plant<F> {
             s.pitch_b[i] += s.pitch_rate_b[i] * dt;
         }
         for j in 0..WHEELSETS {
-            s.w[j].dv += ws[j].dv_w - dv_b[j / 2];
+            s.w[j].dv += r[j].dv_w - dv_b[j / 2];
             s.w[j].dx += s.w[j].dv * dt;
         }
 
