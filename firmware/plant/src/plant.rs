@@ -372,10 +372,13 @@ pub struct Plant<F: Real> {
     flags: Flags,
     /// What the last step left of each wheelset besides its state.
     record: [WheelsetRecord<F>; WHEELSETS],
-    /// Carbody acceleration, damper power and external power of the last step.
+    /// Carbody acceleration and damper power of the last step.
     carbody_accel: F,
     damper_power: F,
-    external_power: F,
+    /// Running resistance (N) and mean carbody speed (m/s) of the last step: the
+    /// external power of [`Outputs`] is computed from them on demand.
+    resistance: F,
+    carbody_mid_speed: F,
     sticky: Flags,
     initial_speed: F,
     /// Adhesion along the track ([`crate::track`]): one surface everywhere unless set.
@@ -429,7 +432,8 @@ impl<F: Real> Plant<F> {
             record: Default::default(),
             carbody_accel: F::ZERO,
             damper_power: F::ZERO,
-            external_power: F::ZERO,
+            resistance: F::ZERO,
+            carbody_mid_speed: F::ZERO,
             sticky: Flags::default(),
             initial_speed: F::ZERO,
             track,
@@ -661,6 +665,22 @@ impl<F: Real> Plant<F> {
         self.k.r
     }
 
+    /// Power of running resistance and gradient on all bodies over the last step
+    /// (negative = taken out), W, for the energy balance. Gradient forces m g_along of
+    /// each body folded at construction; bogies and wheelsets summed first (one product
+    /// per body kind); speeds: the carbody's mean over the step, the bogies' relative
+    /// speeds after it added to it, the wheelsets' after it.
+    fn external_power(&self) -> F {
+        let k = &self.k;
+        let v_mid = self.carbody_mid_speed;
+        let bogie_speeds = (v_mid + self.s.dv_b[0]) + (v_mid + self.s.dv_b[1]);
+        let wo = &self.record;
+        let wheelset_speeds = (wo[0].speed + wo[1].speed) + (wo[2].speed + wo[3].speed);
+        -(self.resistance + k.grade_force_c) * v_mid
+            - k.grade_force_b * bogie_speeds
+            - k.grade_force_w * wheelset_speeds
+    }
+
     /// Outputs of the last step (or of the initial state), built on demand: the step
     /// keeps only what its state does not hold (one record per wheelset), and the values
     /// here come from that record and the state. Board code that needs a few values every
@@ -696,7 +716,7 @@ impl<F: Real> Plant<F> {
                 }
             }),
             damper_power: self.damper_power,
-            external_power: self.external_power,
+            external_power: self.external_power(),
             flags: self.flags,
         }
     }
@@ -735,8 +755,9 @@ impl<F: Real> Plant<F> {
         // The usual case, a reading within [0, limit], by one integer compare (one per
         // input kind); the detailed checks only when it fails.
         let clamp = match input {
+            // Within [0, clamp_force_limit] by the limit's construction (Caliper::new).
             BrakeInput::CylinderPressure(p) if p.within_zero_and(cal.pressure_limit) => {
-                cal.clamp_force(p).min(cal.clamp_force_limit)
+                cal.clamp_force(p)
             }
             BrakeInput::ClampForce(f) if f.within_zero_and(cal.clamp_force_limit) => f,
             _ => {
@@ -756,9 +777,7 @@ impl<F: Real> Plant<F> {
                 }
                 let value = value.clamp_to(F::ZERO, limit);
                 match input {
-                    BrakeInput::CylinderPressure(_) => {
-                        cal.clamp_force(value).min(cal.clamp_force_limit)
-                    }
+                    BrakeInput::CylinderPressure(_) => cal.clamp_force(value),
                     BrakeInput::ClampForce(_) => value,
                 }
             }
@@ -1000,16 +1019,10 @@ impl<F: Real> Plant<F> {
             s.w[j].dx += s.w[j].dv * dt;
         }
 
-        // ---- External power (resistance and gradient) for the energy balance ----
-        // Gradient forces m g_along of each body folded at construction; bogies and
-        // wheelsets summed first (one product per body kind).
-        let v_mid = half * (v_c + v_c_new);
-        let bogie_speeds = (v_mid + s.dv_b[0]) + (v_mid + s.dv_b[1]);
-        let wo = &self.record;
-        let wheelset_speeds = (wo[0].speed + wo[1].speed) + (wo[2].speed + wo[3].speed);
-        let external = -(resistance + k.grade_force_c) * v_mid
-            - k.grade_force_b * bogie_speeds
-            - k.grade_force_w * wheelset_speeds;
+        // External power (resistance and gradient) for the energy balance: from these
+        // two on demand (Self::external_power).
+        self.carbody_mid_speed = half * (v_c + v_c_new);
+        self.resistance = resistance;
 
         // ---- Safe state on a non-finite state (never expected with valid parameters) ----
         // One test on a sum: a NaN or an infinity anywhere makes the sum NaN or infinite
@@ -1022,7 +1035,6 @@ impl<F: Real> Plant<F> {
         self.steps = self.steps.wrapping_add(1);
         self.carbody_accel = a_c;
         self.damper_power = damper_power;
-        self.external_power = external;
         if !finite {
             flags |= Flags::NUMERIC_FAULT;
             self.enter_safe_state();
