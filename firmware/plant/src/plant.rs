@@ -969,23 +969,30 @@ impl<F: Real> Plant<F> {
         let v_abs = v_c.abs();
         let resistance = (k.davis_a + k.davis_b * v_abs + k.davis_c * v_abs * v_abs) * speed_fade;
         let a_c = (-(f_sl[0] + f_sl[1]) - resistance) * k.inv_m_c - k.g_along;
-        // Vertical and pitch velocity increments over the step (dt/m, dt/I folded).
-        let dvz_c = (f_sv[0] + f_sv[1]) * k.dt_inv_m_c;
+
+        // ---- Integrate (symplectic Euler: velocities, then positions), body by body:
+        // each body's velocity increments over the step (dt/m, dt/I and dt g_along
+        // folded) go into its state at once (short live ranges, no spills) ----
+        let dv_c = a_c * dt;
+        kahan_add(&mut s.v_c, &mut s.v_c_comp, dv_c);
+        let v_c_new = s.v_c;
+        kahan_add(&mut s.x_c, &mut s.x_c_comp, v_c_new * dt);
+        s.vz_c += (f_sv[0] + f_sv[1]) * k.dt_inv_m_c;
+        s.z_c += s.vz_c * dt;
         let mut moment_c = F::ZERO;
         for i in 0..2 {
             // Vertical deviation at X_i; longitudinal force on the carbody (-f_sl) at pz.
             moment_c += k.x_bogie[i] * f_sv[i] + k.pz_carbody_sl * f_sl[i];
         }
-        let dpitch_rate_c = moment_c * k.dt_inv_i_c;
-
-        // Bogie velocity increments over the step (dt/m_b and dt g_along folded).
-        let mut dv_b = [F::ZERO; 2];
-        let mut dvz_b = [F::ZERO; 2];
-        let mut dpitch_rate_b = [F::ZERO; 2];
+        s.pitch_rate_c += moment_c * k.dt_inv_i_c;
+        s.pitch_c += s.pitch_rate_c * dt;
         for i in 0..2 {
             let (j0, j1) = (2 * i, 2 * i + 1);
-            dv_b[i] = (f_sl[i] - r[j0].f_pl - r[j1].f_pl) * k.dt_inv_m_b - k.dt_g_along;
-            dvz_b[i] = (r[j0].f_pv + r[j1].f_pv - f_sv[i]) * k.dt_inv_m_b;
+            let dv_b = (f_sl[i] - r[j0].f_pl - r[j1].f_pl) * k.dt_inv_m_b - k.dt_g_along;
+            s.dv_b[i] += dv_b - dv_c;
+            s.dx_b[i] += s.dv_b[i] * dt;
+            s.vz_b[i] += (r[j0].f_pv + r[j1].f_pv - f_sv[i]) * k.dt_inv_m_b;
+            s.z_b[i] += s.vz_b[i] * dt;
             // Moments: primary vertical at +-b/2, primary longitudinal (-f_pl on the bogie)
             // at pz_pl, secondary longitudinal at pz_sl, brake reactions -T_b.
             let m = k.x_axle[0] * r[j0].f_pv
@@ -994,29 +1001,12 @@ impl<F: Real> Plant<F> {
                 - k.pz_bogie_sl * f_sl[i]
                 - r[j0].brake_torque
                 - r[j1].brake_torque;
-            dpitch_rate_b[i] = m * k.dt_inv_i_b;
-        }
-
-        // ---- Integrate (symplectic Euler: velocities, then positions) ----
-        let dv_c = a_c * dt;
-        kahan_add(&mut s.v_c, &mut s.v_c_comp, dv_c);
-        let v_c_new = s.v_c;
-        kahan_add(&mut s.x_c, &mut s.x_c_comp, v_c_new * dt);
-        s.vz_c += dvz_c;
-        s.z_c += s.vz_c * dt;
-        s.pitch_rate_c += dpitch_rate_c;
-        s.pitch_c += s.pitch_rate_c * dt;
-        for i in 0..2 {
-            s.dv_b[i] += dv_b[i] - dv_c;
-            s.dx_b[i] += s.dv_b[i] * dt;
-            s.vz_b[i] += dvz_b[i];
-            s.z_b[i] += s.vz_b[i] * dt;
-            s.pitch_rate_b[i] += dpitch_rate_b[i];
+            s.pitch_rate_b[i] += m * k.dt_inv_i_b;
             s.pitch_b[i] += s.pitch_rate_b[i] * dt;
-        }
-        for j in 0..WHEELSETS {
-            s.w[j].dv += r[j].dv_w - dv_b[j / 2];
-            s.w[j].dx += s.w[j].dv * dt;
+            for j in [j0, j1] {
+                s.w[j].dv += r[j].dv_w - dv_b;
+                s.w[j].dx += s.w[j].dv * dt;
+            }
         }
 
         // External power (resistance and gradient) for the energy balance: from these
