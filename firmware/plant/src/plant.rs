@@ -844,6 +844,9 @@ impl<F: Real> Plant<F> {
             let e_rate = s.vz_b[i] + xa * s.pitch_rate_b[i];
             r[j].f_pv = -(k.k_pv * e + k.c_pv * e_rate);
             r[j].axle_load = k.q_static + r[j].f_pv;
+            if !(r[j].axle_load > F::ZERO) {
+                flags |= Flags::wheelset_bit(Flags::WHEEL_UNLOADED, j);
+            }
             let d = s.w[j].dx + k.pz_bogie_pl * s.pitch_b[i];
             let d_rate = s.w[j].dv + k.pz_bogie_pl * s.pitch_rate_b[i];
             r[j].f_pl = -(k.k_pl * d + k.c_pl * d_rate);
@@ -886,9 +889,6 @@ impl<F: Real> Plant<F> {
             let (v_w, omega, q, clamp) = (w.speed, w.omega, w.axle_load, s.w[j].pad_force);
             let mu = polach.friction_tracked(s.w[j].slip, &mut s.w[j].rail_decay) * mu_factor;
             let contact: ContactForce<F> = polach.evaluate_with_mu(s.w[j].slip, v_w, q, mu);
-            if !(q > F::ZERO) {
-                flags |= Flags::wheelset_bit(Flags::WHEEL_UNLOADED, j);
-            }
             let mu_d = k.friction.mu_d_scaled_tracked(
                 k.speed_exponent_per_spin * omega.abs(),
                 s.w[j].temperature_factor,
