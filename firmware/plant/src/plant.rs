@@ -248,14 +248,17 @@ struct Constants<F> {
     pz_carbody_sl: F,
     pz_bogie_sl: F,
     pz_bogie_pl: F,
-    k_sv: F,
-    c_sv: F,
-    k_sl: F,
-    c_sl: F,
-    k_pv: F,
-    c_pv: F,
-    k_pl: F,
-    c_pl: F,
+    /// Suspension stiffnesses (N/m) and dampings (N s/m), negated: the forces
+    /// -(k e + c e') = (-k) e + (-c) e' take no negation in the step (exact: IEEE
+    /// negation and round-to-nearest are symmetric).
+    neg_k_sv: F,
+    neg_c_sv: F,
+    neg_k_sl: F,
+    neg_c_sl: F,
+    neg_k_pv: F,
+    neg_c_pv: F,
+    neg_k_pl: F,
+    neg_c_pl: F,
     /// Static axle load m_w g + primary preload, N.
     q_static: F,
     davis_a: F,
@@ -566,14 +569,14 @@ impl<F: Real> Plant<F> {
             pz_carbody_sl: F::of(h_sl_c),
             pz_bogie_sl: F::of(h_sl_b),
             pz_bogie_pl: F::of(h_pl_b),
-            k_sv: F::of(k_sv),
-            c_sv: F::of(c_sv),
-            k_sl: F::of(k_sl),
-            c_sl: F::of(c_sl),
-            k_pv: F::of(k_pv),
-            c_pv: F::of(c_pv),
-            k_pl: F::of(k_pl),
-            c_pl: F::of(c_pl),
+            neg_k_sv: -F::of(k_sv),
+            neg_c_sv: -F::of(c_sv),
+            neg_k_sl: -F::of(k_sl),
+            neg_c_sl: -F::of(c_sl),
+            neg_k_pv: -F::of(k_pv),
+            neg_c_pv: -F::of(c_pv),
+            neg_k_pl: -F::of(k_pl),
+            neg_c_pl: -F::of(c_pl),
             q_static: F::of(p_pv + v.wheelset_mass * v.g),
             davis_a: F::of(p.resistance.davis_a_n),
             davis_b: F::of(p.resistance.davis_b_n_per_mps),
@@ -842,15 +845,16 @@ impl<F: Real> Plant<F> {
             let xa = k.x_axle[j % 2];
             let e = s.z_b[i] + xa * s.pitch_b[i];
             let e_rate = s.vz_b[i] + xa * s.pitch_rate_b[i];
-            r[j].f_pv = -(k.k_pv * e + k.c_pv * e_rate);
+            r[j].f_pv = k.neg_k_pv * e + k.neg_c_pv * e_rate;
             r[j].axle_load = k.q_static + r[j].f_pv;
             if !(r[j].axle_load > F::ZERO) {
                 flags |= Flags::wheelset_bit(Flags::WHEEL_UNLOADED, j);
             }
             let d = s.w[j].dx + k.pz_bogie_pl * s.pitch_b[i];
             let d_rate = s.w[j].dv + k.pz_bogie_pl * s.pitch_rate_b[i];
-            r[j].f_pl = -(k.k_pl * d + k.c_pl * d_rate);
-            damper_power += k.c_pv * e_rate * e_rate + k.c_pl * d_rate * d_rate;
+            r[j].f_pl = k.neg_k_pl * d + k.neg_c_pl * d_rate;
+            // + c e'^2 for each damper (the negated dampings subtracted).
+            damper_power -= k.neg_c_pv * e_rate * e_rate + k.neg_c_pl * d_rate * d_rate;
         }
 
         // ---- Slow factors: one per step, in turn (each every 8 steps) ----
@@ -953,14 +957,14 @@ impl<F: Real> Plant<F> {
         for i in 0..2 {
             let e = s.z_c + k.x_bogie[i] * s.pitch_c - s.z_b[i];
             let e_rate = s.vz_c + k.x_bogie[i] * s.pitch_rate_c - s.vz_b[i];
-            f_sv[i] = -(k.k_sv * e + k.c_sv * e_rate);
+            f_sv[i] = k.neg_k_sv * e + k.neg_c_sv * e_rate;
             // Secondary longitudinal (springs + traction link), bogie relative to carbody at
             // the element height; force on the bogie.
             let d = s.dx_b[i] - k.pz_bogie_sl * s.pitch_b[i] + k.pz_carbody_sl * s.pitch_c;
             let d_rate =
                 s.dv_b[i] - k.pz_bogie_sl * s.pitch_rate_b[i] + k.pz_carbody_sl * s.pitch_rate_c;
-            f_sl[i] = -(k.k_sl * d + k.c_sl * d_rate);
-            damper_power += k.c_sv * e_rate * e_rate + k.c_sl * d_rate * d_rate;
+            f_sl[i] = k.neg_k_sl * d + k.neg_c_sl * d_rate;
+            damper_power -= k.neg_c_sv * e_rate * e_rate + k.neg_c_sl * d_rate * d_rate;
         }
         // ---- Bodies ----
         // Running resistance on the carbody (Davis), faded in over +-1 cm/s so that the
@@ -1065,7 +1069,7 @@ impl<F: Real> Plant<F> {
             let e = f(s.z_c) + f(k.x_bogie[i]) * f(s.pitch_c) - f(s.z_b[i]);
             let d = f(s.dx_b[i]) - f(k.pz_bogie_sl) * f(s.pitch_b[i])
                 + f(k.pz_carbody_sl) * f(s.pitch_c);
-            potential += 0.5 * f(k.k_sv) * e * e + 0.5 * f(k.k_sl) * d * d;
+            potential += 0.5 * -f(k.neg_k_sv) * e * e + 0.5 * -f(k.neg_k_sl) * d * d;
         }
         for j in 0..WHEELSETS {
             let i = j / 2;
@@ -1075,7 +1079,7 @@ impl<F: Real> Plant<F> {
             let xa = f(k.x_axle[j % 2]);
             let e = f(s.z_b[i]) + xa * f(s.pitch_b[i]);
             let d = f(s.w[j].dx) + f(k.pz_bogie_pl) * f(s.pitch_b[i]);
-            potential += 0.5 * f(k.k_pv) * e * e + 0.5 * f(k.k_pl) * d * d;
+            potential += 0.5 * -f(k.neg_k_pv) * e * e + 0.5 * -f(k.neg_k_pl) * d * d;
         }
         Energy { kinetic, potential }
     }
