@@ -845,16 +845,19 @@ impl<F: Real> Plant<F> {
             let xa = k.x_axle[j % 2];
             let e = s.z_b[i] + xa * s.pitch_b[i];
             let e_rate = s.vz_b[i] + xa * s.pitch_rate_b[i];
-            r[j].f_pv = k.neg_k_pv * e + k.neg_c_pv * e_rate;
+            // Damping forces -c e' once, for the force and the damper power c e'^2.
+            let damping_v = k.neg_c_pv * e_rate;
+            r[j].f_pv = damping_v + k.neg_k_pv * e;
             r[j].axle_load = k.q_static + r[j].f_pv;
             if !(r[j].axle_load > F::ZERO) {
                 flags |= Flags::wheelset_bit(Flags::WHEEL_UNLOADED, j);
             }
             let d = s.w[j].dx + k.pz_bogie_pl * s.pitch_b[i];
             let d_rate = s.w[j].dv + k.pz_bogie_pl * s.pitch_rate_b[i];
-            r[j].f_pl = k.neg_k_pl * d + k.neg_c_pl * d_rate;
-            // + c e'^2 for each damper (the negated dampings subtracted).
-            damper_power -= k.neg_c_pv * e_rate * e_rate + k.neg_c_pl * d_rate * d_rate;
+            let damping_l = k.neg_c_pl * d_rate;
+            r[j].f_pl = damping_l + k.neg_k_pl * d;
+            damper_power -= damping_v * e_rate;
+            damper_power -= damping_l * d_rate;
         }
 
         // ---- Slow factors: one per step, in turn (each every 8 steps) ----
@@ -957,14 +960,17 @@ impl<F: Real> Plant<F> {
         for i in 0..2 {
             let e = s.z_c + k.x_bogie[i] * s.pitch_c - s.z_b[i];
             let e_rate = s.vz_c + k.x_bogie[i] * s.pitch_rate_c - s.vz_b[i];
-            f_sv[i] = k.neg_k_sv * e + k.neg_c_sv * e_rate;
+            let damping_v = k.neg_c_sv * e_rate;
+            f_sv[i] = damping_v + k.neg_k_sv * e;
             // Secondary longitudinal (springs + traction link), bogie relative to carbody at
             // the element height; force on the bogie.
             let d = s.dx_b[i] - k.pz_bogie_sl * s.pitch_b[i] + k.pz_carbody_sl * s.pitch_c;
             let d_rate =
                 s.dv_b[i] - k.pz_bogie_sl * s.pitch_rate_b[i] + k.pz_carbody_sl * s.pitch_rate_c;
-            f_sl[i] = k.neg_k_sl * d + k.neg_c_sl * d_rate;
-            damper_power -= k.neg_c_sv * e_rate * e_rate + k.neg_c_sl * d_rate * d_rate;
+            let damping_l = k.neg_c_sl * d_rate;
+            f_sl[i] = damping_l + k.neg_k_sl * d;
+            damper_power -= damping_v * e_rate;
+            damper_power -= damping_l * d_rate;
         }
         // ---- Bodies ----
         // Running resistance on the carbody (Davis), faded in over +-1 cm/s so that the
