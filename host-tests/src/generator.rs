@@ -443,7 +443,8 @@ fn run_truth(truth: &Params, nominal: &Params, s: &Scenario, rng: &mut StdRng) -
             next_sample = (rows.len() as f64 + jitter) * period_steps;
             next_sample = next_sample.max(step as f64 + 1.0);
         }
-        let v = sim.step().vehicle_speed;
+        sim.step();
+        let v = sim.plant.vehicle_speed();
         step += 1;
         if rule.observe(step, v) {
             break;

@@ -190,7 +190,8 @@ fn energy_balance(model: FrictionModel) -> (f64, f64, f64, f64) {
     let dt = sim.plant.dt();
     let (mut brake, mut contact, mut damper, mut external) = (0.0, 0.0, 0.0, 0.0);
     for _ in 0..350_000 {
-        let o = sim.step();
+        sim.step();
+        let o = sim.outputs();
         for w in &o.wheelsets {
             brake += w.brake_power * dt;
             contact += w.contact_power * dt;

@@ -49,7 +49,10 @@ fn sil_stop_s(rail: Rail, demand: BrakeDemand, speed_kmh: f64) -> f64 {
         ClosedLoop::<f64>::new(&Params::default(), rail, speed_kmh / KMH_PER_MPS).unwrap();
     sil.set_demand(demand);
     let mut steps = 0u32;
-    while !at_standstill(sil.step().vehicle_speed) {
+    while !at_standstill({
+        sil.step();
+        sil.plant.vehicle_speed()
+    }) {
         steps += 1;
     }
     steps as f64 * 1e-4

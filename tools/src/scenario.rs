@@ -208,7 +208,7 @@ pub fn run_eb<F: Real>(file: &ParamFile, opts: &EbOptions) -> Result<Run> {
             s.step();
         });
         let steps = sc.steps();
-        tracker.observe(sc.sim.outputs(), steps, sc.stop_step());
+        tracker.observe(&sc.sim.outputs(), steps, sc.stop_step());
         if advance.record {
             samples.push(RunRecord::of(&sc.sim, Cmd::Emergency));
         }

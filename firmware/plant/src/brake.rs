@@ -12,8 +12,8 @@ pub struct Caliper<F> {
     /// l_p N_d: friction radius times friction faces, m.
     radius_faces: F,
     friction_faces: F,
-    /// Pad force at 1.5 x the supply pressure (Eq 1): clamp-force inputs above it are
-    /// clamped and flagged.
+    /// Pad force at 1.5 x the supply pressure (Eq 1; at least 1 N): clamp-force inputs
+    /// above it are clamped and flagged.
     pub clamp_force_limit: F,
     /// 1.5 x the supply pressure: pressure inputs above it are clamped and flagged.
     pub pressure_limit: F,
@@ -22,19 +22,22 @@ pub struct Caliper<F> {
 impl<F: Real> Caliper<F> {
     /// The caliper of one wheelset with the `[brake]` parameters (paper Eq (1)).
     pub fn new(p: &BrakeParams) -> Self {
-        let pressure_limit = 1.5 * p.supply_pressure;
-        let clamp_force_limit =
-            ((p.piston_area * pressure_limit - p.retaining_spring_force).max(0.0) * p.lever_ratio)
-                .max(1.0);
-        Self {
+        let pressure_limit = F::of(1.5 * p.supply_pressure);
+        let mut caliper = Self {
             piston_area: F::of(p.piston_area),
             retaining_spring_force: F::of(p.retaining_spring_force),
             lever_ratio: F::of(p.lever_ratio),
             radius_faces: F::of(p.friction_radius * p.friction_faces as f64),
             friction_faces: F::of(p.friction_faces as f64),
-            clamp_force_limit: F::of(clamp_force_limit),
-            pressure_limit: F::of(pressure_limit),
-        }
+            clamp_force_limit: F::ZERO,
+            pressure_limit,
+        };
+        // The limit is the pad force of the pressure limit computed as the step computes
+        // it (in F): every step of that computation rounds monotonically, so the pad force
+        // of any pressure within [0, pressure_limit] is within [0, clamp_force_limit] with
+        // no further clamp in the step.
+        caliper.clamp_force_limit = caliper.clamp_force(pressure_limit).max(F::ONE);
+        caliper
     }
 
     /// Pad normal force per friction face from cylinder pressure:

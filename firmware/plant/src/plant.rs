@@ -248,14 +248,17 @@ struct Constants<F> {
     pz_carbody_sl: F,
     pz_bogie_sl: F,
     pz_bogie_pl: F,
-    k_sv: F,
-    c_sv: F,
-    k_sl: F,
-    c_sl: F,
-    k_pv: F,
-    c_pv: F,
-    k_pl: F,
-    c_pl: F,
+    /// Suspension stiffnesses (N/m) and dampings (N s/m), negated: the forces
+    /// -(k e + c e') = (-k) e + (-c) e' take no negation in the step (exact: IEEE
+    /// negation and round-to-nearest are symmetric).
+    neg_k_sv: F,
+    neg_c_sv: F,
+    neg_k_sl: F,
+    neg_c_sl: F,
+    neg_k_pv: F,
+    neg_c_pv: F,
+    neg_k_pl: F,
+    neg_c_pl: F,
     /// Static axle load m_w g + primary preload, N.
     q_static: F,
     davis_a: F,
@@ -304,22 +307,34 @@ struct State<F: Real> {
     w: [WheelsetState<F>; WHEELSETS],
 }
 
-/// Values of one wheelset within a step (the step's temporaries, one record per wheelset).
+/// What a step leaves of one wheelset besides its state: the values of
+/// [`WheelsetOutput`] that the state does not hold (the rest, and the derived ones, are
+/// computed on demand by [`Plant::outputs`], so the 10 kHz step stores 11 values per
+/// wheelset instead of 15), and the step's own values of the wheelset, written and read
+/// in place (no copy on the stack).
 #[derive(Clone, Copy, Debug, Default)]
-struct WheelsetStep<F> {
-    /// Pad force acting, N per face.
-    clamp: F,
-    v_w: F,
+struct WheelsetRecord<F> {
+    /// Spin speed, rad/s: at the start of the step within it, after the step outside.
     omega: F,
-    /// Axle load Q, N.
-    q: F,
-    /// Primary vertical force deviation on the bogie and longitudinal force, N.
+    /// Wheelset speed, m/s: at the start of the step within it, after the step outside.
+    speed: F,
+    creepage: F,
+    axle_load: F,
+    adhesion_force: F,
+    /// 1/Q of the contact (0 unloaded): the adhesion coefficient F/Q of Eq (13) is
+    /// `adhesion_force * inv_load`.
+    inv_load: F,
+    rail_mu: F,
+    mu_d: F,
+    brake_torque: F,
+    brake_power: F,
+    contact_power: F,
+    /// Primary vertical force deviation on the bogie and longitudinal force, N (the
+    /// step's, for the bodies' equations).
     f_pv: F,
     f_pl: F,
-    /// Wheelset velocity increment over the step (dt times its acceleration), m/s, and
-    /// brake torque, N m.
+    /// Wheelset velocity increment over the step (dt times its acceleration), m/s.
     dv_w: F,
-    brake_torque: F,
 }
 
 /// The state of one wheelset.
@@ -354,7 +369,19 @@ struct WheelsetState<F: Real> {
 pub struct Plant<F: Real> {
     k: Constants<F>,
     s: State<F>,
-    out: Outputs<F>,
+    /// Steps taken since start.
+    steps: u32,
+    /// Flags of the last step.
+    flags: Flags,
+    /// What the last step left of each wheelset besides its state.
+    record: [WheelsetRecord<F>; WHEELSETS],
+    /// Carbody acceleration and damper power of the last step.
+    carbody_accel: F,
+    damper_power: F,
+    /// Running resistance (N) and mean carbody speed (m/s) of the last step: the
+    /// external power of [`Outputs`] is computed from them on demand.
+    resistance: F,
+    carbody_mid_speed: F,
     sticky: Flags,
     initial_speed: F,
     /// Adhesion along the track ([`crate::track`]): one surface everywhere unless set.
@@ -403,7 +430,13 @@ impl<F: Real> Plant<F> {
         let mut plant = Plant {
             k,
             s: State::default(),
-            out: Outputs::default(),
+            steps: 0,
+            flags: Flags::default(),
+            record: Default::default(),
+            carbody_accel: F::ZERO,
+            damper_power: F::ZERO,
+            resistance: F::ZERO,
+            carbody_mid_speed: F::ZERO,
             sticky: Flags::default(),
             initial_speed: F::ZERO,
             track,
@@ -425,7 +458,7 @@ impl<F: Real> Plant<F> {
         plant.initial_speed = v0;
         plant.reset_state(F::of(params.thermal.ambient_rise));
         plant.sticky = Flags(flags);
-        plant.out.flags = Flags(flags);
+        plant.flags = Flags(flags);
         Ok(plant)
     }
 
@@ -536,14 +569,14 @@ impl<F: Real> Plant<F> {
             pz_carbody_sl: F::of(h_sl_c),
             pz_bogie_sl: F::of(h_sl_b),
             pz_bogie_pl: F::of(h_pl_b),
-            k_sv: F::of(k_sv),
-            c_sv: F::of(c_sv),
-            k_sl: F::of(k_sl),
-            c_sl: F::of(c_sl),
-            k_pv: F::of(k_pv),
-            c_pv: F::of(c_pv),
-            k_pl: F::of(k_pl),
-            c_pl: F::of(c_pl),
+            neg_k_sv: -F::of(k_sv),
+            neg_c_sv: -F::of(c_sv),
+            neg_k_sl: -F::of(k_sl),
+            neg_c_sl: -F::of(c_sl),
+            neg_k_pv: -F::of(k_pv),
+            neg_c_pv: -F::of(c_pv),
+            neg_k_pl: -F::of(k_pl),
+            neg_c_pl: -F::of(c_pl),
             q_static: F::of(p_pv + v.wheelset_mass * v.g),
             davis_a: F::of(p.resistance.davis_a_n),
             davis_b: F::of(p.resistance.davis_b_n_per_mps),
@@ -586,24 +619,20 @@ impl<F: Real> Plant<F> {
                 .friction
                 .speed_decay_at(v0 * self.k.inv_r * self.k.friction_radius);
         }
-        self.out.steps = 0;
-        self.out.vehicle_speed = v0;
-        self.out.distance = F::ZERO;
-        self.out.carbody_accel = F::ZERO;
-        self.out.carbody_pitch = F::ZERO;
-        for w in self.out.wheelsets.iter_mut() {
-            *w = WheelsetOutput {
+        self.steps = 0;
+        self.carbody_accel = F::ZERO;
+        for w in self.record.iter_mut() {
+            *w = WheelsetRecord {
                 omega: v0 * self.k.inv_r,
                 speed: v0,
                 axle_load: self.k.q_static,
-                disc_temp,
                 mu_d: self.k.friction.mu_d(
                     v0 * self.k.inv_r * self.k.friction_radius,
                     disc_temp,
                     F::ZERO,
                 ),
                 rail_mu: self.k.polach.friction(F::ZERO),
-                ..WheelsetOutput::default()
+                ..WheelsetRecord::default()
             };
         }
     }
@@ -611,7 +640,27 @@ impl<F: Real> Plant<F> {
     /// Wheel circumferential speeds r omega, m/s (what axle speed sensors measure).
     pub fn wheel_speeds(&self) -> [F; WHEELSETS] {
         let r = self.k.r;
-        self.out.wheelsets.map(|w| w.omega * r)
+        self.record.map(|w| w.omega * r)
+    }
+
+    /// Wheelset spin speeds omega, rad/s (positive rolling forward), of the last step.
+    pub fn spin_speeds(&self) -> [F; WHEELSETS] {
+        self.record.map(|w| w.omega)
+    }
+
+    /// Carbody (vehicle) speed, m/s.
+    pub fn vehicle_speed(&self) -> F {
+        self.s.v_c
+    }
+
+    /// Carbody longitudinal acceleration of the last step, m/s^2.
+    pub fn carbody_accel(&self) -> F {
+        self.carbody_accel
+    }
+
+    /// Steps taken since start.
+    pub fn steps(&self) -> u32 {
+        self.steps
     }
 
     /// Wheel radius, m.
@@ -619,9 +668,60 @@ impl<F: Real> Plant<F> {
         self.k.r
     }
 
-    /// Outputs of the last step (or of the initial state).
-    pub fn outputs(&self) -> &Outputs<F> {
-        &self.out
+    /// Power of running resistance and gradient on all bodies over the last step
+    /// (negative = taken out), W, for the energy balance. Gradient forces m g_along of
+    /// each body folded at construction; bogies and wheelsets summed first (one product
+    /// per body kind); speeds: the carbody's mean over the step, the bogies' relative
+    /// speeds after it added to it, the wheelsets' after it.
+    fn external_power(&self) -> F {
+        let k = &self.k;
+        let v_mid = self.carbody_mid_speed;
+        let bogie_speeds = (v_mid + self.s.dv_b[0]) + (v_mid + self.s.dv_b[1]);
+        let wo = &self.record;
+        let wheelset_speeds = (wo[0].speed + wo[1].speed) + (wo[2].speed + wo[3].speed);
+        -(self.resistance + k.grade_force_c) * v_mid
+            - k.grade_force_b * bogie_speeds
+            - k.grade_force_w * wheelset_speeds
+    }
+
+    /// Outputs of the last step (or of the initial state), built on demand: the step
+    /// keeps only what its state does not hold (one record per wheelset), and the values
+    /// here come from that record and the state. Board code that needs a few values every
+    /// step uses [`Self::spin_speeds`], [`Self::wheel_speeds`], [`Self::vehicle_speed`] and
+    /// [`Self::carbody_accel`] instead.
+    pub fn outputs(&self) -> Outputs<F> {
+        let s = &self.s;
+        Outputs {
+            steps: self.steps,
+            vehicle_speed: s.v_c,
+            distance: s.x_c,
+            carbody_accel: self.carbody_accel,
+            carbody_pitch: s.pitch_c,
+            wheelsets: core::array::from_fn(|j| {
+                let r = &self.record[j];
+                let w = &s.w[j];
+                WheelsetOutput {
+                    omega: r.omega,
+                    speed: r.speed,
+                    slip_velocity: w.slip,
+                    creepage: r.creepage,
+                    axle_load: r.axle_load,
+                    adhesion_force: r.adhesion_force,
+                    adhesion: r.adhesion_force * r.inv_load,
+                    rail_mu: r.rail_mu,
+                    mu_d: r.mu_d,
+                    clamp_force: w.pad_force,
+                    brake_torque: r.brake_torque,
+                    brake_force: self.k.caliper.friction_force(r.mu_d, w.pad_force),
+                    disc_temp: w.disc_temp,
+                    brake_power: r.brake_power,
+                    contact_power: r.contact_power,
+                }
+            }),
+            damper_power: self.damper_power,
+            external_power: self.external_power(),
+            flags: self.flags,
+        }
     }
 
     /// Flags of every step so far, or-ed.
@@ -636,7 +736,7 @@ impl<F: Real> Plant<F> {
 
     /// Time since start, s.
     pub fn time(&self) -> F {
-        F::of(self.out.steps as f64) * self.k.dt
+        F::of(self.steps as f64) * self.k.dt
     }
 
     /// Static axle load (all four equal), N.
@@ -655,29 +755,35 @@ impl<F: Real> Plant<F> {
         flags: &mut u32,
     ) -> F {
         let cal = &k.caliper;
-        let (value, limit, low) = match input {
-            BrakeInput::CylinderPressure(p) => (p, cal.pressure_limit, k.pressure_low),
-            BrakeInput::ClampForce(f) => (f, cal.clamp_force_limit, k.clamp_force_low),
-        };
-        // The usual case, a reading within [0, limit], by one integer compare; the
-        // detailed checks only when it fails.
-        let value = if value.within_zero_and(limit) {
-            value
-        } else {
-            if !value.is_finite() {
-                *flags |= Flags::wheelset_bit(Flags::INPUT_NOT_FINITE, j);
-                return *last_clamp;
-            }
-            // Below zero by more than 2 % of the range, or above the limit: out of range.
-            // Small negative readings are sensor noise around zero and clamp silently to 0.
-            if value > limit || value < low {
-                *flags |= Flags::wheelset_bit(Flags::INPUT_OUT_OF_RANGE, j);
-            }
-            value.clamp_to(F::ZERO, limit)
-        };
+        // The usual case, a reading within [0, limit], by one integer compare (one per
+        // input kind); the detailed checks only when it fails.
         let clamp = match input {
-            BrakeInput::CylinderPressure(_) => cal.clamp_force(value).min(cal.clamp_force_limit),
-            BrakeInput::ClampForce(_) => value,
+            // Within [0, clamp_force_limit] by the limit's construction (Caliper::new).
+            BrakeInput::CylinderPressure(p) if p.within_zero_and(cal.pressure_limit) => {
+                cal.clamp_force(p)
+            }
+            BrakeInput::ClampForce(f) if f.within_zero_and(cal.clamp_force_limit) => f,
+            _ => {
+                let (value, limit, low) = match input {
+                    BrakeInput::CylinderPressure(p) => (p, cal.pressure_limit, k.pressure_low),
+                    BrakeInput::ClampForce(f) => (f, cal.clamp_force_limit, k.clamp_force_low),
+                };
+                if !value.is_finite() {
+                    *flags |= Flags::wheelset_bit(Flags::INPUT_NOT_FINITE, j);
+                    return *last_clamp;
+                }
+                // Below zero by more than 2 % of the range, or above the limit: out of
+                // range. Small negative readings are sensor noise around zero and clamp
+                // silently to 0.
+                if value > limit || value < low {
+                    *flags |= Flags::wheelset_bit(Flags::INPUT_OUT_OF_RANGE, j);
+                }
+                let value = value.clamp_to(F::ZERO, limit);
+                match input {
+                    BrakeInput::CylinderPressure(_) => cal.clamp_force(value),
+                    BrakeInput::ClampForce(_) => value,
+                }
+            }
         };
         *last_clamp = clamp;
         clamp
@@ -707,8 +813,9 @@ impl<F: Real> Plant<F> {
         *pad
     }
 
-    /// Advances the plant by one fixed step with the brake inputs of the four wheelsets.
-    pub fn step(&mut self, inputs: &[BrakeInput<F>; WHEELSETS]) -> &Outputs<F> {
+    /// Advances the plant by one fixed step with the brake inputs of the four wheelsets;
+    /// returns the step's flags ([`Self::outputs`] gives the values).
+    pub fn step(&mut self, inputs: &[BrakeInput<F>; WHEELSETS]) -> Flags {
         let mut flags = 0u32;
         let half = F::of(0.5);
         let k = &self.k;
@@ -720,38 +827,17 @@ impl<F: Real> Plant<F> {
         // before it is read).
         let v_c = s.v_c;
         let v_b = [v_c + s.dv_b[0], v_c + s.dv_b[1]];
-        let mut ws: [WheelsetStep<F>; WHEELSETS] = core::array::from_fn(|j| {
+        let r = &mut self.record;
+        for j in 0..WHEELSETS {
+            // The pad force acting is the state's `pad_force` from here on.
+            Self::pad_force(k, &mut s.w[j], j, inputs[j], &mut flags);
             let v_w = v_b[j / 2] + s.w[j].dv;
-            WheelsetStep {
-                clamp: Self::pad_force(k, &mut s.w[j], j, inputs[j], &mut flags),
-                v_w,
-                omega: (v_w - s.w[j].slip) * k.inv_r,
-                q: F::ZERO,
-                f_pv: F::ZERO,
-                f_pl: F::ZERO,
-                dv_w: F::ZERO,
-                brake_torque: F::ZERO,
-            }
-        });
-
-        // ---- Suspension forces (deviation from the static preloads) ----
-        // Secondary vertical, bogie i: extension e = z_c + X_i theta_c - z_b;
-        // force deviation on the carbody, upward.
-        let mut f_sv = [F::ZERO; 2];
-        let mut f_sl = [F::ZERO; 2];
-        let mut damper_power = F::ZERO;
-        for i in 0..2 {
-            let e = s.z_c + k.x_bogie[i] * s.pitch_c - s.z_b[i];
-            let e_rate = s.vz_c + k.x_bogie[i] * s.pitch_rate_c - s.vz_b[i];
-            f_sv[i] = -(k.k_sv * e + k.c_sv * e_rate);
-            // Secondary longitudinal (springs + traction link), bogie relative to carbody at
-            // the element height; force on the bogie.
-            let d = s.dx_b[i] - k.pz_bogie_sl * s.pitch_b[i] + k.pz_carbody_sl * s.pitch_c;
-            let d_rate =
-                s.dv_b[i] - k.pz_bogie_sl * s.pitch_rate_b[i] + k.pz_carbody_sl * s.pitch_rate_c;
-            f_sl[i] = -(k.k_sl * d + k.c_sl * d_rate);
-            damper_power += k.c_sv * e_rate * e_rate + k.c_sl * d_rate * d_rate;
+            r[j].speed = v_w;
+            r[j].omega = (v_w - s.w[j].slip) * k.inv_r;
         }
+
+        // ---- Primary suspension (deviation from the static preloads) ----
+        let mut damper_power = F::ZERO;
         // Primary vertical (force deviation on the bogie, upward) and longitudinal (force on
         // the wheelset), wheelset j in bogie j/2.
         for j in 0..WHEELSETS {
@@ -759,16 +845,23 @@ impl<F: Real> Plant<F> {
             let xa = k.x_axle[j % 2];
             let e = s.z_b[i] + xa * s.pitch_b[i];
             let e_rate = s.vz_b[i] + xa * s.pitch_rate_b[i];
-            ws[j].f_pv = -(k.k_pv * e + k.c_pv * e_rate);
-            ws[j].q = k.q_static + ws[j].f_pv;
+            // Damping forces -c e' once, for the force and the damper power c e'^2.
+            let damping_v = k.neg_c_pv * e_rate;
+            r[j].f_pv = damping_v + k.neg_k_pv * e;
+            r[j].axle_load = k.q_static + r[j].f_pv;
+            if !(r[j].axle_load > F::ZERO) {
+                flags |= Flags::wheelset_bit(Flags::WHEEL_UNLOADED, j);
+            }
             let d = s.w[j].dx + k.pz_bogie_pl * s.pitch_b[i];
             let d_rate = s.w[j].dv + k.pz_bogie_pl * s.pitch_rate_b[i];
-            ws[j].f_pl = -(k.k_pl * d + k.c_pl * d_rate);
-            damper_power += k.c_pv * e_rate * e_rate + k.c_pl * d_rate * d_rate;
+            let damping_l = k.neg_c_pl * d_rate;
+            r[j].f_pl = damping_l + k.neg_k_pl * d;
+            damper_power -= damping_v * e_rate;
+            damper_power -= damping_l * d_rate;
         }
 
         // ---- Slow factors: one per step, in turn (each every 8 steps) ----
-        let turn = self.out.steps % (2 * WHEELSETS as u32);
+        let turn = self.steps % (2 * WHEELSETS as u32);
         let slow = (turn % WHEELSETS as u32) as usize;
         if turn < WHEELSETS as u32 {
             let w = &mut s.w[slow];
@@ -779,7 +872,7 @@ impl<F: Real> Plant<F> {
             let w = &mut s.w[slow];
             w.heat_loss = k
                 .thermal
-                .loss_coefficient_tracked(k.r * ws[slow].omega, &mut w.speed_power);
+                .loss_coefficient_tracked(k.r * r[slow].omega, &mut w.speed_power);
         }
         // Zones and degraded adhesion along the track (crate::track): one wheelset per
         // step, in turn; nothing to do on a uniform track with degraded adhesion off.
@@ -788,8 +881,8 @@ impl<F: Real> Plant<F> {
             track.step(
                 slow,
                 s.x_c + self.track_offset[slow],
-                ws[slow].v_w,
-                self.out.wheelsets[slow].contact_power,
+                r[slow].speed,
+                r[slow].contact_power,
                 F::of(WHEELSETS as f64) * dt,
             );
         }
@@ -799,19 +892,17 @@ impl<F: Real> Plant<F> {
         for j in 0..core::hint::black_box(WHEELSETS) {
             let j = j & (WHEELSETS - 1);
             let (polach, mu_factor) = track.contact(j);
+            let w = &mut r[j];
+            let (v_w, omega, q, clamp) = (w.speed, w.omega, w.axle_load, s.w[j].pad_force);
             let mu = polach.friction_tracked(s.w[j].slip, &mut s.w[j].rail_decay) * mu_factor;
-            let contact: ContactForce<F> =
-                polach.evaluate_with_mu(s.w[j].slip, ws[j].v_w, ws[j].q, mu);
-            if !(ws[j].q > F::ZERO) {
-                flags |= Flags::wheelset_bit(Flags::WHEEL_UNLOADED, j);
-            }
+            let contact: ContactForce<F> = polach.evaluate_with_mu(s.w[j].slip, v_w, q, mu);
             let mu_d = k.friction.mu_d_scaled_tracked(
-                k.speed_exponent_per_spin * ws[j].omega.abs(),
+                k.speed_exponent_per_spin * omega.abs(),
                 s.w[j].temperature_factor,
-                ws[j].clamp,
+                clamp,
                 &mut s.w[j].speed_decay,
             );
-            let torque_kinetic = k.caliper.torque(mu_d, ws[j].clamp);
+            let torque_kinetic = k.caliper.torque(mu_d, clamp);
 
             // Semi-implicit spin/slip update with the brake as a clutch. Unknowns at the
             // new step: u', omega', F' = chord u'. With D = 1 + dt chord (1/m + r^2/I):
@@ -821,11 +912,11 @@ impl<F: Real> Plant<F> {
             // wheel (omega' = 0) when that suffices.
             let chord = contact.chord;
             // dt times the explicit acceleration (dt folded into 1/m_w and g_along).
-            let dv_explicit = ws[j].f_pl * k.dt_inv_m_w - k.dt_g_along;
+            let dv_explicit = w.f_pl * k.dt_inv_m_w - k.dt_g_along;
             let d = F::ONE + chord * k.dt_spin_compliance;
             let inv_d = F::ONE / d;
             let u0 = (s.w[j].slip + dv_explicit) * inv_d;
-            let omega0 = ws[j].omega + chord * u0 * k.dt_r_inv_i_w;
+            let omega0 = omega + chord * u0 * k.dt_r_inv_i_w;
             let g = k.dt_inv_i_w * (F::ONE + chord * k.dt_inv_m_w) * inv_d;
             let limit = g * torque_kinetic;
             let (torque, omega_new) = if omega0 > limit {
@@ -837,23 +928,19 @@ impl<F: Real> Plant<F> {
             };
             let u_new = u0 + torque * k.dt_r_inv_i_w * inv_d;
             let force = chord * u_new;
-            ws[j].dv_w = dv_explicit - force * k.dt_inv_m_w;
-            ws[j].brake_torque = torque;
+            w.dv_w = dv_explicit - force * k.dt_inv_m_w;
 
-            let w = &mut self.out.wheelsets[j];
+            // The pad force and the disc temperature are the state's; the outputs
+            // derive the rest (Plant::outputs).
             w.omega = omega_new;
-            w.speed = ws[j].v_w + ws[j].dv_w;
-            w.slip_velocity = u_new;
+            w.speed = v_w + w.dv_w;
             w.creepage = contact.creepage;
-            w.axle_load = ws[j].q;
             w.adhesion_force = force;
-            w.adhesion = force * contact.inv_load;
+            w.inv_load = contact.inv_load;
             w.rail_mu = contact.mu;
             w.mu_d = mu_d;
-            w.clamp_force = ws[j].clamp;
             w.brake_torque = torque;
-            w.brake_force = k.caliper.friction_force(mu_d, ws[j].clamp);
-            w.brake_power = torque * half * (ws[j].omega + omega_new);
+            w.brake_power = torque * half * (omega + omega_new);
             w.contact_power = force * half * (s.w[j].slip + u_new);
             s.w[j].slip = u_new;
 
@@ -862,9 +949,29 @@ impl<F: Real> Plant<F> {
                 k.thermal
                     .net_heat_flow(w.brake_power, s.w[j].disc_temp, s.w[j].heat_loss);
             s.w[j].disc_temp += heat_flow * k.dt_inv_disc_heat_capacity;
-            w.disc_temp = s.w[j].disc_temp;
         }
 
+        // ---- Secondary suspension (deviation from the static preloads), after the
+        // wheelsets: its forces need not live across their loop ----
+        // Secondary vertical, bogie i: extension e = z_c + X_i theta_c - z_b;
+        // force deviation on the carbody, upward.
+        let mut f_sv = [F::ZERO; 2];
+        let mut f_sl = [F::ZERO; 2];
+        for i in 0..2 {
+            let e = s.z_c + k.x_bogie[i] * s.pitch_c - s.z_b[i];
+            let e_rate = s.vz_c + k.x_bogie[i] * s.pitch_rate_c - s.vz_b[i];
+            let damping_v = k.neg_c_sv * e_rate;
+            f_sv[i] = damping_v + k.neg_k_sv * e;
+            // Secondary longitudinal (springs + traction link), bogie relative to carbody at
+            // the element height; force on the bogie.
+            let d = s.dx_b[i] - k.pz_bogie_sl * s.pitch_b[i] + k.pz_carbody_sl * s.pitch_c;
+            let d_rate =
+                s.dv_b[i] - k.pz_bogie_sl * s.pitch_rate_b[i] + k.pz_carbody_sl * s.pitch_rate_c;
+            let damping_l = k.neg_c_sl * d_rate;
+            f_sl[i] = damping_l + k.neg_k_sl * d;
+            damper_power -= damping_v * e_rate;
+            damper_power -= damping_l * d_rate;
+        }
         // ---- Bodies ----
         // Running resistance on the carbody (Davis), faded in over +-1 cm/s so that the
         // vehicle never creeps backwards at rest.
@@ -872,66 +979,50 @@ impl<F: Real> Plant<F> {
         let v_abs = v_c.abs();
         let resistance = (k.davis_a + k.davis_b * v_abs + k.davis_c * v_abs * v_abs) * speed_fade;
         let a_c = (-(f_sl[0] + f_sl[1]) - resistance) * k.inv_m_c - k.g_along;
-        // Vertical and pitch velocity increments over the step (dt/m, dt/I folded).
-        let dvz_c = (f_sv[0] + f_sv[1]) * k.dt_inv_m_c;
+
+        // ---- Integrate (symplectic Euler: velocities, then positions), body by body:
+        // each body's velocity increments over the step (dt/m, dt/I and dt g_along
+        // folded) go into its state at once (short live ranges, no spills) ----
+        let dv_c = a_c * dt;
+        kahan_add(&mut s.v_c, &mut s.v_c_comp, dv_c);
+        let v_c_new = s.v_c;
+        kahan_add(&mut s.x_c, &mut s.x_c_comp, v_c_new * dt);
+        s.vz_c += (f_sv[0] + f_sv[1]) * k.dt_inv_m_c;
+        s.z_c += s.vz_c * dt;
         let mut moment_c = F::ZERO;
         for i in 0..2 {
             // Vertical deviation at X_i; longitudinal force on the carbody (-f_sl) at pz.
             moment_c += k.x_bogie[i] * f_sv[i] + k.pz_carbody_sl * f_sl[i];
         }
-        let dpitch_rate_c = moment_c * k.dt_inv_i_c;
-
-        // Bogie velocity increments over the step (dt/m_b and dt g_along folded).
-        let mut dv_b = [F::ZERO; 2];
-        let mut dvz_b = [F::ZERO; 2];
-        let mut dpitch_rate_b = [F::ZERO; 2];
-        for i in 0..2 {
-            let (j0, j1) = (2 * i, 2 * i + 1);
-            dv_b[i] = (f_sl[i] - ws[j0].f_pl - ws[j1].f_pl) * k.dt_inv_m_b - k.dt_g_along;
-            dvz_b[i] = (ws[j0].f_pv + ws[j1].f_pv - f_sv[i]) * k.dt_inv_m_b;
-            // Moments: primary vertical at +-b/2, primary longitudinal (-f_pl on the bogie)
-            // at pz_pl, secondary longitudinal at pz_sl, brake reactions -T_b.
-            let m = k.x_axle[0] * ws[j0].f_pv
-                + k.x_axle[1] * ws[j1].f_pv
-                + k.pz_bogie_pl * (ws[j0].f_pl + ws[j1].f_pl)
-                - k.pz_bogie_sl * f_sl[i]
-                - ws[j0].brake_torque
-                - ws[j1].brake_torque;
-            dpitch_rate_b[i] = m * k.dt_inv_i_b;
-        }
-
-        // ---- Integrate (symplectic Euler: velocities, then positions) ----
-        let dv_c = a_c * dt;
-        kahan_add(&mut s.v_c, &mut s.v_c_comp, dv_c);
-        let v_c_new = s.v_c;
-        kahan_add(&mut s.x_c, &mut s.x_c_comp, v_c_new * dt);
-        s.vz_c += dvz_c;
-        s.z_c += s.vz_c * dt;
-        s.pitch_rate_c += dpitch_rate_c;
+        s.pitch_rate_c += moment_c * k.dt_inv_i_c;
         s.pitch_c += s.pitch_rate_c * dt;
         for i in 0..2 {
-            s.dv_b[i] += dv_b[i] - dv_c;
+            let (j0, j1) = (2 * i, 2 * i + 1);
+            let dv_b = (f_sl[i] - r[j0].f_pl - r[j1].f_pl) * k.dt_inv_m_b - k.dt_g_along;
+            s.dv_b[i] += dv_b - dv_c;
             s.dx_b[i] += s.dv_b[i] * dt;
-            s.vz_b[i] += dvz_b[i];
+            s.vz_b[i] += (r[j0].f_pv + r[j1].f_pv - f_sv[i]) * k.dt_inv_m_b;
             s.z_b[i] += s.vz_b[i] * dt;
-            s.pitch_rate_b[i] += dpitch_rate_b[i];
+            // Moments: primary vertical at +-b/2, primary longitudinal (-f_pl on the bogie)
+            // at pz_pl, secondary longitudinal at pz_sl, brake reactions -T_b.
+            let m = k.x_axle[0] * r[j0].f_pv
+                + k.x_axle[1] * r[j1].f_pv
+                + k.pz_bogie_pl * (r[j0].f_pl + r[j1].f_pl)
+                - k.pz_bogie_sl * f_sl[i]
+                - r[j0].brake_torque
+                - r[j1].brake_torque;
+            s.pitch_rate_b[i] += m * k.dt_inv_i_b;
             s.pitch_b[i] += s.pitch_rate_b[i] * dt;
-        }
-        for j in 0..WHEELSETS {
-            s.w[j].dv += ws[j].dv_w - dv_b[j / 2];
-            s.w[j].dx += s.w[j].dv * dt;
+            for j in [j0, j1] {
+                s.w[j].dv += r[j].dv_w - dv_b;
+                s.w[j].dx += s.w[j].dv * dt;
+            }
         }
 
-        // ---- External power (resistance and gradient) for the energy balance ----
-        // Gradient forces m g_along of each body folded at construction; bogies and
-        // wheelsets summed first (one product per body kind).
-        let v_mid = half * (v_c + v_c_new);
-        let bogie_speeds = (v_mid + s.dv_b[0]) + (v_mid + s.dv_b[1]);
-        let wo = &self.out.wheelsets;
-        let wheelset_speeds = (wo[0].speed + wo[1].speed) + (wo[2].speed + wo[3].speed);
-        let external = -(resistance + k.grade_force_c) * v_mid
-            - k.grade_force_b * bogie_speeds
-            - k.grade_force_w * wheelset_speeds;
+        // External power (resistance and gradient) for the energy balance: from these
+        // two on demand (Self::external_power).
+        self.carbody_mid_speed = half * (v_c + v_c_new);
+        self.resistance = resistance;
 
         // ---- Safe state on a non-finite state (never expected with valid parameters) ----
         // One test on a sum: a NaN or an infinity anywhere makes the sum NaN or infinite
@@ -941,28 +1032,23 @@ impl<F: Real> Plant<F> {
             sum += s.w[j].slip + s.w[j].disc_temp;
         }
         let finite = sum.is_finite();
-        let out = &mut self.out;
-        out.steps = out.steps.wrapping_add(1);
-        out.vehicle_speed = s.v_c;
-        out.distance = s.x_c;
-        out.carbody_accel = a_c;
-        out.carbody_pitch = s.pitch_c;
-        out.damper_power = damper_power;
-        out.external_power = external;
+        self.steps = self.steps.wrapping_add(1);
+        self.carbody_accel = a_c;
+        self.damper_power = damper_power;
         if !finite {
             flags |= Flags::NUMERIC_FAULT;
             self.enter_safe_state();
         }
-        self.out.flags = Flags(flags);
+        self.flags = Flags(flags);
         self.sticky.0 |= flags;
-        &self.out
+        self.flags
     }
 
     /// Safe state after a numeric fault: vehicle at rest, brakes' effect nil, discs kept
     /// if finite. Outputs show standstill, so a brake controller sees a stopped train.
     fn enter_safe_state(&mut self) {
         let temps = self.s.w.map(|w| w.disc_temp);
-        let steps = self.out.steps;
+        let steps = self.steps;
         self.initial_speed = F::ZERO;
         self.reset_state(F::ZERO);
         for j in 0..WHEELSETS {
@@ -970,7 +1056,7 @@ impl<F: Real> Plant<F> {
                 self.s.w[j].disc_temp = temps[j];
             }
         }
-        self.out.steps = steps;
+        self.steps = steps;
     }
 
     /// Kinetic and spring energy (host-side check of the energy balance).
@@ -989,7 +1075,7 @@ impl<F: Real> Plant<F> {
             let e = f(s.z_c) + f(k.x_bogie[i]) * f(s.pitch_c) - f(s.z_b[i]);
             let d = f(s.dx_b[i]) - f(k.pz_bogie_sl) * f(s.pitch_b[i])
                 + f(k.pz_carbody_sl) * f(s.pitch_c);
-            potential += 0.5 * f(k.k_sv) * e * e + 0.5 * f(k.k_sl) * d * d;
+            potential += 0.5 * -f(k.neg_k_sv) * e * e + 0.5 * -f(k.neg_k_sl) * d * d;
         }
         for j in 0..WHEELSETS {
             let i = j / 2;
@@ -999,7 +1085,7 @@ impl<F: Real> Plant<F> {
             let xa = f(k.x_axle[j % 2]);
             let e = f(s.z_b[i]) + xa * f(s.pitch_b[i]);
             let d = f(s.w[j].dx) + f(k.pz_bogie_pl) * f(s.pitch_b[i]);
-            potential += 0.5 * f(k.k_pv) * e * e + 0.5 * f(k.k_pl) * d * d;
+            potential += 0.5 * -f(k.neg_k_pv) * e * e + 0.5 * -f(k.neg_k_pl) * d * d;
         }
         Energy { kinetic, potential }
     }
@@ -1010,7 +1096,7 @@ impl<F: Real> Plant<F> {
         for j in 0..WHEELSETS {
             let x = self.s.x_c + self.track_offset[j];
             self.track
-                .step(j, x, self.out.wheelsets[j].speed, F::ZERO, F::ZERO);
+                .step(j, x, self.record[j].speed, F::ZERO, F::ZERO);
         }
     }
 

@@ -17,7 +17,8 @@ fn balance(permille: f64) -> (f64, f64, f64) {
     let input = [BrakeInput::ClampForce(8.0e3); 4];
     let (mut dissipated, mut external) = (0.0, 0.0);
     for _ in 0..30_000 {
-        let o = plant.step(&input);
+        plant.step(&input);
+        let o = plant.outputs();
         for w in &o.wheelsets {
             dissipated += (w.brake_power + w.contact_power) * dt;
         }

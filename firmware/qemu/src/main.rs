@@ -434,7 +434,7 @@ mod emulator {
         let mut stats = [const { Stat::new() }; PARTS.len()];
         let mut rows = 1u32;
         loop {
-            let prev = *sc.sim.outputs();
+            let prev = sc.sim.outputs();
             let mut replay = sc.sim.plant.clone();
             let mut loop_cost = 0;
             let adv = sc.advance(|sim| {
@@ -446,7 +446,7 @@ mod emulator {
             });
             let step = sc.steps();
             let step_cost = replay_cost(host, timer, &sc, &mut replay);
-            let cur = *sc.sim.outputs();
+            let cur = sc.sim.outputs();
             // The sub-models, with this step's per-wheelset values.
             let w = |o: &hils_plant::Outputs<f32>, j: usize| o.wheelsets[j];
             let contact_args = [0, 1, 2, 3].map(|j| {
@@ -557,7 +557,7 @@ mod emulator {
         let ((), cost) = timer.measure(|| {
             replay.step(black_box(&inputs));
         });
-        if *replay.outputs() != *sc.sim.outputs() {
+        if replay.outputs() != sc.sim.outputs() {
             host.line(format_args!(
                 "X the replayed plant step {} differs",
                 sc.steps()

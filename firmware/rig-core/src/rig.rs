@@ -729,12 +729,18 @@ impl<S: SimStore> Rig<S> {
         self.pulses
     }
 
-    /// The plant outputs of the run (None without a run).
-    pub fn outputs(&self) -> Option<&Outputs<f32>> {
+    /// The plant outputs of the run (None without a run), built on demand
+    /// ([`hils_plant::Plant::outputs`]; the tick uses [`Self::plant`]'s cheap accessors).
+    pub fn outputs(&self) -> Option<Outputs<f32>> {
+        self.plant().map(|p| p.outputs())
+    }
+
+    /// The plant of the run (None without a run).
+    fn plant(&self) -> Option<&Plant<f32>> {
         match self.sim()? {
             Sim::None => None,
-            Sim::Rig(p) => Some(p.outputs()),
-            Sim::SelfTest(c) => Some(c.outputs()),
+            Sim::Rig(p) => Some(p),
+            Sim::SelfTest(c) => Some(&c.plant),
         }
     }
 
@@ -1107,8 +1113,8 @@ impl<S: SimStore> Rig<S> {
                     self.sticky |= Faults::PLANT_NUMERIC;
                     self.end_run(RigState::Fault);
                 } else if self
-                    .outputs()
-                    .is_some_and(|o| at_standstill(o.vehicle_speed))
+                    .plant()
+                    .is_some_and(|p| at_standstill(p.vehicle_speed()))
                 {
                     self.end_run(RigState::Finished);
                 }
@@ -1145,9 +1151,9 @@ impl<S: SimStore> Rig<S> {
                         SensorKind::PressureTransducer => BrakeInput::CylinderPressure(readings[j]),
                     };
                 }
-                plant.step(&inputs).flags
+                plant.step(&inputs)
             }
-            Sim::SelfTest(c) => c.step().flags,
+            Sim::SelfTest(c) => c.step(),
         }
     }
 
@@ -1286,22 +1292,23 @@ impl<S: SimStore> Rig<S> {
         // Wheel circumferential speeds r omega (m/s) for CAN, spin speeds omega (rad/s)
         // for the pulse trains.
         let (speeds, o) = match (sim_in(&self.sim, self.sim_lent), live) {
-            (Some(Sim::Rig(p)), true) => (p.wheel_speeds(), Some(p.outputs())),
-            (Some(Sim::SelfTest(c)), true) => (c.plant.wheel_speeds(), Some(c.outputs())),
+            (Some(Sim::Rig(p)), true) => (p.wheel_speeds(), Some(p)),
+            (Some(Sim::SelfTest(c)), true) => (c.plant.wheel_speeds(), Some(&c.plant)),
             _ => ([0.0; WHEELSETS], None),
         };
         let (v, a) = o
-            .map(|o| (o.vehicle_speed, o.carbody_accel))
+            .map(|p| (p.vehicle_speed(), p.carbody_accel()))
             .unwrap_or((0.0, 0.0));
         // At rest after the run (`Finished`): trains silent, speeds 0.00 km/h (the plant's
         // residual creep and carbody swing-back are not wheel rotation to report).
         let at_rest = self.state == RigState::Finished;
+        let spins = o.map(|p| p.spin_speeds());
         for j in 0..WHEELSETS {
-            let regs = match o {
-                Some(o) if !at_rest => self
+            let regs = match spins {
+                Some(spins) if !at_rest => self
                     .config
                     .pulse_timer
-                    .registers(wheel_frequency_hz(o.wheelsets[j].omega, self.config.teeth)),
+                    .registers(wheel_frequency_hz(spins[j], self.config.teeth)),
                 _ => self.config.pulse_timer.silent(),
             };
             self.pulses[j] = regs;

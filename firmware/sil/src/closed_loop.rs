@@ -4,7 +4,7 @@
 use hils_brake_unit::{BrakeDemand, BrakeUnit, UnitConfig, UnitError, UnitOutputs, Valve};
 use hils_plant::params::{ParamError, Params, Rail, STEP_S};
 use hils_plant::track::ContactSets;
-use hils_plant::{BrakeInput, Outputs, Plant, Real, Track, TrackAdhesion, WHEELSETS};
+use hils_plant::{BrakeInput, Flags, Outputs, Plant, Real, Track, TrackAdhesion, WHEELSETS};
 
 use crate::params::ParamFile;
 
@@ -68,7 +68,7 @@ impl<F: Real> ClosedLoop<F> {
             cylinder_pressure: [F::ZERO; WHEELSETS],
             valves: [Valve::Apply; WHEELSETS],
             venting: [false; WHEELSETS],
-            reference_speed: plant.outputs().vehicle_speed,
+            reference_speed: plant.vehicle_speed(),
             demand_pressure: F::ZERO,
         };
         Ok(Self {
@@ -106,8 +106,9 @@ impl<F: Real> ClosedLoop<F> {
         self.unit.set_demand(demand);
     }
 
-    /// One fixed step of unit and plant.
-    pub fn step(&mut self) -> &Outputs<F> {
+    /// One fixed step of unit and plant; returns the plant's flags of the step
+    /// ([`Self::outputs`] gives the values).
+    pub fn step(&mut self) -> Flags {
         let speeds = self.plant.wheel_speeds();
         self.unit_out = self.unit.step(&speeds);
         let inputs = self
@@ -117,8 +118,8 @@ impl<F: Real> ClosedLoop<F> {
         self.plant.step(&inputs)
     }
 
-    /// The plant's outputs after the last step.
-    pub fn outputs(&self) -> &Outputs<F> {
+    /// The plant's outputs after the last step (built on demand, [`Plant::outputs`]).
+    pub fn outputs(&self) -> Outputs<F> {
         self.plant.outputs()
     }
 

@@ -126,7 +126,7 @@ impl<F: Real> EbScenario<F> {
 
     /// Plant steps taken so far.
     pub fn steps(&self) -> u32 {
-        self.sim.outputs().steps
+        self.sim.plant.steps()
     }
 
     /// The step at which the carbody speed first fell to [`STOP_SPEED_MPS`].
@@ -152,7 +152,7 @@ impl<F: Real> EbScenario<F> {
                 done: true,
             };
         }
-        let done = self.rule.observe(steps, self.sim.outputs().vehicle_speed);
+        let done = self.rule.observe(steps, self.sim.plant.vehicle_speed());
         Advance {
             record: steps % self.record_every == 0,
             done,

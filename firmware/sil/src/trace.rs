@@ -63,7 +63,7 @@ pub struct TraceRow {
 impl TraceRow {
     /// The row of the loop's current state.
     pub fn of(sim: &ClosedLoop<f32>) -> Self {
-        Self::from_outputs(sim.plant.time(), sim.outputs(), sim.unit_outputs())
+        Self::from_outputs(sim.plant.time(), &sim.outputs(), sim.unit_outputs())
     }
 
     /// The row of a plant time (s), the plant's outputs and the unit's outputs.

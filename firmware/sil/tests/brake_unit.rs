@@ -28,9 +28,9 @@ fn eb_pressure_decelerates_the_nominal_vehicle_at_5_kmh_per_s() {
     sim.set_demand(BrakeDemand::Emergency);
     let mut v8 = 0.0;
     for step in 1..=200_000 {
-        let o = sim.step();
+        sim.step();
         if step == 80_000 {
-            v8 = o.vehicle_speed;
+            v8 = sim.outputs().vehicle_speed;
         }
     }
     let decel = (v8 - sim.outputs().vehicle_speed) / 12.0;

@@ -44,7 +44,8 @@ fn clean_stop_no_backward_creep_no_nan() {
         let mut stopped_at = None;
         let mut max_distance = 0.0f32;
         for step in 0..400_000u32 {
-            let o = sim.step();
+            sim.step();
+            let o = sim.outputs();
             assert!(o.vehicle_speed.is_finite() && o.distance.is_finite());
             for w in &o.wheelsets {
                 // A braked wheel never spins backwards.

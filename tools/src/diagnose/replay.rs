@@ -902,7 +902,7 @@ pub fn replay(run: &Prepared, model: &Model) -> Option<Replay> {
         }
         row
     };
-    trace.push(record(plant.outputs()));
+    trace.push(record(&plant.outputs()));
     mu_trace.push(plant.outputs().wheelsets.map(|w| w.mu_d));
     let mut inputs = [BrakeInput::ClampForce(0.0); WHEELSETS];
     for k in 0..steps {
@@ -927,8 +927,9 @@ pub fn replay(run: &Prepared, model: &Model) -> Option<Replay> {
             };
             inputs[j] = BrakeInput::ClampForce(f);
         }
-        let o = plant.step(&inputs);
-        trace.push(record(o));
+        plant.step(&inputs);
+        let o = plant.outputs();
+        trace.push(record(&o));
         mu_trace.push(o.wheelsets.map(|w| w.mu_d));
     }
     let flags = plant.sticky_flags().0;
