@@ -552,7 +552,7 @@ mod emulator {
         let inputs = sc
             .sim
             .unit_outputs()
-            .cylinder_pressure
+            .cylinder_pressure_pa
             .map(BrakeInput::CylinderPressure);
         let ((), cost) = timer.measure(|| {
             replay.step(black_box(&inputs));

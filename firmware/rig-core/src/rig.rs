@@ -1142,7 +1142,7 @@ impl<S: SimStore> Rig<S> {
                     }
                 }
                 (
-                    u.cylinder_pressure,
+                    u.cylinder_pressure_pa,
                     w(&|j| o.wheelsets[j].clamp_force),
                     bits,
                 )

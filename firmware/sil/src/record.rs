@@ -284,7 +284,7 @@ impl RunRecord {
             a_x_mps2: o.carbody_accel.to_f64(),
             cmd,
             omega_radps: w(&|j| o.wheelsets[j].omega),
-            p_cyl_pa: w(&|j| u.cylinder_pressure[j]),
+            p_cyl_pa: w(&|j| u.cylinder_pressure_pa[j]),
             f_clamp_n: w(&|j| o.wheelsets[j].clamp_force),
             f_brake_n: w(&|j| o.wheelsets[j].brake_force),
             t_disc_c: w(&|j| o.wheelsets[j].disc_temp),
@@ -293,7 +293,7 @@ impl RunRecord {
             mu_d: w(&|j| o.wheelsets[j].mu_d),
             creepage: w(&|j| o.wheelsets[j].creepage),
             adhesion: w(&|j| o.wheelsets[j].adhesion),
-            v_ref_est_mps: u.reference_speed.to_f64(),
+            v_ref_est_mps: u.reference_speed_mps.to_f64(),
         }
     }
 

@@ -75,8 +75,8 @@ impl TraceRow {
             o.distance,
             o.carbody_accel,
             o.carbody_pitch,
-            u.reference_speed,
-            u.demand_pressure,
+            u.reference_speed_mps,
+            u.demand_pressure_pa,
         ];
         let mut k = 0;
         for x in scalars {
@@ -86,7 +86,7 @@ impl TraceRow {
         let mut valves = 0u32;
         for j in 0..WHEELSETS {
             let w = &o.wheelsets[j];
-            let per = w.values().into_iter().chain([u.cylinder_pressure[j]]);
+            let per = w.values().into_iter().chain([u.cylinder_pressure_pa[j]]);
             for x in per {
                 values[k] = x.to_bits();
                 k += 1;
