@@ -22,10 +22,10 @@ use hils_rig_core::sensor::ADC_SEQUENCE_LEN;
 
 use crate::Irqs;
 use crate::pulse::PulseOut;
+use crate::shared::{BUILT, LOCAL_CMD, RIG_STATE, START_REQUESTS};
 use crate::sim_store::{BoardSim, lent_store};
 use crate::step::{
-    BUILT, BoardIo, LOCAL_CMD, REAL_TIME, RIG_STATE, RealTime, START_REQUESTS, WATCHDOG_TIMEOUT_US,
-    Watchdog, configure_step_timer,
+    BoardIo, REAL_TIME, RealTime, WATCHDOG_TIMEOUT_US, Watchdog, configure_step_timer,
 };
 
 /// ADC ring buffer: four sequences.
@@ -162,7 +162,7 @@ async fn adc_restart_task() {
     let mut restarts = 0u32;
     loop {
         Delay::after_millis(1).await;
-        if crate::step::ADC_STOPPED.swap(false, core::sync::atomic::Ordering::Relaxed) {
+        if crate::shared::ADC_STOPPED.swap(false, core::sync::atomic::Ordering::Relaxed) {
             // SAFETY: thread mode; `start` is a few register writes.
             let done = unsafe { REAL_TIME.with_step_masked(|rt| rt.io.adc.start()) };
             if done.is_some() {
