@@ -74,7 +74,7 @@ fn recorded_inputs(params: &ParamFile, steps: usize) -> Result<Vec<[f32; 4]>> {
     Ok((0..steps)
         .map(|_| {
             sim.step();
-            sim.unit_outputs().cylinder_pressure
+            sim.unit_outputs().cylinder_pressure_pa
         })
         .collect())
 }

@@ -4,15 +4,16 @@
 
 use defmt::{info, unwrap};
 use embassy_executor::Spawner;
-use embassy_stm32::Peripherals;
-use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, Exten, SampleTime};
+use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, Exten, RingBufferedAdc, SampleTime};
 use embassy_stm32::can::CanConfigurator;
 use embassy_stm32::gpio::{Input, Level, Output, OutputType, Pull, Speed};
 use embassy_stm32::interrupt::{self, InterruptExt};
+use embassy_stm32::peripherals::{ADC1, DMA1_CH1, PA0, PA1, PC0, PC1, TIM3};
 use embassy_stm32::timer::low_level::Timer;
 use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::triggers;
 use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_stm32::{Peri, Peripherals};
 use embassy_time::Timer as Delay;
 use hils_plant::FrictionModel;
 use hils_rig_core::Code;
@@ -22,10 +23,10 @@ use hils_rig_core::sensor::ADC_SEQUENCE_LEN;
 
 use crate::Irqs;
 use crate::pulse::PulseOut;
+use crate::shared::{BUILT, LOCAL_CMD, RIG_STATE, START_REQUESTS};
 use crate::sim_store::{BoardSim, lent_store};
 use crate::step::{
-    BUILT, BoardIo, LOCAL_CMD, REAL_TIME, RIG_STATE, RealTime, START_REQUESTS, WATCHDOG_TIMEOUT_US,
-    Watchdog, configure_step_timer,
+    BoardIo, REAL_TIME, RealTime, WATCHDOG_TIMEOUT_US, Watchdog, configure_step_timer,
 };
 
 /// ADC ring buffer: four sequences.
@@ -51,31 +52,7 @@ pub async fn run(spawner: Spawner, p: Peripherals) {
     let ws3 = pulse_out!(p.TIM8, p.PC6);
     let ws4 = pulse_out!(p.TIM20, p.PB2);
 
-    // ADC1: 16 ranks triggered by TIM3_CC4, circular DMA.
-    let adc = Adc::new(p.ADC1, AdcConfig::default());
-    let t = SampleTime::CYCLES24_5;
-    // Each input appears in four ranks. SAFETY: the copies of a pin only put it in analog
-    // mode and name its channel; nothing else uses these pins.
-    let (ch1, ch2, ch3, ch4) = (p.PA0, p.PA1, p.PC1, p.PC0);
-    let sequence: [_; ADC_SEQUENCE_LEN] = core::array::from_fn(|rank| unsafe {
-        let ch = match rank % 4 {
-            0 => ch1.clone_unchecked().degrade_adc(),
-            1 => ch2.clone_unchecked().degrade_adc(),
-            2 => ch3.clone_unchecked().degrade_adc(),
-            _ => ch4.clone_unchecked().degrade_adc(),
-        };
-        (ch, t)
-    });
-    let dma_buf = unwrap!(cortex_m::singleton!(: [u16; ADC_RING] = [0; ADC_RING]));
-    let mut adc = adc.into_ring_buffered(
-        p.DMA1_CH1,
-        dma_buf,
-        Irqs,
-        sequence.into_iter(),
-        triggers::TIM3_CC4,
-        Exten::RISING_EDGE,
-    );
-    adc.start();
+    let adc = start_adc(p.ADC1, p.DMA1_CH1, (p.PA0, p.PA1, p.PC1, p.PC0));
 
     let (tx, rx, props) =
         crate::can_io::start(CanConfigurator::new(p.FDCAN1, p.PA11, p.PA12, Irqs));
@@ -116,15 +93,7 @@ pub async fn run(spawner: Spawner, p: Peripherals) {
         Speed::Low
     ))));
 
-    // TIM3: 10 kHz update interrupt (the step), CH4 at mid-period (the ADC trigger).
-    let step_timer = Timer::new(p.TIM3);
-    configure_step_timer(&step_timer);
-    step_timer.enable_update_interrupt(true);
-    // SAFETY: the handler touches only REAL_TIME (published above), the queues and atomics.
-    unsafe { interrupt::TIM3.enable() };
-    step_timer.start();
-    // The step timer runs for good: keep its clock on (Timer's drop would disable it).
-    core::mem::forget(step_timer);
+    start_step_timer(p.TIM3);
     info!(
         "10 kHz step running, watchdog {=u32} us; press B1 for the self-test paper scenario",
         WATCHDOG_TIMEOUT_US
@@ -135,6 +104,59 @@ pub async fn run(spawner: Spawner, p: Peripherals) {
             .send(Command::paper_self_test(FrictionModel::Variable))
             .await;
     }
+}
+
+/// ADC1: 16 ranks (each brake input in four) triggered by TIM3_CC4, into a circular DMA
+/// ring; started (the conversions begin with the step timer).
+fn start_adc(
+    adc1: Peri<'static, ADC1>,
+    dma: Peri<'static, DMA1_CH1>,
+    pins: (
+        Peri<'static, PA0>,
+        Peri<'static, PA1>,
+        Peri<'static, PC1>,
+        Peri<'static, PC0>,
+    ),
+) -> RingBufferedAdc<'static, ADC1> {
+    let adc = Adc::new(adc1, AdcConfig::default());
+    let t = SampleTime::CYCLES24_5;
+    // Each input appears in four ranks. SAFETY: the copies of a pin only put it in analog
+    // mode and name its channel; nothing else uses these pins.
+    let (ch1, ch2, ch3, ch4) = pins;
+    let sequence: [_; ADC_SEQUENCE_LEN] = core::array::from_fn(|rank| unsafe {
+        let ch = match rank % 4 {
+            0 => ch1.clone_unchecked().degrade_adc(),
+            1 => ch2.clone_unchecked().degrade_adc(),
+            2 => ch3.clone_unchecked().degrade_adc(),
+            _ => ch4.clone_unchecked().degrade_adc(),
+        };
+        (ch, t)
+    });
+    let dma_buf = unwrap!(cortex_m::singleton!(: [u16; ADC_RING] = [0; ADC_RING]));
+    let mut ring = adc.into_ring_buffered(
+        dma,
+        dma_buf,
+        Irqs,
+        sequence.into_iter(),
+        triggers::TIM3_CC4,
+        Exten::RISING_EDGE,
+    );
+    ring.start();
+    ring
+}
+
+/// TIM3: 10 kHz update interrupt (the step), CH4 at mid-period (the ADC trigger); runs
+/// for good from here.
+fn start_step_timer(tim3: Peri<'static, TIM3>) {
+    let step_timer = Timer::new(tim3);
+    configure_step_timer(&step_timer);
+    step_timer.enable_update_interrupt(true);
+    // SAFETY: the handler touches only REAL_TIME (published by `run` before this call), the
+    // queues and atomics.
+    unsafe { interrupt::TIM3.enable() };
+    step_timer.start();
+    // The step timer runs for good: keep its clock on (Timer's drop would disable it).
+    core::mem::forget(step_timer);
 }
 
 /// Builds the simulation of each run the step requests, in thread mode (~35 000
@@ -162,7 +184,7 @@ async fn adc_restart_task() {
     let mut restarts = 0u32;
     loop {
         Delay::after_millis(1).await;
-        if crate::step::ADC_STOPPED.swap(false, core::sync::atomic::Ordering::Relaxed) {
+        if crate::shared::ADC_STOPPED.swap(false, core::sync::atomic::Ordering::Relaxed) {
             // SAFETY: thread mode; `start` is a few register writes.
             let done = unsafe { REAL_TIME.with_step_masked(|rt| rt.io.adc.start()) };
             if done.is_some() {

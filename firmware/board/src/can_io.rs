@@ -4,7 +4,7 @@
 //! frames dropped and counted, bus-off counted in the FDCAN interrupt, recovery with backoff.
 
 use core::num::{NonZeroU8, NonZeroU16};
-use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use core::sync::atomic::Ordering;
 
 use defmt::{info, unwrap, warn};
 use embassy_stm32::can::config::{GlobalFilter, NominalBitTiming as EmbassyTiming, TxBufferMode};
@@ -20,12 +20,9 @@ use hils_rig_core::can_timing::{BitTimingLimits, NominalBitTiming, nominal_bit_t
 use hils_rig_core::can_tx::{QueuedFrame, TxSlots, frame_ticks, is_stale_behind};
 
 use crate::clock::HSE_HZ;
-use crate::step::{BUS_STATE, CAN_RX, CAN_TX, CAN_TX_DROPS, STEP_TICKS};
-
-/// Entries into bus-off seen by the FDCAN interrupt since power-up (wrapping).
-pub static BUS_OFF_IRQS: AtomicU32 = AtomicU32::new(0);
-/// The step's `ClearFaults` asks the bus supervision to clear its sticky bus-off.
-pub static BUS_CLEAR: AtomicBool = AtomicBool::new(false);
+use crate::shared::{
+    BUS_CLEAR, BUS_OFF_IRQS, BUS_STATE, CAN_RX, CAN_TX, CAN_TX_DROPS, STEP_TICKS, THREAD_HEARTBEAT,
+};
 
 /// Counts bus-off entries as they happen (RM0440 FDCAN `IR.BO`: bus-off status changed,
 /// routed to IT0 by embassy with `IE.BOE`): an episode shorter than the bus task's 10 ms
@@ -224,7 +221,7 @@ pub async fn bus_task(props: Properties) {
     loop {
         ticker.next().await;
         // Thread mode is alive: the step keeps feeding the watchdog.
-        crate::step::THREAD_HEARTBEAT.store(STEP_TICKS.load(Ordering::Relaxed), Ordering::Relaxed);
+        THREAD_HEARTBEAT.store(STEP_TICKS.load(Ordering::Relaxed), Ordering::Relaxed);
         let mode = match props.bus_error_mode() {
             can::enums::BusErrorMode::ErrorActive => BusMode::ErrorActive,
             can::enums::BusErrorMode::ErrorPassive => BusMode::ErrorPassive,

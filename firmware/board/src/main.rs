@@ -31,6 +31,7 @@ mod clock;
 mod fault;
 mod handoff;
 mod pulse;
+mod shared;
 #[cfg(not(feature = "bringup"))]
 mod sim_store;
 mod step;

@@ -2,7 +2,7 @@
 //! from CCM SRAM, owning the rig and its peripherals (handed over once from `main`), talking
 //! to the tasks only through ceiling-locked queues and atomics, feeding the watchdog.
 
-use core::sync::atomic::{AtomicBool, AtomicU8, AtomicU32, Ordering};
+use core::sync::atomic::Ordering;
 
 #[cfg(not(feature = "bringup"))]
 use crate::sim_store::BoardSim;
@@ -14,19 +14,23 @@ use embassy_stm32::interrupt::{self};
 use embassy_stm32::pac;
 use embassy_stm32::peripherals::{ADC1, IWDG, TIM1, TIM4, TIM8, TIM20};
 use embassy_stm32::wdg::IndependentWatchdog;
-use hils_rig_core::can::Command;
 use hils_rig_core::can_tx::QueuedFrame;
 use hils_rig_core::heartbeat::thread_alive;
 use hils_rig_core::hw::{RigIo, TelemetryEvent};
 use hils_rig_core::pulse::PulseRegisters;
 #[cfg(not(feature = "bringup"))]
-use hils_rig_core::rig::{Built, StartRequest};
-use hils_rig_core::rig::{CommandError, Rig, SimStore};
+use hils_rig_core::rig::CommandError;
+use hils_rig_core::rig::{Rig, SimStore};
 use hils_rig_core::sensor::ADC_SEQUENCE_LEN;
 
-use crate::ceiling::StepChannel;
 use crate::handoff::Handoff;
 use crate::pulse::PulseOut;
+use crate::shared::{
+    ADC_STOPPED, BUS_CLEAR, BUS_STATE, CAN_RX, CAN_TX, CAN_TX_DROPS, LOCAL_CMD, RIG_STATE,
+    STEP_EVENTS, STEP_TICKS, StepEvent, TELEMETRY, TELEMETRY_DROPS, THREAD_HEARTBEAT,
+};
+#[cfg(not(feature = "bringup"))]
+use crate::shared::{BUILT, START_REQUESTS};
 
 /// CPU and timer clock, Hz.
 pub const CPU_HZ: u32 = crate::clock::SYSCLK_HZ;
@@ -34,56 +38,6 @@ pub const CPU_HZ: u32 = crate::clock::SYSCLK_HZ;
 pub const STEP_COUNTS: u16 = (CPU_HZ / hils_rig_core::STEP_RATE_HZ) as u16;
 /// Watchdog timeout, us: 100 steps. LSI 32 kHz nominal, /4, reload 79 (embassy wdg).
 pub const WATCHDOG_TIMEOUT_US: u32 = 10_000;
-
-/// Frames from the step to the CAN transmit task, with the tick they were made at.
-pub static CAN_TX: StepChannel<QueuedFrame<Frame>, 32> = StepChannel::new();
-/// `RIG_COMMAND` frames received, for the step.
-pub static CAN_RX: StepChannel<Frame, 8> = StepChannel::new();
-/// Local commands (user button, autostart), for the step.
-pub static LOCAL_CMD: StepChannel<Command, 2> = StepChannel::new();
-/// Runs the step requested, for the builder task (thread mode). Not in the bring-up image
-/// (it builds its one run in thread mode before timing it).
-#[cfg(not(feature = "bringup"))]
-pub static START_REQUESTS: StepChannel<StartRequest, 1> = StepChannel::new();
-/// The builder's word that it built a run in the rig's store (`crate::sim_store`), or why
-/// not: a few bytes, the simulation itself is not moved.
-#[cfg(not(feature = "bringup"))]
-pub static BUILT: Handoff<Built<()>, 1> = Handoff::new();
-/// Telemetry events from the step to the logging task.
-pub static TELEMETRY: StepChannel<TelemetryEvent, 16> = StepChannel::new();
-/// What the step has to say, for a task to log (the step never logs).
-pub static STEP_EVENTS: StepChannel<StepEvent, 8> = StepChannel::new();
-
-/// Step ticks since the step started (0.1 ms, wrapping); written by the step only.
-pub static STEP_TICKS: AtomicU32 = AtomicU32::new(0);
-/// Bus state for the step: bit 0 error passive, bit 1 bus-off (now or seen); bits 8.. count.
-pub static BUS_STATE: AtomicU32 = AtomicU32::new(0);
-/// Rig state for the LED task.
-pub static RIG_STATE: AtomicU8 = AtomicU8::new(0);
-/// Frames dropped after they left the step's queue (stale, or cancelled in the controller).
-pub static CAN_TX_DROPS: AtomicU32 = AtomicU32::new(0);
-/// Telemetry events the RTT channel could not take.
-pub static TELEMETRY_DROPS: AtomicU32 = AtomicU32::new(0);
-/// Thread mode's heartbeat: the step tick at the bus task's last 10 ms poll. The step
-/// feeds the watchdog only while it is fresh (`hils_rig_core::heartbeat`).
-pub static THREAD_HEARTBEAT: AtomicU32 = AtomicU32::new(0);
-/// The step found the ADC's DMA stopped (it does not restart it: the ADC task does).
-pub static ADC_STOPPED: AtomicBool = AtomicBool::new(false);
-
-/// Something the step reports to the log.
-#[derive(Clone, Copy, Debug, defmt::Format)]
-pub enum StepEvent {
-    CommandRejected(CommandError),
-    LocalCommandRejected(CommandError),
-    /// A requested run could not start (the build failed).
-    StartFailed(CommandError),
-    /// A build came back for a start request no longer pending (stopped, or superseded
-    /// by a later `Start`): not installed; with the rig's count of such builds.
-    StaleBuild {
-        seq: u32,
-        count: u32,
-    },
-}
 
 /// The peripherals the step uses.
 pub struct BoardIo {
@@ -216,7 +170,7 @@ fn step_tick() {
     #[cfg(not(feature = "bringup"))]
     hand_over_runs(&mut rt.rig);
     if rt.rig.take_bus_clear() {
-        crate::can_io::BUS_CLEAR.store(true, Ordering::Relaxed);
+        BUS_CLEAR.store(true, Ordering::Relaxed);
     }
     let bus = BUS_STATE.load(Ordering::Relaxed);
     rt.rig.set_bus(bus & 1 != 0, bus & 2 != 0, bus >> 8);

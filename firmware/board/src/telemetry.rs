@@ -13,7 +13,7 @@ use core::sync::atomic::{AtomicU32, Ordering};
 
 use hils_rig_core::log_gate::{LogGate, ring_free_bytes};
 
-use crate::step::{STEP_EVENTS, TELEMETRY, TELEMETRY_DROPS};
+use crate::shared::{STEP_EVENTS, TELEMETRY, TELEMETRY_DROPS};
 
 /// Room a record needs before it has been measured: a `tlm1` record is 160 bytes before
 /// rzCOBS framing (index, 64-bit timestamp, 41 values), at most ~185 after.

@@ -369,16 +369,16 @@ pub struct BrakeUnit<F: Real> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct UnitOutputs<F> {
     /// Brake cylinder pressure of each wheelset, Pa (the input of paper Eq (1)).
-    pub cylinder_pressure: [F; WHEELSETS],
+    pub cylinder_pressure_pa: [F; WHEELSETS],
     /// Valve commands of the WSP. The valve acts at once; the cylinder feels it after
     /// the pneumatic dead time.
     pub valves: [Valve; WHEELSETS],
     /// True while a wheelset's WSP valve vents (the `wsp1..4` column of a run log).
     pub venting: [bool; WHEELSETS],
     /// The WSP's reference (vehicle) speed estimate, m/s.
-    pub reference_speed: F,
+    pub reference_speed_mps: F,
     /// Cylinder pressure the brake demand asks for (before the WSP), Pa.
-    pub demand_pressure: F,
+    pub demand_pressure_pa: F,
 }
 
 impl<F: Real> BrakeUnit<F> {
@@ -531,11 +531,11 @@ impl<F: Real> BrakeUnit<F> {
             self.step_in_cycle = 0;
         }
         let mut out = UnitOutputs {
-            cylinder_pressure: [F::ZERO; WHEELSETS],
+            cylinder_pressure_pa: [F::ZERO; WHEELSETS],
             valves: [Valve::Apply; WHEELSETS],
             venting: [false; WHEELSETS],
-            reference_speed: self.reference.speed,
-            demand_pressure: self.acting_pressure,
+            reference_speed_mps: self.reference.speed,
+            demand_pressure_pa: self.acting_pressure,
         };
         for j in 0..WHEELSETS {
             let c = &mut self.cylinders[j];
@@ -574,7 +574,7 @@ impl<F: Real> BrakeUnit<F> {
                     c.approach(F::ZERO, self.vent_gain);
                 }
             }
-            out.cylinder_pressure[j] = c.pressure;
+            out.cylinder_pressure_pa[j] = c.pressure;
             out.valves[j] = self.channels[j].valve;
             out.venting[j] = self.channels[j].valve == Valve::Vent;
         }

@@ -4,27 +4,27 @@
 //!
 //! **Reference speed.** The unit sees only wheel speeds v_j = r omega_j (as from axle speed
 //! sensors). The vehicle reference speed v_ref follows the fastest wheel, but may fall no
-//! faster than [`WspTuning::ref_max_decel`] (a wheel that slides cannot drag it down)
+//! faster than [`WspTuning::ref_max_decel_mps2`] (a wheel that slides cannot drag it down)
 //! and rises at once when a wheel runs faster (a recovered wheel shows the true speed).
 //!
 //! **Slide detection.** For each wheel:
-//! * speed deficit dv = v_ref - v_j, threshold dv_th = max(`deficit_min`,
+//! * speed deficit dv = v_ref - v_j, threshold dv_th = max(`deficit_min_mps`,
 //!   `deficit_ratio` v_ref);
 //! * wheel deceleration relative to the reference, a_rel = dv_j/dt - dv_ref/dt, from a
 //!   first-order filtered derivative.
 //! A wheel slides when dv > dv_th, or when dv > dv_th / 2 and it decelerates faster than
-//! the reference by more than `decel_threshold` (early detection of a runaway).
+//! the reference by more than `decel_threshold_mps2` (early detection of a runaway).
 //!
 //! **Valve states** (one dump valve per wheelset):
 //! * `Apply`: the cylinder follows the brake demand. Slide detected -> `Vent`.
 //! * `Vent`: the cylinder vents. When the wheel speeds up clearly (its own acceleration
-//!   a_j > `recover_accel`, i.e. the vented torque is well below the adhesion torque) and
+//!   a_j > `recover_accel_mps2`, i.e. the vented torque is well below the adhesion torque) and
 //!   is no longer locked -> `Hold`.
 //! * `Hold`: the cylinder pressure is held while the wheel spins back up to the vehicle
 //!   speed. Runaway again or locked -> `Vent`. Once the wheel has stopped speeding up
-//!   (a_j < `caught_up_accel`): dv below `reapply_ratio` dv_th -> `Apply`; dv still above
+//!   (a_j < `caught_up_accel_mps2`): dv below `reapply_ratio` dv_th -> `Apply`; dv still above
 //!   dv_th -> `Vent` (the held pressure is too high to recover). Held longer than
-//!   `hold_max` -> `Apply`.
+//!   `hold_max_s` -> `Apply`.
 //! The recovery thresholds use the wheel's own acceleration, not the deficit to the
 //! reference: when every wheel slides the reference is itself too low, and only a wheel
 //! that has spun back up to the rail speed can correct it.
@@ -36,10 +36,10 @@
 //! vents (no hold), so lock ends as soon as the vented pressure lets the adhesion spin it
 //! up: with the reference brake unit (dead time 50 ms, vent lag 150 ms) a lock lasts well
 //! under 0.4 s (the tests measure it). Continuous WSP action (vent and hold together: the
-//! brake not applied) is limited to `vent_max` (EN 15595's WSP timer): after it the valve
-//! returns to `Apply` and the channel may not act for `hold_max`, so that a faulty WSP
+//! brake not applied) is limited to `vent_max_s` (EN 15595's WSP timer): after it the valve
+//! returns to `Apply` and the channel may not act for `hold_max_s`, so that a faulty WSP
 //! cannot release a brake indefinitely, not even by cycling vent and hold. Below
-//! `min_speed` the WSP is inhibited (`Apply`).
+//! `min_speed_mps` the WSP is inhibited (`Apply`).
 
 use hils_plant::Real;
 
@@ -70,96 +70,102 @@ impl Valve {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct WspTuning {
     /// Smallest speed-deficit threshold, m/s.
-    pub deficit_min: f64,
+    pub deficit_min_mps: f64,
     /// Speed-deficit threshold as a share of the reference speed.
     pub deficit_ratio: f64,
     /// Reapply when the deficit falls below this share of the threshold.
     pub reapply_ratio: f64,
     /// Wheel deceleration beyond the reference that counts as a runaway, m/s^2.
-    pub decel_threshold: f64,
+    pub decel_threshold_mps2: f64,
     /// Wheel acceleration that ends venting, m/s^2.
-    pub recover_accel: f64,
+    pub recover_accel_mps2: f64,
     /// Wheel acceleration below which a held wheel has caught up, m/s^2.
-    pub caught_up_accel: f64,
+    pub caught_up_accel_mps2: f64,
     /// A wheel below this share of the reference speed is locked.
     pub lock_ratio: f64,
     /// Longest continuous WSP action (vent and hold), s (EN 15595 WSP timer).
-    pub vent_max: f64,
+    pub vent_max_s: f64,
     /// Longest hold, s.
-    pub hold_max: f64,
+    pub hold_max_s: f64,
     /// WSP inhibited below this reference speed, m/s.
-    pub min_speed: f64,
+    pub min_speed_mps: f64,
     /// Largest fall rate of the reference speed, m/s^2.
-    pub ref_max_decel: f64,
+    pub ref_max_decel_mps2: f64,
     /// Time constant of the wheel-deceleration filter, s.
-    pub accel_filter: f64,
+    pub accel_filter_s: f64,
 }
 
 impl Default for WspTuning {
     fn default() -> Self {
         Self {
-            deficit_min: 0.8,
+            deficit_min_mps: 0.8,
             deficit_ratio: 0.06,
             reapply_ratio: 0.5,
-            decel_threshold: 2.5,
-            recover_accel: 1.5,
-            caught_up_accel: 0.0,
+            decel_threshold_mps2: 2.5,
+            recover_accel_mps2: 1.5,
+            caught_up_accel_mps2: 0.0,
             lock_ratio: 0.5,
-            vent_max: 3.0,
-            hold_max: 1.0,
-            min_speed: 1.4,
-            ref_max_decel: 2.0,
-            accel_filter: 0.01,
+            vent_max_s: 3.0,
+            hold_max_s: 1.0,
+            min_speed_mps: 1.4,
+            ref_max_decel_mps2: 2.0,
+            accel_filter_s: 0.01,
         }
     }
 }
 
 impl WspTuning {
     /// Checks every value against its physical range (NaN and inf are out of range); the
-    /// error names the field (`wsp.<field>`).
+    /// error names the value by its key, `wsp.` and the field's name without its unit
+    /// (`wsp.vent_max` for [`WspTuning::vent_max_s`]).
     pub fn validate(&self) -> Result<(), hils_plant::ParamError> {
         use hils_plant::params::check;
-        check("wsp.deficit_min", self.deficit_min, 0.0, 10.0)?;
+        check("wsp.deficit_min", self.deficit_min_mps, 0.0, 10.0)?;
         check("wsp.deficit_ratio", self.deficit_ratio, 0.0, 1.0)?;
         check("wsp.reapply_ratio", self.reapply_ratio, 0.0, 1.0)?;
-        check("wsp.decel_threshold", self.decel_threshold, 0.0, 50.0)?;
-        check("wsp.recover_accel", self.recover_accel, -50.0, 50.0)?;
-        check("wsp.caught_up_accel", self.caught_up_accel, -50.0, 50.0)?;
+        check("wsp.decel_threshold", self.decel_threshold_mps2, 0.0, 50.0)?;
+        check("wsp.recover_accel", self.recover_accel_mps2, -50.0, 50.0)?;
+        check(
+            "wsp.caught_up_accel",
+            self.caught_up_accel_mps2,
+            -50.0,
+            50.0,
+        )?;
         check("wsp.lock_ratio", self.lock_ratio, 0.0, 1.0)?;
-        check("wsp.vent_max", self.vent_max, 0.0, 60.0)?;
-        check("wsp.hold_max", self.hold_max, 0.0, 60.0)?;
-        check("wsp.min_speed", self.min_speed, 0.0, 20.0)?;
-        check("wsp.ref_max_decel", self.ref_max_decel, 0.0, 50.0)?;
-        check("wsp.accel_filter", self.accel_filter, 0.0, 10.0)
+        check("wsp.vent_max", self.vent_max_s, 0.0, 60.0)?;
+        check("wsp.hold_max", self.hold_max_s, 0.0, 60.0)?;
+        check("wsp.min_speed", self.min_speed_mps, 0.0, 20.0)?;
+        check("wsp.ref_max_decel", self.ref_max_decel_mps2, 0.0, 50.0)?;
+        check("wsp.accel_filter", self.accel_filter_s, 0.0, 10.0)
     }
 }
 
 /// Precomputed tuning in the unit's float type, for a control period `dt`.
 #[derive(Clone, Copy, Debug)]
 pub struct WspConstants<F> {
-    /// [`WspTuning::deficit_min`], m/s.
-    pub deficit_min: F,
+    /// [`WspTuning::deficit_min_mps`], m/s.
+    pub deficit_min_mps: F,
     /// [`WspTuning::deficit_ratio`] (share of the reference speed).
     pub deficit_ratio: F,
     /// [`WspTuning::reapply_ratio`] (share of the deficit threshold).
     pub reapply_ratio: F,
-    /// [`WspTuning::decel_threshold`], m/s^2.
-    pub decel_threshold: F,
-    /// [`WspTuning::recover_accel`], m/s^2.
-    pub recover_accel: F,
-    /// [`WspTuning::caught_up_accel`], m/s^2.
-    pub caught_up_accel: F,
+    /// [`WspTuning::decel_threshold_mps2`], m/s^2.
+    pub decel_threshold_mps2: F,
+    /// [`WspTuning::recover_accel_mps2`], m/s^2.
+    pub recover_accel_mps2: F,
+    /// [`WspTuning::caught_up_accel_mps2`], m/s^2.
+    pub caught_up_accel_mps2: F,
     /// [`WspTuning::lock_ratio`] (share of the reference speed).
     pub lock_ratio: F,
-    /// [`WspTuning::vent_max`] in control periods (rounded).
+    /// [`WspTuning::vent_max_s`] in control periods (rounded).
     pub vent_max_cycles: u32,
-    /// [`WspTuning::hold_max`] in control periods (rounded).
+    /// [`WspTuning::hold_max_s`] in control periods (rounded).
     pub hold_max_cycles: u32,
-    /// [`WspTuning::min_speed`], m/s.
-    pub min_speed: F,
+    /// [`WspTuning::min_speed_mps`], m/s.
+    pub min_speed_mps: F,
     /// Largest fall of the reference speed in one control period, m/s
-    /// ([`WspTuning::ref_max_decel`] x dt).
-    pub ref_fall_per_cycle: F,
+    /// ([`WspTuning::ref_max_decel_mps2`] x dt).
+    pub ref_fall_per_cycle_mps: F,
     /// 1 / dt, 1/s (the control period's rate).
     pub inv_dt: F,
     /// Filter gain dt / (tau + dt).
@@ -171,19 +177,19 @@ impl<F: Real> WspConstants<F> {
     pub fn new(t: &WspTuning, dt: f64) -> Self {
         let cycles = |s: f64| (s / dt + 0.5) as u32;
         Self {
-            deficit_min: F::of(t.deficit_min),
+            deficit_min_mps: F::of(t.deficit_min_mps),
             deficit_ratio: F::of(t.deficit_ratio),
             reapply_ratio: F::of(t.reapply_ratio),
-            decel_threshold: F::of(t.decel_threshold),
-            recover_accel: F::of(t.recover_accel),
-            caught_up_accel: F::of(t.caught_up_accel),
+            decel_threshold_mps2: F::of(t.decel_threshold_mps2),
+            recover_accel_mps2: F::of(t.recover_accel_mps2),
+            caught_up_accel_mps2: F::of(t.caught_up_accel_mps2),
             lock_ratio: F::of(t.lock_ratio),
-            vent_max_cycles: cycles(t.vent_max),
-            hold_max_cycles: cycles(t.hold_max),
-            min_speed: F::of(t.min_speed),
-            ref_fall_per_cycle: F::of(t.ref_max_decel * dt),
+            vent_max_cycles: cycles(t.vent_max_s),
+            hold_max_cycles: cycles(t.hold_max_s),
+            min_speed_mps: F::of(t.min_speed_mps),
+            ref_fall_per_cycle_mps: F::of(t.ref_max_decel_mps2 * dt),
             inv_dt: F::of(1.0 / dt),
-            accel_gain: F::of(dt / (t.accel_filter + dt)),
+            accel_gain: F::of(dt / (t.accel_filter_s + dt)),
         }
     }
 }
@@ -201,7 +207,7 @@ pub struct ReferenceSpeed<F> {
 
 impl<F: Real> ReferenceSpeed<F> {
     /// One control period: the fastest wheel speed (m/s), limited to a fall of
-    /// `ref_fall_per_cycle`, and the filtered rate of the fall.
+    /// `ref_fall_per_cycle_mps`, and the filtered rate of the fall.
     pub fn update(&mut self, k: &WspConstants<F>, wheel_speeds: &[F; 4]) {
         let fastest = wheel_speeds.iter().fold(F::ZERO, |m, &v| m.max(v));
         if !self.initialised {
@@ -210,7 +216,7 @@ impl<F: Real> ReferenceSpeed<F> {
             return;
         }
         let previous = self.speed;
-        let floor = previous - k.ref_fall_per_cycle;
+        let floor = previous - k.ref_fall_per_cycle_mps;
         self.speed = fastest.max(floor).max(F::ZERO);
         // Only the fall of the reference is a vehicle deceleration. A rise re-anchors the
         // estimate to a wheel that has spun back up to the rail speed (issue 13: when
@@ -253,20 +259,20 @@ impl<F: Real> WspChannel<F> {
 
         let v_ref = reference.speed;
         let deficit = v_ref - v;
-        let threshold = k.deficit_min.max(k.deficit_ratio * v_ref);
+        let threshold = k.deficit_min_mps.max(k.deficit_ratio * v_ref);
         let half = F::of(0.5) * threshold;
         let rel_accel = self.accel - reference.accel;
-        let runaway = deficit > half && rel_accel < -k.decel_threshold;
+        let runaway = deficit > half && rel_accel < -k.decel_threshold_mps2;
         let slide = deficit > threshold || runaway;
         let locked = v < k.lock_ratio * v_ref;
 
-        let next = if !(v_ref > k.min_speed) || self.inhibit_cycles > 0 {
+        let next = if !(v_ref > k.min_speed_mps) || self.inhibit_cycles > 0 {
             self.inhibit_cycles = self.inhibit_cycles.saturating_sub(1);
             Valve::Apply
         } else if self.valve != Valve::Apply && self.released_cycles >= k.vent_max_cycles {
-            // WSP timer: vent and hold together have kept the brake off for `vent_max`
+            // WSP timer: vent and hold together have kept the brake off for `vent_max_s`
             // (a Vent -> Hold -> Vent cycle does not restart it). Give the brake back and do
-            // not act again for `hold_max`, so a slide that never clears cannot keep the
+            // not act again for `hold_max_s`, so a slide that never clears cannot keep the
             // brake off.
             self.inhibit_cycles = k.hold_max_cycles;
             Valve::Apply
@@ -280,7 +286,7 @@ impl<F: Real> WspChannel<F> {
                     }
                 }
                 Valve::Vent => {
-                    if self.accel > k.recover_accel && !locked {
+                    if self.accel > k.recover_accel_mps2 && !locked {
                         Valve::Hold
                     } else {
                         Valve::Vent
@@ -291,7 +297,7 @@ impl<F: Real> WspChannel<F> {
                         Valve::Vent
                     } else if self.cycles_in_state >= k.hold_max_cycles {
                         Valve::Apply
-                    } else if self.accel < k.caught_up_accel {
+                    } else if self.accel < k.caught_up_accel_mps2 {
                         if deficit < k.reapply_ratio * threshold {
                             Valve::Apply
                         } else if deficit > threshold {

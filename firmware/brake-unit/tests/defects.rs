@@ -28,7 +28,7 @@ fn another_wheels_recovery_does_not_vent_a_normally_braking_wheel() {
         };
         let speeds = [v - creep, v - creep, v - creep, w4].map(|x| x as f32);
         let out = unit.step(&speeds);
-        max_ref_rise = max_ref_rise.max(out.reference_speed as f64 - (v - creep));
+        max_ref_rise = max_ref_rise.max(out.reference_speed_mps as f64 - (v - creep));
         for j in 0..3 {
             vented[j] |= out.valves[j] == Valve::Vent;
         }
@@ -50,7 +50,7 @@ fn cylinder_pressure_reaches_the_demand_in_f32() {
     let speeds = [40.0f32; 4];
     let mut pressure = 0.0f32;
     for _ in 0..100_000 {
-        pressure = unit.step(&speeds).cylinder_pressure[0];
+        pressure = unit.step(&speeds).cylinder_pressure_pa[0];
     }
     let gap = (target - pressure).abs();
     assert!(
@@ -62,8 +62,8 @@ fn cylinder_pressure_reaches_the_demand_in_f32() {
 /// Review of issue 13: the WSP timer counted only one continuous vent, so a channel that
 /// cycles Vent -> Hold -> Vent (a wheel that spins up, then locks again) kept the brake off
 /// indefinitely. The timer exists so that WSP action, vent or hold, cannot release the
-/// brake for longer than `vent_max`: after it the channel applies and stays applied for
-/// `hold_max`.
+/// brake for longer than `vent_max_s`: after it the channel applies and stays applied for
+/// `hold_max_s`.
 #[test]
 fn vent_hold_cycles_cannot_keep_the_brake_off_past_the_wsp_timer() {
     use hils_brake_unit::wsp::{ReferenceSpeed, WspChannel, WspConstants};
@@ -95,13 +95,13 @@ fn vent_hold_cycles_cannot_keep_the_brake_off_past_the_wsp_timer() {
     }
     // The channel does cycle vent and hold (the case of the defect) ...
     assert!(states[1] > 1000 && states[2] > 100, "{states:?}");
-    // ... and the timer gives the brake back vent_max after the first action.
+    // ... and the timer gives the brake back vent_max_s after the first action.
     let (start, apply) = (
         first_action.unwrap(),
         first_apply_after.expect("never applied"),
     );
     assert!(
-        (apply - start - tuning.vent_max).abs() < 2.0 * dt,
+        (apply - start - tuning.vent_max_s).abs() < 2.0 * dt,
         "applied {apply} s after action from {start} s"
     );
 }

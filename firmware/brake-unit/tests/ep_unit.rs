@@ -60,7 +60,7 @@ fn service_steps_scale_the_pressure() {
         unit.set_demand(BrakeDemand::ServiceStep { step });
         let mut pressure = 0.0;
         for _ in 0..60_000 {
-            pressure = unit.step(&speeds).cylinder_pressure[0];
+            pressure = unit.step(&speeds).cylinder_pressure_pa[0];
         }
         at.push(pressure);
     }
@@ -95,7 +95,7 @@ fn wsp_reapplies_in_pulses() {
             v
         };
         let out = unit.step(&[v, v, v, w4]);
-        trace.push(out.cylinder_pressure[3]);
+        trace.push(out.cylinder_pressure_pa[3]);
         valves.push(out.valves[3]);
     }
     let last_wsp = valves

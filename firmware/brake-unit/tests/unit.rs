@@ -15,7 +15,7 @@ fn cylinder_follows_the_demand_after_the_dead_time_with_the_fill_lag() {
     let p_eb = unit.eb_pressure();
     let mut trace = Vec::new();
     for _ in 0..20_000 {
-        trace.push(unit.step(&speeds).cylinder_pressure[0]);
+        trace.push(unit.step(&speeds).cylinder_pressure_pa[0]);
     }
     // Nothing during the 50 ms dead time (+ up to one 1 ms control cycle).
     assert_eq!(trace[490], 0.0);
@@ -34,10 +34,10 @@ fn cylinder_follows_the_demand_after_the_dead_time_with_the_fill_lag() {
     }
     // Release: exhaust with the vent lag (0.15 s) after the dead time.
     unit.set_demand(BrakeDemand::Release);
-    let start = unit.step(&speeds).cylinder_pressure[0];
+    let start = unit.step(&speeds).cylinder_pressure_pa[0];
     let mut last = start;
     for _ in 0..(500 + 1500) {
-        last = unit.step(&speeds).cylinder_pressure[0];
+        last = unit.step(&speeds).cylinder_pressure_pa[0];
     }
     let ratio = last / start;
     assert!((ratio - (-1.0f64).exp()).abs() < 0.03, "{ratio}");
@@ -68,19 +68,19 @@ fn wsp_vents_holds_and_reapplies_a_sliding_wheel() {
         if states.last() != Some(&valve) {
             states.push(valve);
             if valve == Valve::Vent {
-                pressure_at_vent = Some(out.cylinder_pressure[3]);
+                pressure_at_vent = Some(out.cylinder_pressure_pa[3]);
             }
         }
         assert_eq!(out.valves[0], Valve::Apply);
         // The reference speed follows the true speed (wheels 1-3) during the slide.
         assert!(
-            (out.reference_speed - v).abs() < 0.05,
+            (out.reference_speed_mps - v).abs() < 0.05,
             "{} vs {v}",
-            out.reference_speed
+            out.reference_speed_mps
         );
         if t > 3.6 && t < 3.7 {
             // Vented after the dead time: pressure well below EB.
-            assert!(out.cylinder_pressure[3] < 0.8 * pressure_at_vent.unwrap());
+            assert!(out.cylinder_pressure_pa[3] < 0.8 * pressure_at_vent.unwrap());
         }
     }
     assert_eq!(
@@ -99,7 +99,7 @@ fn wsp_vents_holds_and_reapplies_a_sliding_wheel() {
 fn wsp_timer_gives_the_brake_back() {
     let mut unit = common::emergency_unit::<f64>();
     // Wheel 4 reads standstill while the vehicle runs (a locked wheel that never recovers,
-    // or a dead sensor): the valve may not vent longer than vent_max (3 s), then it applies.
+    // or a dead sensor): the valve may not vent longer than vent_max_s (3 s), then it applies.
     let mut longest_vent = 0usize;
     let mut run = 0usize;
     let mut applied_after_vent = false;

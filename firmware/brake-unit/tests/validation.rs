@@ -18,12 +18,17 @@ fn key_of(e: UnitError) -> &'static str {
     }
 }
 
-/// `(key, field)` rows of WSP values: the file's key is `wsp.` and the field's name.
+/// The WSP tuning's fields, as accessors, in the order of [`WSP_KEYS`].
 macro_rules! wsp_fields {
     ($($field:ident),* $(,)?) => {
-        [$((concat!("wsp.", stringify!($field)), |c| &mut c.wsp.$field)),*]
+        [$(|c: &mut UnitConfig| &mut c.wsp.$field),*]
     };
 }
+
+/// The keys the errors name, written out (not made from the field names, which carry units).
+const WSP_KEYS: &str = "wsp.deficit_min wsp.deficit_ratio wsp.reapply_ratio \
+    wsp.decel_threshold wsp.recover_accel wsp.caught_up_accel wsp.lock_ratio wsp.vent_max \
+    wsp.hold_max wsp.min_speed wsp.ref_max_decel wsp.accel_filter";
 
 #[test]
 fn every_brake_unit_and_wsp_value_is_checked() {
@@ -42,11 +47,14 @@ fn every_brake_unit_and_wsp_value_is_checked() {
         }),
         ("brake_unit.dead_time", |c| &mut c.params.dead_time_s),
     ];
-    let wsp: [Field; 12] = wsp_fields! {
-        deficit_min, deficit_ratio, reapply_ratio, decel_threshold, recover_accel,
-        caught_up_accel, lock_ratio, vent_max, hold_max, min_speed, ref_max_decel, accel_filter,
+    let wsp: [fn(&mut UnitConfig) -> &mut f64; 12] = wsp_fields! {
+        deficit_min_mps, deficit_ratio, reapply_ratio, decel_threshold_mps2, recover_accel_mps2,
+        caught_up_accel_mps2, lock_ratio, vent_max_s, hold_max_s, min_speed_mps,
+        ref_max_decel_mps2, accel_filter_s,
     };
-    let fields = brake_unit.into_iter().chain(wsp);
+    let wsp_keys: Vec<&str> = WSP_KEYS.split_whitespace().collect();
+    assert_eq!(wsp_keys.len(), wsp.len());
+    let fields = brake_unit.into_iter().chain(wsp_keys.into_iter().zip(wsp));
     assert!(build(&p, &UnitConfig::new(1e-4)).is_ok());
     for (key, field) in fields {
         for bad in BAD {

@@ -396,41 +396,134 @@ mod emulator {
         }
     }
 
+    /// The plant's sub-models timed on their own with each step's values: contact
+    /// (Polach Eqs 9-12), disc-pad friction (Eq 2) and disc heat (Eqs 3-6), for the four
+    /// wheelsets, with the step's trackers replayed and the harness baselines subtracted.
+    struct SubModels {
+        fr: DiscPadFriction<f32>,
+        th: DiscThermal<f32>,
+        polach: hils_plant::contact::Polach<f32>,
+        friction_radius: f32,
+        wheel_radius: f32,
+        /// Harness cost of four and of one trivial call.
+        baseline: u32,
+        baseline_one: u32,
+        /// The step's trackers of e^(-B|w|) and e^(-m_v v_d), replayed from the same
+        /// arguments (the measurements follow the step's anchors).
+        rail_decay: [TrackedExp<f32>; WHEELSETS],
+        speed_decay: [TrackedExp<f32>; WHEELSETS],
+    }
+
+    impl SubModels {
+        fn new(timer: &Timer, file: &ParamFile, sc: &EbScenario<f32>) -> Self {
+            let params = &file.plant;
+            let fr = DiscPadFriction::<f32>::new(&params.friction);
+            let friction_radius = params.brake.friction_radius as f32;
+            let zero = [[0.5f32, 20.0, 1.0e5]; WHEELSETS];
+            let baseline = (0..8)
+                .map(|_| four(timer, &zero, trivial))
+                .min()
+                .unwrap_or(0);
+            let baseline_one = (0..8)
+                .map(|_| one(timer, &[zero[0]], trivial))
+                .min()
+                .unwrap_or(0);
+            let v_d0 = sc.sim.outputs().wheelsets[0].omega * friction_radius;
+            Self {
+                speed_decay: [fr.speed_decay_at(v_d0); WHEELSETS],
+                fr,
+                th: DiscThermal::<f32>::new(&params.thermal),
+                polach: *sc.sim.plant.polach(),
+                friction_radius,
+                wheel_radius: params.vehicle.wheel_radius as f32,
+                baseline,
+                baseline_one,
+                rail_decay: [TrackedExp::<f32>::default(); WHEELSETS],
+            }
+        }
+
+        /// Instructions of contact, friction and thermal in the step from `prev` to `cur`.
+        fn costs(
+            &mut self,
+            timer: &Timer,
+            prev: &hils_plant::Outputs<f32>,
+            cur: &hils_plant::Outputs<f32>,
+        ) -> [u32; 3] {
+            let (fr, th, polach) = (&self.fr, &self.th, &self.polach);
+            let (friction_radius, r) = (self.friction_radius, self.wheel_radius);
+            let (baseline, baseline_one) = (self.baseline, self.baseline_one);
+            let w = |o: &hils_plant::Outputs<f32>, j: usize| o.wheelsets[j];
+            let contact_args = [0, 1, 2, 3].map(|j| {
+                [
+                    w(prev, j).slip_velocity,
+                    w(prev, j).speed,
+                    w(cur, j).axle_load,
+                ]
+            });
+            // Friction and heat as the step computes them: Eq (2) with the temperature
+            // bracket and Eq (5) with the loss coefficient, one of which the step refreshes
+            // for one wheelset (`slow`) in an 8-step turn, plus that refresh.
+            let turn = prev.steps % (2 * WHEELSETS as u32);
+            let slow = (turn % WHEELSETS as u32) as usize;
+            let friction_args = [0, 1, 2, 3].map(|j| {
+                [
+                    w(prev, j).omega * friction_radius,
+                    fr.temperature_factor(w(prev, j).disc_temp),
+                    w(cur, j).clamp_force,
+                ]
+            });
+            let thermal_args = [0, 1, 2, 3].map(|j| {
+                [
+                    w(cur, j).brake_power,
+                    w(prev, j).disc_temp,
+                    th.loss_coefficient(r * w(prev, j).omega),
+                ]
+            });
+            let refresh_args = [[w(prev, slow).disc_temp, r * w(prev, slow).omega, 0.0]; 1];
+            let contact = four_tracked(timer, &contact_args, &mut self.rail_decay, |a, d| {
+                let mu = polach.friction_tracked(a[0], d);
+                let c = polach.evaluate_with_mu(a[0], a[1], a[2], mu);
+                c.chord + c.mu + c.creepage
+            })
+            .saturating_sub(baseline);
+            let refresh_friction = turn < WHEELSETS as u32;
+            let friction = (four_tracked(timer, &friction_args, &mut self.speed_decay, |a, d| {
+                fr.mu_d_tracked(a[0], a[1], a[2], d)
+            }) + if refresh_friction {
+                one(timer, &refresh_args, |a| fr.temperature_factor(a[0]))
+            } else {
+                baseline_one
+            })
+            .saturating_sub(baseline + baseline_one);
+            let thermal = (four(timer, &thermal_args, |a| th.rate_with(a[0], a[1], a[2]))
+                + if refresh_friction {
+                    baseline_one
+                } else {
+                    one(timer, &refresh_args, |a| th.loss_coefficient(a[1]))
+                })
+            .saturating_sub(baseline + baseline_one);
+            [contact, friction, thermal]
+        }
+    }
+
+    /// The paper scenario under `friction` on the target: its trace rows (`R`), the cost of
+    /// each part of every step ([`PARTS`], `C` lines) and the end (`E`).
     fn run(host: &mut Host, timer: &Timer, friction: FrictionModel) {
         let name = friction_name(friction);
         let mut file = ParamFile::default();
         file.plant.friction.model = friction;
-        let params = &file.plant;
         let Ok(mut sc) = EbScenario::<f32>::new(&file, RECORD_EVERY) else {
             host.line(format_args!(
                 "X friction={name}: cannot build the closed loop"
             ));
             fail_exit();
         };
-        let fr = DiscPadFriction::<f32>::new(&params.friction);
-        let th = DiscThermal::<f32>::new(&params.thermal);
-        let friction_radius = params.brake.friction_radius as f32;
-        let r = params.vehicle.wheel_radius as f32;
-        let polach = *sc.sim.plant.polach();
-        let zero = [[0.5f32, 20.0, 1.0e5]; WHEELSETS];
-        let baseline = (0..8)
-            .map(|_| four(timer, &zero, trivial))
-            .min()
-            .unwrap_or(0);
-        let baseline_one = (0..8)
-            .map(|_| one(timer, &[zero[0]], trivial))
-            .min()
-            .unwrap_or(0);
-
+        let mut models = SubModels::new(timer, &file, &sc);
         host.line(format_args!(
-            "B friction={name} harness_baseline={baseline}"
+            "B friction={name} harness_baseline={}",
+            models.baseline
         ));
         host.row(&TraceRow::of(&sc.sim));
-        // The step's trackers of e^(-B|w|) and e^(-m_v v_d), replayed from the same
-        // arguments (the sub-model measurements below follow the step's anchors).
-        let v_d0 = sc.sim.outputs().wheelsets[0].omega * friction_radius;
-        let mut rail_decay = [TrackedExp::<f32>::default(); WHEELSETS];
-        let mut speed_decay = [fr.speed_decay_at(v_d0); WHEELSETS];
         let mut stats = [const { Stat::new() }; PARTS.len()];
         let mut rows = 1u32;
         loop {
@@ -446,58 +539,7 @@ mod emulator {
             });
             let step = sc.steps();
             let step_cost = replay_cost(host, timer, &sc, &mut replay);
-            let cur = sc.sim.outputs();
-            // The sub-models, with this step's per-wheelset values.
-            let w = |o: &hils_plant::Outputs<f32>, j: usize| o.wheelsets[j];
-            let contact_args = [0, 1, 2, 3].map(|j| {
-                [
-                    w(&prev, j).slip_velocity,
-                    w(&prev, j).speed,
-                    w(&cur, j).axle_load,
-                ]
-            });
-            // Friction and heat as the step computes them: Eq (2) with the temperature
-            // bracket and Eq (5) with the loss coefficient, one of which the step refreshes
-            // for one wheelset (`slow`) in an 8-step turn, plus that refresh.
-            let turn = prev.steps % (2 * WHEELSETS as u32);
-            let slow = (turn % WHEELSETS as u32) as usize;
-            let friction_args = [0, 1, 2, 3].map(|j| {
-                [
-                    w(&prev, j).omega * friction_radius,
-                    fr.temperature_factor(w(&prev, j).disc_temp),
-                    w(&cur, j).clamp_force,
-                ]
-            });
-            let thermal_args = [0, 1, 2, 3].map(|j| {
-                [
-                    w(&cur, j).brake_power,
-                    w(&prev, j).disc_temp,
-                    th.loss_coefficient(r * w(&prev, j).omega),
-                ]
-            });
-            let refresh_args = [[w(&prev, slow).disc_temp, r * w(&prev, slow).omega, 0.0]; 1];
-            let contact = four_tracked(timer, &contact_args, &mut rail_decay, |a, d| {
-                let mu = polach.friction_tracked(a[0], d);
-                let c = polach.evaluate_with_mu(a[0], a[1], a[2], mu);
-                c.chord + c.mu + c.creepage
-            })
-            .saturating_sub(baseline);
-            let refresh_friction = turn < WHEELSETS as u32;
-            let friction = (four_tracked(timer, &friction_args, &mut speed_decay, |a, d| {
-                fr.mu_d_tracked(a[0], a[1], a[2], d)
-            }) + if refresh_friction {
-                one(timer, &refresh_args, |a| fr.temperature_factor(a[0]))
-            } else {
-                baseline_one
-            })
-            .saturating_sub(baseline + baseline_one);
-            let thermal = (four(timer, &thermal_args, |a| th.rate_with(a[0], a[1], a[2]))
-                + if refresh_friction {
-                    baseline_one
-                } else {
-                    one(timer, &refresh_args, |a| th.loss_coefficient(a[1]))
-                })
-            .saturating_sub(baseline + baseline_one);
+            let [contact, friction, thermal] = models.costs(timer, &prev, &sc.sim.outputs());
             let suspension = step_cost.saturating_sub(contact + friction + thermal);
             let unit = loop_cost.saturating_sub(step_cost);
             for (k, x) in [
@@ -516,6 +558,11 @@ mod emulator {
                 break;
             }
         }
+        report(host, name, &stats, &sc, rows);
+    }
+
+    /// The `C` line of each part and the `E` line of a run.
+    fn report(host: &mut Host, name: &str, stats: &[Stat], sc: &EbScenario<f32>, rows: u32) {
         for (k, s) in stats.iter().enumerate() {
             host.line(format_args!(
                 "C friction={name} part={} n={} sum={} max={} max_step={} p50={} p99={}",
@@ -552,7 +599,7 @@ mod emulator {
         let inputs = sc
             .sim
             .unit_outputs()
-            .cylinder_pressure
+            .cylinder_pressure_pa
             .map(BrakeInput::CylinderPressure);
         let ((), cost) = timer.measure(|| {
             replay.step(black_box(&inputs));

@@ -1085,21 +1085,6 @@ pub enum Command {
 }
 
 impl Command {
-    /// Start of the paper's scenario in self-test mode: 150 km/h, wet rail, EB at t = 0,
-    /// on the default vehicle (its [`crate::digest::setup_digest`]; the board's user button
-    /// stamps the kept vehicle's instead, [`crate::rig::Rig::on_kept_setup`]).
-    pub fn paper_self_test(friction: FrictionModel) -> Command {
-        Command::Start(StartCommand {
-            mode: RigMode::SelfTest,
-            rail: Rail::Wet,
-            friction,
-            emergency: true,
-            initial_speed_kmh: 150.0,
-            track: false,
-            setup_digest: crate::digest::setup_digest(None, &Default::default()),
-        })
-    }
-
     /// The opcode of the command (byte 0 of `RIG_COMMAND`).
     pub fn opcode(&self) -> u8 {
         self.kind().into()

@@ -12,7 +12,7 @@
 //! and the value's IEEE f32 bits (little endian).
 
 use crate::can::surface_code;
-use crate::rig::{TrackFrames, VehicleValues};
+use crate::setup::{TrackFrames, VehicleValues};
 
 /// CRC-16/CCITT-FALSE (polynomial 0x1021, not reflected, init 0xFFFF, no final xor;
 /// check value 0x29B1 for "123456789"), bitwise: a few bytes of flash, run only by a

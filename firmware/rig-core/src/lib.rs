@@ -22,6 +22,8 @@
 //! * [`heartbeat`]: whether thread mode is alive (the watchdog is fed only then).
 //! * [`bringup`]: pass/fail rules of the board's bring-up self-test.
 //! * [`telemetry`]: the decimated telemetry record, its defmt line and its parser.
+//! * [`setup`]: the track and vehicle a run is set up with, as the board keeps them.
+//! * [`digest`]: the CRC-16 setup digest a `Start` carries.
 //! * [`rig`]: the real-time step and the run state machine (commands, faults, safe state).
 //! * [`hw`]: the hardware-interface traits the board implements.
 //! * [`script`]: a scripted self-test run shared by the QEMU telemetry fixture and its host check.
@@ -45,6 +47,7 @@ pub mod pulse;
 pub mod rig;
 pub mod script;
 pub mod sensor;
+pub mod setup;
 pub mod telemetry;
 pub mod timing;
 

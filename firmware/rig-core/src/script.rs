@@ -14,6 +14,7 @@
 use hils_plant::{FrictionModel, Rail};
 
 use crate::can::{Calibration, ClassicFrame, Command, RigMode, StartCommand};
+use crate::digest::setup_digest;
 use crate::hw::{RigIo, TelemetryEvent};
 use crate::pulse::PulseRegisters;
 use crate::rig::{Rig, RigConfig};
@@ -71,6 +72,25 @@ pub fn run(sink: impl FnMut(&TelemetryEvent)) -> u32 {
     io.frames
 }
 
+/// The scripted starts, here beside the scripts that give them rather than in the frame
+/// codec ([`crate::can`]), which so needs no digest.
+impl Command {
+    /// Start of the paper's scenario in self-test mode: 150 km/h, wet rail, EB at t = 0,
+    /// on the default vehicle (its [`setup_digest`]; the board's user button
+    /// stamps the kept vehicle's instead, [`crate::rig::Rig::on_kept_setup`]).
+    pub fn paper_self_test(friction: FrictionModel) -> Command {
+        Command::Start(StartCommand {
+            mode: RigMode::SelfTest,
+            rail: Rail::Wet,
+            friction,
+            emergency: true,
+            initial_speed_kmh: 150.0,
+            track: false,
+            setup_digest: setup_digest(None, &Default::default()),
+        })
+    }
+}
+
 /// Ticks of the cost sequence ([`cost_command`]).
 pub const COST_TICKS: u32 = 21_400;
 
@@ -91,7 +111,7 @@ pub fn cost_command(k: u32) -> Option<Command> {
             emergency: false,
             initial_speed_kmh: 120.0,
             track: false,
-            setup_digest: crate::digest::setup_digest(None, &Default::default()),
+            setup_digest: setup_digest(None, &Default::default()),
         }),
         21_010 => inject(Some(InjectedFault::Open)),
         21_100 => inject(None),

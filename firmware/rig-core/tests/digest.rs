@@ -4,7 +4,7 @@
 use hils_plant::Surface;
 use hils_rig_core::can::{ZoneFrame, surface_code};
 use hils_rig_core::digest::{crc16, setup_digest};
-use hils_rig_core::rig::{TrackFrames, VehicleValues};
+use hils_rig_core::setup::{TrackFrames, VehicleValues};
 use proptest::prelude::*;
 
 /// CRC-16/CCITT-FALSE byte by byte through a 256-entry table (a second implementation).

@@ -272,7 +272,7 @@ fn track_frames_are_refused_with_their_rule() {
 #[test]
 fn a_lost_commit_or_vehicle_frame_rejects_the_start() {
     use hils_rig_core::digest::setup_digest;
-    use hils_rig_core::rig::{TrackFrames, VehicleValues};
+    use hils_rig_core::setup::{TrackFrames, VehicleValues};
     let stamped = |track: Option<&TrackFrames>, vehicle: &VehicleValues| {
         let mut c = self_test_eb(80.0, track.is_some());
         if let Command::Start(start) = &mut c {

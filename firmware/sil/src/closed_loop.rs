@@ -65,11 +65,11 @@ impl<F: Real> ClosedLoop<F> {
             .map_err(LoopError::Params)?;
         let unit = BrakeUnit::new(params, config).map_err(LoopError::Unit)?;
         let unit_out = UnitOutputs {
-            cylinder_pressure: [F::ZERO; WHEELSETS],
+            cylinder_pressure_pa: [F::ZERO; WHEELSETS],
             valves: [Valve::Apply; WHEELSETS],
             venting: [false; WHEELSETS],
-            reference_speed: plant.vehicle_speed(),
-            demand_pressure: F::ZERO,
+            reference_speed_mps: plant.vehicle_speed(),
+            demand_pressure_pa: F::ZERO,
         };
         Ok(Self {
             plant,
@@ -113,7 +113,7 @@ impl<F: Real> ClosedLoop<F> {
         self.unit_out = self.unit.step(&speeds);
         let inputs = self
             .unit_out
-            .cylinder_pressure
+            .cylinder_pressure_pa
             .map(BrakeInput::CylinderPressure);
         self.plant.step(&inputs)
     }

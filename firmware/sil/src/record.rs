@@ -26,7 +26,8 @@ pub struct Channel {
 }
 
 impl Channel {
-    const fn scalar(stem: &'static str, unit: &'static str) -> Self {
+    /// A channel with one column (`t_s`).
+    pub const fn scalar(stem: &'static str, unit: &'static str) -> Self {
         Self {
             stem,
             unit,
@@ -34,7 +35,8 @@ impl Channel {
         }
     }
 
-    const fn wheelset(stem: &'static str, unit: &'static str) -> Self {
+    /// A channel with a column per wheelset (`omega1_radps`).
+    pub const fn wheelset(stem: &'static str, unit: &'static str) -> Self {
         Self {
             stem,
             unit,
@@ -284,7 +286,7 @@ impl RunRecord {
             a_x_mps2: o.carbody_accel.to_f64(),
             cmd,
             omega_radps: w(&|j| o.wheelsets[j].omega),
-            p_cyl_pa: w(&|j| u.cylinder_pressure[j]),
+            p_cyl_pa: w(&|j| u.cylinder_pressure_pa[j]),
             f_clamp_n: w(&|j| o.wheelsets[j].clamp_force),
             f_brake_n: w(&|j| o.wheelsets[j].brake_force),
             t_disc_c: w(&|j| o.wheelsets[j].disc_temp),
@@ -293,7 +295,33 @@ impl RunRecord {
             mu_d: w(&|j| o.wheelsets[j].mu_d),
             creepage: w(&|j| o.wheelsets[j].creepage),
             adhesion: w(&|j| o.wheelsets[j].adhesion),
-            v_ref_est_mps: u.reference_speed.to_f64(),
+            v_ref_est_mps: u.reference_speed_mps.to_f64(),
+        }
+    }
+
+    /// The value of column `channel` of wheelset `j` (0-based; ignored for a scalar
+    /// channel): `None` for a channel the record does not hold (`cmd`, as text in its
+    /// column, and the rig's and the trace's own channels).
+    pub fn value(&self, channel: Channel, j: usize) -> Option<f64> {
+        use run_log::*;
+        let w = |a: &[f64; WHEELSETS]| a.get(j).copied();
+        match channel {
+            T => Some(self.t_s),
+            V_REF => Some(self.v_ref_mps),
+            X => Some(self.x_m),
+            A_X => Some(self.a_x_mps2),
+            V_REF_EST => Some(self.v_ref_est_mps),
+            OMEGA => w(&self.omega_radps),
+            P_CYL => w(&self.p_cyl_pa),
+            F_CLAMP => w(&self.f_clamp_n),
+            F_BRAKE => w(&self.f_brake_n),
+            T_DISC => w(&self.t_disc_c),
+            Q => w(&self.q_n),
+            MU_D => w(&self.mu_d),
+            CREEPAGE => w(&self.creepage),
+            ADHESION => w(&self.adhesion),
+            WSP => self.wsp.get(j).map(|&v| v as u8 as f64),
+            _ => None,
         }
     }
 

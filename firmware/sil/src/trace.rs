@@ -4,38 +4,56 @@
 //! of the cost lines the binary prints ([`PARTS`]).
 
 use hils_brake_unit::UnitOutputs;
-use hils_plant::{Outputs, WHEELSETS, WheelsetOutput};
+use hils_plant::{Outputs, WHEELSETS};
 
 use crate::closed_loop::ClosedLoop;
+use crate::record::{Channel, run_log};
 
 /// Record every this many plant steps: 10 ms at the 0.1 ms step.
 pub const RECORD_EVERY: u32 = 100;
 
-/// Names of the scalar values of a [`TraceRow`], in order (units in the names).
-pub const SCALAR_COLUMNS: [&str; 7] = [
-    "t_s",
-    "vehicle_speed_mps",
-    "distance_m",
-    "carbody_accel_mps2",
-    "carbody_pitch_rad",
-    "reference_speed_mps",
-    "demand_pressure_pa",
+/// The scalar values of a [`TraceRow`], in order: channels of the run-record schema
+/// ([`crate::record`]): the run log's, and the trace's own (the plant's and the unit's
+/// internals no run log has, named by the same rule: the plant's names as stem and unit).
+pub const SCALAR_COLUMNS: [Channel; 7] = [
+    run_log::T,
+    run_log::V_REF,
+    run_log::X,
+    run_log::A_X,
+    Channel::scalar("carbody_pitch", "_rad"),
+    run_log::V_REF_EST,
+    Channel::scalar("demand_pressure", "_pa"),
 ];
 
-/// Names of the per-wheelset values of a [`TraceRow`] (wheelset number appended), in order:
-/// the plant's wheelset outputs ([`WheelsetOutput::NAMES`]), then the unit's cylinder
-/// pressure.
-pub const WHEELSET_COLUMNS: [&str; 16] = {
-    let names = WheelsetOutput::<f32>::NAMES;
-    let mut out = [""; 16];
-    let mut k = 0;
-    while k < names.len() {
-        out[k] = names[k];
-        k += 1;
-    }
-    out[15] = "cylinder_pressure_pa";
-    out
-};
+/// The per-wheelset values of a [`TraceRow`], in order: the plant's wheelset outputs (the
+/// order of [`hils_plant::WheelsetOutput::values`] and its `NAMES`), then the unit's cylinder
+/// pressure; the run log's channels where it has the value, else the plant's name.
+pub const WHEELSET_COLUMNS: [Channel; 16] = [
+    run_log::OMEGA,
+    Channel::wheelset("speed", "_mps"),
+    Channel::wheelset("slip_velocity", "_mps"),
+    run_log::CREEPAGE,
+    run_log::Q,
+    Channel::wheelset("adhesion_force", "_n"),
+    run_log::ADHESION,
+    Channel::wheelset("rail_mu", ""),
+    run_log::MU_D,
+    run_log::F_CLAMP,
+    Channel::wheelset("brake_torque", "_nm"),
+    run_log::F_BRAKE,
+    run_log::T_DISC,
+    Channel::wheelset("brake_power", "_w"),
+    Channel::wheelset("contact_power", "_w"),
+    run_log::P_CYL,
+];
+
+/// Every value of a [`TraceRow`] as (channel, wheelset 0-based; 0 for a scalar), in the
+/// order of [`TraceRow::values`].
+pub fn columns() -> impl Iterator<Item = (Channel, usize)> {
+    let scalars = SCALAR_COLUMNS.into_iter().map(|c| (c, 0));
+    let per = (0..WHEELSETS).flat_map(|j| WHEELSET_COLUMNS.into_iter().map(move |c| (c, j)));
+    scalars.chain(per)
+}
 
 /// Number of f32 values in a [`TraceRow`].
 pub const VALUES: usize = SCALAR_COLUMNS.len() + WHEELSETS * WHEELSET_COLUMNS.len();
@@ -75,8 +93,8 @@ impl TraceRow {
             o.distance,
             o.carbody_accel,
             o.carbody_pitch,
-            u.reference_speed,
-            u.demand_pressure,
+            u.reference_speed_mps,
+            u.demand_pressure_pa,
         ];
         let mut k = 0;
         for x in scalars {
@@ -86,7 +104,7 @@ impl TraceRow {
         let mut valves = 0u32;
         for j in 0..WHEELSETS {
             let w = &o.wheelsets[j];
-            let per = w.values().into_iter().chain([u.cylinder_pressure[j]]);
+            let per = w.values().into_iter().chain([u.cylinder_pressure_pa[j]]);
             for x in per {
                 values[k] = x.to_bits();
                 k += 1;

@@ -213,10 +213,10 @@ proptest! {
         for s in &speeds {
             for _ in 0..100 {
                 let out = unit.step(s);
-                for pc in out.cylinder_pressure {
+                for pc in out.cylinder_pressure_pa {
                     prop_assert!(pc.is_finite() && pc >= 0.0 && pc <= p.brake.supply_pressure as f32);
                 }
-                prop_assert!(out.reference_speed.is_finite());
+                prop_assert!(out.reference_speed_mps.is_finite());
             }
         }
     }

@@ -189,7 +189,7 @@ impl SimController {
                     }
                 }
                 if let Some(u) = &mut self.unit {
-                    self.pressure_pa = u.step(&speeds).cylinder_pressure;
+                    self.pressure_pa = u.step(&speeds).cylinder_pressure_pa;
                 }
             }
         }

@@ -3,7 +3,8 @@
 
 use anyhow::{Result, anyhow, bail};
 use hils_plant::{FrictionModel, WHEELSETS};
-use hils_sil::trace::{RECORD_EVERY, SCALAR_COLUMNS, WHEELSET_COLUMNS};
+use hils_sil::record::run_log;
+use hils_sil::trace::{self, RECORD_EVERY};
 use hils_sil::{EbScenario, ParamFile, TraceRow};
 use serde::Serialize;
 
@@ -28,13 +29,11 @@ pub fn host_trace(friction: FrictionModel) -> Result<(Vec<TraceRow>, u32, Option
     Ok((rows, sc.steps(), sc.stop_step()))
 }
 
-/// Names of the values of a [`TraceRow`]: `step`, `flags`, `valves`, then the columns.
+/// Names of the values of a [`TraceRow`]: `step`, `flags`, `valves`, then the columns
+/// (run-record channel names, [`trace::columns`]).
 pub fn column_names() -> Vec<String> {
     let mut names = vec!["step".to_string(), "flags".into(), "valves".into()];
-    names.extend(SCALAR_COLUMNS.iter().map(|s| s.to_string()));
-    for j in 1..=WHEELSETS {
-        names.extend(WHEELSET_COLUMNS.iter().map(|c| format!("{c}{j}")));
-    }
+    names.extend(trace::columns().map(|(c, j)| c.name(j).to_string()));
     names
 }
 
@@ -116,39 +115,25 @@ pub fn check_against_simulate(friction: FrictionModel, rows: &[TraceRow]) -> Res
             rows.len()
         );
     }
-    let col = |name: &str| SCALAR_COLUMNS.iter().position(|c| *c == name);
-    let wcol = |name: &str| WHEELSET_COLUMNS.iter().position(|c| *c == name);
     let mut checked = 0;
     for (i, (s, r)) in run.samples.iter().zip(rows).enumerate() {
-        let mut same = |what: &str, sim: f64, row: f32| -> Result<()> {
+        let mut same = |what: &dyn std::fmt::Display, sim: f64, row: f32| -> Result<()> {
             checked += 1;
             if sim as f32 != row || (sim.is_nan() != row.is_nan()) {
                 bail!("sample {i}: {what} is {sim} in hils simulate but {row} in the trace");
             }
             Ok(())
         };
-        let scalar = |name: &str| r.value(col(name).unwrap_or(usize::MAX));
-        same("t", s.t_s, scalar("t_s"))?;
-        same("v_ref", s.v_ref_mps, scalar("vehicle_speed_mps"))?;
-        same("distance", s.x_m, scalar("distance_m"))?;
-        same("a_x", s.a_x_mps2, scalar("carbody_accel_mps2"))?;
-        same(
-            "v_ref_estimate",
-            s.v_ref_est_mps,
-            scalar("reference_speed_mps"),
-        )?;
+        // Every trace column the record holds, by channel (the trace's own have no value
+        // in the record); the record's WSP is the trace's valve bits.
+        for (k, (c, j)) in trace::columns().enumerate() {
+            if let Some(sim) = s.value(c, j) {
+                same(&c.name(j), sim, r.value(k))?;
+            }
+        }
         for j in 0..WHEELSETS {
-            let w = |name: &str| r.wheelset_value(j, wcol(name).unwrap_or(usize::MAX));
-            same("omega", s.omega_radps[j], w("omega_radps"))?;
-            same("p_cyl", s.p_cyl_pa[j], w("cylinder_pressure_pa"))?;
-            same("f_clamp", s.f_clamp_n[j], w("clamp_force_n"))?;
-            same("f_brake", s.f_brake_n[j], w("brake_force_n"))?;
-            same("t_disc", s.t_disc_c[j], w("disc_temp_c"))?;
-            same("q", s.q_n[j], w("axle_load_n"))?;
-            same("mu_d", s.mu_d[j], w("mu_d"))?;
-            same("creepage", s.creepage[j], w("creepage"))?;
-            same("adhesion", s.adhesion[j], w("adhesion"))?;
-            same("wsp", s.wsp[j] as u8 as f64, r.venting(j) as u8 as f32)?;
+            let sim = s.wsp[j] as u8 as f64;
+            same(&run_log::WSP.name(j), sim, r.venting(j) as u8 as f32)?;
         }
     }
     Ok(checked)

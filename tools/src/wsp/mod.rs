@@ -86,7 +86,7 @@ pub fn simulate(run: &Run) -> Result<(Trace, Vec<[Surface; 4]>)> {
             trace.x_m.push(out.distance as f64);
             for j in 0..WHEELSETS {
                 trace.wheel_mps[j].push(out.wheelsets[j].omega as f64 * r);
-                trace.p_cyl_pa[j].push(u.cylinder_pressure[j] as f64);
+                trace.p_cyl_pa[j].push(u.cylinder_pressure_pa[j] as f64);
                 trace.venting[j].push(u.valves[j] == Valve::Vent);
                 trace.holding[j].push(u.valves[j] == Valve::Hold);
                 trace.acting_vent[j].push(acting[j] == Valve::Vent);

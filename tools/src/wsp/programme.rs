@@ -55,7 +55,7 @@ pub struct Criteria {
     /// cylinder per two friction faces of `[brake]` ([`Criteria::for_file`]).
     #[serde(skip)]
     pub channel_volume_l: f64,
-    /// The WSP timer of the unit under test, s: the simulated unit's `vent_max`
+    /// The WSP timer of the unit under test, s: the simulated unit's `vent_max_s`
     /// ([`Criteria::for_file`]); a continuous WSP action this long counts as a timer action.
     #[serde(skip)]
     pub wsp_timer_s: f64,
@@ -87,7 +87,7 @@ impl Criteria {
         let cylinders = (b.friction_faces as f64 / 2.0).ceil().max(1.0);
         self.channel_volume_l =
             cylinders * b.piston_area * self.cylinder_stroke_m * 1000.0 + self.pipe_volume_l;
-        self.wsp_timer_s = file.unit_config().wsp.vent_max;
+        self.wsp_timer_s = file.unit_config().wsp.vent_max_s;
         self
     }
 }
