@@ -62,6 +62,8 @@ pub struct BenchFigures {
     pub steps: usize,
     pub repeat: usize,
     pub math: &'static str,
+    /// The host instruction set the plant was compiled for (`.cargo/config.toml`).
+    pub host_isa: &'static str,
     pub threads: usize,
 }
 
@@ -173,9 +175,20 @@ pub fn measure(params: &ParamFile, steps: usize, repeat: usize) -> Result<BenchF
         steps,
         repeat,
         math: hils_plant::math::IMPLEMENTATION,
+        host_isa: HOST_ISA,
         threads,
     })
 }
+
+/// The instruction set this build targets: x86-64-v3 (AVX2, FMA; `.cargo/config.toml`) or
+/// the baseline. FMA being available changes no result: Rust never fuses a*b+c on its own.
+const HOST_ISA: &str = if cfg!(all(target_feature = "avx2", target_feature = "fma")) {
+    "x86-64-v3 (avx2, fma)"
+} else if cfg!(target_arch = "x86_64") {
+    "x86-64 baseline (sse2)"
+} else {
+    std::env::consts::ARCH
+};
 
 pub fn main(args: BenchArgs) -> Result<()> {
     if let Some(path) = &args.reader {
@@ -190,8 +203,9 @@ pub fn main(args: BenchArgs) -> Result<()> {
         println!("{}", serde_json::to_string(&f)?);
     } else {
         println!(
-            "plant (17 DOF, 4 contacts, Eq 2, heat), paper EB inputs, one core, best of {}:",
-            f.repeat
+            "plant (17 DOF, 4 contacts, Eq 2, heat), paper EB inputs, one core, best of {}, \
+             compiled for {}:",
+            f.repeat, f.host_isa
         );
         println!(
             "  f32: {:>10.0} steps/s  ({:.0} ns/step)  real-time factor at {:.0} Hz: {:.0}x",

@@ -32,7 +32,7 @@ pub struct EpConstants<F> {
 
 impl<F: Real> EpConstants<F> {
     /// Constants for a control cycle `dt_s`.
-    pub fn new(p: &crate::BrakeUnitParams, dt_s: f64, supply_pa: f64) -> Self {
+    pub fn new(p: &crate::params::BrakeUnitParams, dt_s: f64, supply_pa: f64) -> Self {
         Self {
             kp: F::of(p.ep_kp),
             ki_dt: F::of(p.ep_ki_per_s * dt_s),

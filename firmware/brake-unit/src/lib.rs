@@ -11,6 +11,7 @@
 #![forbid(unsafe_code)]
 
 pub mod ep;
+pub mod params;
 pub mod unit;
 pub mod wsp;
 

@@ -1,8 +1,8 @@
 //! Wheel-rail adhesion: Polach's simplified contact model, paper Eqs (9)-(12).
 
-use crate::math::TrackedExp;
 use crate::params::{AdhesionSet, ContactParams, Rail};
 use crate::real::Real;
+use crate::tracked::TrackedExp;
 
 /// Precomputed constants of the Polach model for one rail condition.
 #[derive(Clone, Copy, Debug)]
@@ -94,7 +94,7 @@ impl<F: Real> Polach<F> {
     }
 
     /// Eq (11) with e^(-B |w|) from a [`TrackedExp`] (the plant's step: w moves little
-    /// from step to step; within [`crate::math::TRACK_MAX_REL_ERROR`] of [`Self::friction`]).
+    /// from step to step; within [`crate::tracked::TRACK_MAX_REL_ERROR`] of [`Self::friction`]).
     #[inline(always)]
     pub fn friction_tracked(&self, slip_velocity: F, decay: &mut TrackedExp<F>) -> F {
         self.mu_decaying * decay.exp(-self.b_exp * slip_velocity.abs()) + self.mu_inf

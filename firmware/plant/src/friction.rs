@@ -1,8 +1,8 @@
 //! Disc-pad friction coefficient, paper Eq (2).
 
-use crate::math::TrackedExp;
 use crate::params::{FrictionModel, FrictionParams};
 use crate::real::Real;
+use crate::tracked::TrackedExp;
 
 /// Precomputed Eq (2): mu_d = c mu_d0 (n_v e^(-m_v v_d) + 1)(n_T e^(-m_T T_d) + 1),
 /// or mu_d0 alone with [`FrictionModel::Constant`]; times the pressure extension
@@ -63,7 +63,7 @@ impl<F: Real> DiscPadFriction<F> {
 
     /// [`Self::temperature_factor`] with e^(-m_T T_d) from a [`TrackedExp`] (the plant's
     /// refresh in turn: the disc temperature moves little between refreshes; within
-    /// [`crate::math::TRACK_MAX_REL_ERROR`] of the exact factor).
+    /// [`crate::tracked::TRACK_MAX_REL_ERROR`] of the exact factor).
     #[inline(always)]
     pub fn temperature_factor_tracked(&self, t_d: F, decay: &mut TrackedExp<F>) -> F {
         if self.variable {
@@ -102,7 +102,7 @@ impl<F: Real> DiscPadFriction<F> {
 
     /// [`Self::mu_d_with`] with e^(-m_v v_d) from a [`TrackedExp`] (the plant's step: the
     /// friction speed moves little from step to step; within
-    /// [`crate::math::TRACK_MAX_REL_ERROR`] of the exact factor).
+    /// [`crate::tracked::TRACK_MAX_REL_ERROR`] of the exact factor).
     #[inline(always)]
     pub fn mu_d_tracked(
         &self,

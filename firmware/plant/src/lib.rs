@@ -23,6 +23,7 @@ pub mod plant;
 pub mod real;
 pub mod thermal;
 pub mod track;
+pub mod tracked;
 
 pub use params::{FrictionModel, ParamError, Params, Rail, STEP_S};
 pub use plant::{BrakeInput, Energy, Flags, Outputs, Plant, WHEELSETS, WheelsetOutput};

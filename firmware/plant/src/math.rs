@@ -23,14 +23,8 @@
 
 mod atan;
 mod expf;
-mod tracked;
 
 pub use atan::ATAN_OVER_X_MAX_REL_ERROR;
-
-pub use tracked::{
-    PowLaw, TRACK_MAX_REL_ERROR, TRACK_POW_MAX_REL_ERROR, TRACK_POW_WINDOW, TRACK_WINDOW,
-    TrackedExp, TrackedPow,
-};
 
 #[cfg(all(feature = "math-libm", feature = "math-micromath"))]
 compile_error!("the features math-libm and math-micromath exclude each other");
@@ -121,9 +115,15 @@ pub use f32_impl::{
 /// the f64 reference and the f32 baselines.
 #[inline(always)]
 #[allow(dead_code)]
-fn quotient<F: crate::real::Real>(x: F, atan_x: F) -> F {
-    if x.abs() < F::of(1.0e-3) {
-        F::ONE - x * x / F::of(3.0)
+fn quotient<F>(x: F, atan_x: F) -> F
+where
+    F: Copy + PartialOrd + From<f32> + core::ops::Neg<Output = F>,
+    F: core::ops::Mul<Output = F> + core::ops::Sub<Output = F> + core::ops::Div<Output = F>,
+{
+    // |x| < 1e-3 written with core's operators only (this module sits below `real`).
+    let small = F::from(1.0e-3f32);
+    if x < small && -x < small {
+        F::from(1.0f32) - x * x / F::from(3.0f32)
     } else {
         atan_x / x
     }

@@ -348,6 +348,9 @@ section!(
 /// paper text: 0.1 ms sampling of the vehicle model).
 pub const STEP_S: f64 = 1.0e-4;
 
+/// Number of wheelsets of the vehicle (Fig 3: two bogies of two).
+pub const WHEELSETS: usize = 4;
+
 /// A parameter outside its physical range: names the key, the value and the range.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

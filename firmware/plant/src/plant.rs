@@ -50,14 +50,13 @@
 use crate::brake::Caliper;
 use crate::contact::{ContactForce, Polach};
 use crate::friction::DiscPadFriction;
-use crate::math::{TrackedExp, TrackedPow};
 use crate::params::{ParamError, Params, Rail};
 use crate::real::Real;
 use crate::thermal::DiscThermal;
 use crate::track::{DegradedAdhesionParams, Surface, Track, TrackAdhesion};
+use crate::tracked::{TrackedExp, TrackedPow};
 
-/// Number of wheelsets.
-pub const WHEELSETS: usize = 4;
+pub use crate::params::WHEELSETS;
 
 /// The measured or simulated brake input of one wheelset.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -125,7 +124,9 @@ pub struct WheelsetOutput<F> {
     pub clamp_force: F,
     /// Brake torque applied this step (clutch: <= the kinetic torque of Eq 1), N m.
     pub brake_torque: F,
-    /// Tangential friction force at the friction radius over all faces, T_b / l_p, N.
+    /// Kinetic tangential friction force at the friction radius over all faces,
+    /// mu_d f N_d (Eq 1's force; T_b / l_p while the disc slips, more than that while
+    /// the clutch holds the wheel), N.
     pub brake_force: F,
     /// Disc temperature rise T_d, degC (Eq 6).
     pub disc_temp: F,
@@ -467,7 +468,7 @@ impl<F: Real> Plant<F> {
             v0
         };
         plant.initial_speed = v0;
-        plant.reset_state(F::of(params.thermal.ambient_rise));
+        plant.reset_state([F::of(params.thermal.ambient_rise); WHEELSETS]);
         plant.sticky = Flags(flags);
         plant.flags = Flags(flags);
         Ok(plant)
@@ -612,11 +613,15 @@ impl<F: Real> Plant<F> {
     }
 
     /// Back to static equilibrium at the initial speed (discs at `disc_temp`).
-    fn reset_state(&mut self, disc_temp: F) {
+    fn reset_state(&mut self, disc_temps: [F; WHEELSETS]) {
         let v0 = self.initial_speed;
         self.s = State::default();
         self.s.v_c = v0;
-        for w in self.s.w.iter_mut() {
+        // Outputs of the last step that the state does not hold: none before a step.
+        self.damper_power = F::ZERO;
+        self.resistance = F::ZERO;
+        self.carbody_mid_speed = v0;
+        for (w, &disc_temp) in self.s.w.iter_mut().zip(disc_temps.iter()) {
             w.disc_temp = disc_temp;
             w.temperature_decay = self.k.friction.temperature_decay_at(disc_temp);
             w.temperature_factor = self
@@ -632,7 +637,7 @@ impl<F: Real> Plant<F> {
         }
         self.steps = 0;
         self.carbody_accel = F::ZERO;
-        for w in self.record.iter_mut() {
+        for (w, &disc_temp) in self.record.iter_mut().zip(disc_temps.iter()) {
             *w = WheelsetRecord {
                 omega: v0 * self.k.inv_r,
                 speed: v0,
@@ -685,6 +690,10 @@ impl<F: Real> Plant<F> {
     /// per body kind); speeds: the carbody's mean over the step, the bogies' relative
     /// speeds after it added to it, the wheelsets' after it.
     fn external_power(&self) -> F {
+        if self.steps == 0 {
+            // Before the first step: no step, no work done.
+            return F::ZERO;
+        }
         let k = &self.k;
         let v_mid = self.carbody_mid_speed;
         let bogie_speeds = (v_mid + self.s.dv_b[0]) + (v_mid + self.s.dv_b[1]);
@@ -826,6 +835,10 @@ impl<F: Real> Plant<F> {
 
     /// Advances the plant by one fixed step with the brake inputs of the four wheelsets;
     /// returns the step's flags ([`Self::outputs`] gives the values).
+    ///
+    /// Longer than the project's ~80 lines on purpose: it is the 10 kHz hot path, laid out
+    /// for the Cortex-M4F's registers (live ranges, spills), and every change to it is
+    /// measured per instruction by `hils target-cost`; its sections are marked `// ----`.
     pub fn step(&mut self, inputs: &[BrakeInput<F>; WHEELSETS]) -> Flags {
         let mut flags = 0u32;
         let half = F::of(0.5);
@@ -1060,15 +1073,18 @@ impl<F: Real> Plant<F> {
     /// Safe state after a numeric fault: vehicle at rest, brakes' effect nil, discs kept
     /// if finite. Outputs show standstill, so a brake controller sees a stopped train.
     fn enter_safe_state(&mut self) {
-        let temps = self.s.w.map(|w| w.disc_temp);
+        // Discs keep a finite temperature (0 when it is not finite); Eq (2)'s factors
+        // follow it.
+        let temps = self.s.w.map(|w| {
+            if w.disc_temp.is_finite() {
+                w.disc_temp
+            } else {
+                F::ZERO
+            }
+        });
         let steps = self.steps;
         self.initial_speed = F::ZERO;
-        self.reset_state(F::ZERO);
-        for j in 0..WHEELSETS {
-            if temps[j].is_finite() {
-                self.s.w[j].disc_temp = temps[j];
-            }
-        }
+        self.reset_state(temps);
         self.steps = steps;
     }
 
@@ -1121,5 +1137,65 @@ impl<F: Real> Plant<F> {
     /// The Polach model in use (for adhesion curves, Fig 11).
     pub fn polach(&self) -> &Polach<F> {
         &self.k.polach
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The numeric-fault safe state (module doc, "Bad input"): a non-finite state puts the
+    /// plant at rest, flagged, with every output finite, the step count kept and each
+    /// disc's finite temperature kept (Eq 2's factors following it).
+    #[test]
+    fn non_finite_state_enters_the_documented_safe_state() {
+        let params = Params::default();
+        let mut plant = Plant::<f32>::new(&params, Rail::Dry, 30.0).unwrap();
+        let eb = [BrakeInput::ClampForce(20_000.0); WHEELSETS];
+        for _ in 0..500 {
+            plant.step(&eb);
+        }
+        assert!(!plant.sticky_flags().contains(Flags::NUMERIC_FAULT));
+        let hot = plant.s.w[0].disc_temp;
+        assert!(hot > 0.0);
+        // An infinite disc temperature on wheelset 2 (the other discs stay finite).
+        plant.s.w[1].disc_temp = f32::INFINITY;
+        let flags = plant.step(&eb);
+        assert!(flags.contains(Flags::NUMERIC_FAULT));
+        let o = plant.outputs();
+        assert_eq!(o.steps, 501);
+        assert_eq!(o.vehicle_speed, 0.0);
+        assert_eq!(o.damper_power, 0.0);
+        assert_eq!(o.external_power, 0.0);
+        let kept = o.wheelsets[0].disc_temp;
+        // One more step of braking heat on it (0.05 s of braking before: under 1 % more).
+        assert!(kept >= hot && kept <= 1.01 * hot, "{kept} vs {hot}");
+        assert_eq!(o.wheelsets[1].disc_temp, 0.0);
+        let friction = DiscPadFriction::<f32>::new(&params.friction);
+        assert_eq!(o.wheelsets[0].mu_d, friction.mu_d(0.0, kept, 0.0));
+        for w in o.wheelsets {
+            assert_eq!(w.omega, 0.0);
+            assert!(w.values().iter().all(|x| x.is_finite()), "{w:?}");
+        }
+        // It stays at rest and finite under the same brake inputs.
+        for _ in 0..100 {
+            let flags = plant.step(&eb);
+            assert!(!flags.contains(Flags::NUMERIC_FAULT));
+        }
+        let o = plant.outputs();
+        assert_eq!(o.vehicle_speed, 0.0);
+        assert!(o.wheelsets.iter().all(|w| w.omega == 0.0 && w.speed == 0.0));
+        assert!(plant.sticky_flags().contains(Flags::NUMERIC_FAULT));
+    }
+
+    /// Before the first step no work has been done: external and damper power are zero,
+    /// on a gradient too.
+    #[test]
+    fn no_power_before_the_first_step() {
+        let mut params = Params::default();
+        params.track.gradient_permille = 10.0;
+        let plant = Plant::<f32>::new(&params, Rail::Dry, 30.0).unwrap();
+        let o = plant.outputs();
+        assert_eq!((o.external_power, o.damper_power, o.steps), (0.0, 0.0, 0));
     }
 }

@@ -1,8 +1,8 @@
 //! Lumped disc heat balance per wheelset, paper Eqs (3)-(6).
 
-use crate::math::{PowLaw, TrackedPow};
 use crate::params::ThermalParams;
 use crate::real::Real;
+use crate::tracked::{PowLaw, TrackedPow};
 
 /// The exponent of the wheel speed in the convective loss of Eq (5).
 const CONVECTION_EXPONENT: f64 = 0.8;
@@ -49,7 +49,7 @@ impl<F: Real> DiscThermal<F> {
     }
 
     /// [`Self::loss_coefficient`] with v_w^0.8 from a [`TrackedPow`] (the plant's refresh in
-    /// turn; within [`crate::math::TRACK_POW_MAX_REL_ERROR`] of the exact power).
+    /// turn; within [`crate::tracked::TRACK_POW_MAX_REL_ERROR`] of the exact power).
     #[inline(always)]
     pub fn loss_coefficient_tracked(&self, wheel_speed: F, power: &mut TrackedPow<F>) -> F {
         self.alpha + self.beta * power.pow(wheel_speed.abs(), &self.speed_power)

@@ -378,15 +378,15 @@ pub struct TrackAdhesion<F: Real> {
     /// uniform track without it costs the plant's step one flag test).
     active: bool,
     /// Surface under each wheelset (refreshed in turn).
-    surface: [Surface; crate::WHEELSETS],
+    surface: [Surface; crate::params::WHEELSETS],
     /// The contact model of each wheelset's surface (a copy: no lookup in the step).
-    wheel_polach: [Polach<F>; crate::WHEELSETS],
+    wheel_polach: [Polach<F>; crate::params::WHEELSETS],
     /// Positions between which each wheelset's surface cannot change, `[lo, hi)`, m: the
     /// zones are looked up again only when a wheelset leaves its interval.
-    lo: [F; crate::WHEELSETS],
-    hi: [F; crate::WHEELSETS],
+    lo: [F; crate::params::WHEELSETS],
+    hi: [F; crate::params::WHEELSETS],
     /// Friction factor 1 + (R - 1) lambda of each wheelset (exactly 1 when off).
-    mu_factor: [F; crate::WHEELSETS],
+    mu_factor: [F; crate::params::WHEELSETS],
     degraded: Option<Recovery<F>>,
 }
 
@@ -401,16 +401,16 @@ struct Recovery<F> {
     inv_cell: F,
     /// Cell under each wheelset and where it ends, m (followed step by step in the
     /// plant's precision: no f64 in the board's step).
-    cell: [i32; crate::WHEELSETS],
-    cell_end: [F; crate::WHEELSETS],
+    cell: [i32; crate::params::WHEELSETS],
+    cell_end: [F; crate::params::WHEELSETS],
     /// Energy per metre deposited in each cell, J/m, and the cell's index along the track.
     cell_energy: [F; CELLS],
     cell_tag: [i32; CELLS],
     /// Own low-passed specific dissipation P/v per wheelset, J/m.
-    own: [F; crate::WHEELSETS],
+    own: [F; crate::params::WHEELSETS],
     /// Energy each wheelset deposited in the cell it is in (removed from what it reads).
-    own_in_cell: [F; crate::WHEELSETS],
-    own_tag: [i32; crate::WHEELSETS],
+    own_in_cell: [F; crate::params::WHEELSETS],
+    own_tag: [i32; crate::params::WHEELSETS],
 }
 
 impl<F: Real> TrackAdhesion<F> {
@@ -432,13 +432,13 @@ impl<F: Real> TrackAdhesion<F> {
             own_gain: F::of(1.0 - crate::math::exp_f64(-4.0 * dt_s / degraded.time_constant_s)),
             cell_length: F::of(degraded.cell_length_m),
             inv_cell: F::of(1.0 / degraded.cell_length_m),
-            cell: [0; crate::WHEELSETS],
-            cell_end: [F::of(degraded.cell_length_m); crate::WHEELSETS],
+            cell: [0; crate::params::WHEELSETS],
+            cell_end: [F::of(degraded.cell_length_m); crate::params::WHEELSETS],
             cell_energy: [F::ZERO; CELLS],
             cell_tag: [i32::MIN; CELLS],
-            own: [F::ZERO; crate::WHEELSETS],
-            own_in_cell: [F::ZERO; crate::WHEELSETS],
-            own_tag: [i32::MIN; crate::WHEELSETS],
+            own: [F::ZERO; crate::params::WHEELSETS],
+            own_in_cell: [F::ZERO; crate::params::WHEELSETS],
+            own_tag: [i32::MIN; crate::params::WHEELSETS],
         });
         let base = track.base();
         let mut starts = [F::ZERO; MAX_ZONES];
@@ -460,12 +460,12 @@ impl<F: Real> TrackAdhesion<F> {
             starts,
             ends,
             active: !uniform || recovery.is_some(),
-            wheel_polach: [polach[base as usize]; crate::WHEELSETS],
+            wheel_polach: [polach[base as usize]; crate::params::WHEELSETS],
             polach,
-            surface: [base; crate::WHEELSETS],
-            lo: [lo; crate::WHEELSETS],
-            hi: [hi; crate::WHEELSETS],
-            mu_factor: [F::ONE; crate::WHEELSETS],
+            surface: [base; crate::params::WHEELSETS],
+            lo: [lo; crate::params::WHEELSETS],
+            hi: [hi; crate::params::WHEELSETS],
+            mu_factor: [F::ONE; crate::params::WHEELSETS],
             degraded: recovery,
         })
     }
@@ -489,7 +489,7 @@ impl<F: Real> TrackAdhesion<F> {
     }
 
     /// The surface under each wheelset.
-    pub fn surfaces(&self) -> [Surface; crate::WHEELSETS] {
+    pub fn surfaces(&self) -> [Surface; crate::params::WHEELSETS] {
         self.surface
     }
 

@@ -54,9 +54,9 @@ mod emulator {
     use cortex_m_rt::{ExceptionFrame, entry, exception};
     use cortex_m_semihosting::{debug, hio};
     use hils_plant::friction::DiscPadFriction;
-    use hils_plant::math::TrackedExp;
     use hils_plant::thermal::DiscThermal;
     use hils_plant::track::ContactSets;
+    use hils_plant::tracked::TrackedExp;
     use hils_plant::{BrakeInput, FrictionModel, Surface, Track, WHEELSETS, Zone};
     use hils_sil::trace::{LINE_LEN, PARTS, RECORD_EVERY};
     use hils_sil::{EbScenario, ParamFile, TraceRow};

@@ -124,11 +124,6 @@ impl TraceRow {
         f32::from_bits(self.values[k])
     }
 
-    /// Value of column `c` ([`WHEELSET_COLUMNS`] index) of wheelset `j` (0-based).
-    pub fn wheelset_value(&self, j: usize, c: usize) -> f32 {
-        self.value(SCALAR_COLUMNS.len() + j * WHEELSET_COLUMNS.len() + c)
-    }
-
     /// Whether wheelset `j`'s WSP valve vents.
     pub fn venting(&self, j: usize) -> bool {
         (self.valves >> (2 * j)) & 3 == 2

@@ -136,5 +136,18 @@ pub fn check_against_simulate(friction: FrictionModel, rows: &[TraceRow]) -> Res
             same(&run_log::WSP.name(j), sim, r.venting(j) as u8 as f32)?;
         }
     }
+    // Every trace column that is a run-log channel must have been compared: a channel the
+    // record fails to give (`RunRecord::value` -> None) is an error, not a skipped column.
+    let per_row = trace::columns()
+        .filter(|(c, _)| run_log::ALL.contains(c))
+        .count()
+        + WHEELSETS;
+    if checked != rows.len() * per_row {
+        bail!(
+            "compared {checked} values, expected {} ({} rows x {per_row} run-log columns)",
+            rows.len() * per_row,
+            rows.len()
+        );
+    }
     Ok(checked)
 }
