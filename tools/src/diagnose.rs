@@ -80,7 +80,7 @@ pub struct DiagnoseArgs {
     pub out: crate::outputs::Outputs,
     /// Replay step, s (default 1 ms; the plant's semi-implicit contact keeps it accurate,
     /// see docs/diagnosis.md).
-    #[arg(long, default_value_t = replay::REPLAY_STEP_S, value_parser = crate::cli::step_s)]
+    #[arg(long, default_value_t = replay::REPLAY_STEP_S, value_parser = crate::flags::step_s)]
     pub step_s: f64,
     /// Run logs (spec/measured-data.md, section 1).
     #[arg(required = true)]

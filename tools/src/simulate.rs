@@ -72,13 +72,13 @@ pub struct SimulateArgs {
     #[arg(long, value_enum)]
     pub rail: Option<RailArg>,
     /// Initial speed, km/h (default: the scenario's).
-    #[arg(long, value_parser = crate::cli::speed_kmh)]
+    #[arg(long, value_parser = crate::flags::speed_kmh)]
     pub speed_kmh: Option<f64>,
     /// Output directory (created).
     #[arg(long)]
     pub out: PathBuf,
     /// Sample rate of run.csv, Hz (a divisor of the plant rate).
-    #[arg(long, default_value_t = 1000.0, value_parser = crate::cli::sample_rate_hz)]
+    #[arg(long, default_value_t = 1000.0, value_parser = crate::flags::sample_rate_hz)]
     pub sample_rate_hz: f64,
     /// Plant precision (f32 is what the target runs).
     #[arg(long, value_enum, default_value = "f32")]

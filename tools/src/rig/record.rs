@@ -33,7 +33,7 @@ use hils_sil::Cmd;
 use hils_sil::record::Channel;
 use hils_sil::record::run_log::*;
 
-use super::commands::state_name;
+use super::monitor::state_name;
 use super::monitor::{Seen, WheelSpeeds};
 use super::transport::ProbeEvent;
 use crate::runlog;
