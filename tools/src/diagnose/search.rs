@@ -63,7 +63,10 @@ impl SetFit {
     /// Whether `after` is significantly better than `self` on validation data (compared
     /// where either shows an error beyond the noise, [`replay::compare`]).
     pub fn improved_by(&self, after: &SetFit) -> bool {
-        let (a, b) = replay::compare(&self.validation, &after.validation);
+        let replay::ComparedRms {
+            reference: a,
+            candidate: b,
+        } = replay::compare(&self.validation, &after.validation);
         significant(a, b)
     }
 
@@ -558,7 +561,10 @@ fn pick(trials: Vec<SetFit>) -> Option<SetFit> {
         .filter(|&i| {
             // Simpler wins unless the other is better by the tolerance and by half a noise
             // variance (below the noise, relative differences mean nothing).
-            let (simple, complex) = replay::compare(&trials[i].validation, &best.validation);
+            let replay::ComparedRms {
+                reference: simple,
+                candidate: complex,
+            } = replay::compare(&trials[i].validation, &best.validation);
             let clearly_better = complex * PARSIMONY_TOLERANCE < simple
                 && simple * simple - complex * complex >= 0.5;
             trials[i].n_params() < best.n_params() && !clearly_better
@@ -856,7 +862,10 @@ fn lookalike_swaps(
                     && !already.iter().any(|(kk, b, _)| *kk == k && *b == a)
                     && d.material(s1, 0)
                     && {
-                        let (now, alt) = replay::compare(&own.validation, &s1.validation);
+                        let replay::ComparedRms {
+                            reference: now,
+                            candidate: alt,
+                        } = replay::compare(&own.validation, &s1.validation);
                         alt <= BEAM_TOLERANCE * now
                     }
             })
@@ -1046,7 +1055,10 @@ pub(super) fn search(d: &Diagnoser, base: &SetFit, started: Instant) -> Search {
         for (k, e) in current.effects.iter().enumerate() {
             let mut group = vec![e.name().to_string()];
             for (kk, a, f) in &confirmed {
-                let (now, alt) = replay::compare(&current.validation, &f.validation);
+                let replay::ComparedRms {
+                    reference: now,
+                    candidate: alt,
+                } = replay::compare(&current.validation, &f.validation);
                 // Confounded: within the tolerance, or not significantly worse (below the
                 // noise, relative differences mean nothing).
                 if *kk == k

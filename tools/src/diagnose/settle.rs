@@ -80,7 +80,10 @@ pub fn settle(base: &Baseline, causes: &Causes, notes: &mut Vec<String>) -> Sett
 /// [`replay::compare`]) that `extended` leaves.
 fn unexplained_share(baseline: &Score, extended: &Score) -> f64 {
     let excess = |rms: f64| (rms * rms - 1.0).max(0.0);
-    let (b, e) = replay::compare(baseline, extended);
+    let replay::ComparedRms {
+        reference: b,
+        candidate: e,
+    } = replay::compare(baseline, extended);
     (excess(e) / excess(b).max(1e-12)).sqrt().clamp(0.0, 1.0)
 }
 

@@ -41,7 +41,10 @@ pub fn judge(baseline: &Params, base: &Baseline, causes: &Causes, settled: &Sett
 
 /// Share of the fit-step baseline's validation error that `v` removes.
 fn gain_of(causes: &Causes, v: &Score) -> f64 {
-    let (b, e) = replay::compare(&causes.fit_base_validation, v);
+    let replay::ComparedRms {
+        reference: b,
+        candidate: e,
+    } = replay::compare(&causes.fit_base_validation, v);
     if b > 0.0 { 1.0 - e / b } else { 0.0 }
 }
 
@@ -144,17 +147,20 @@ fn gain(runs: &[Prepared], base_val: &Score, ext_val: &Score) -> Gain {
     speed.insert("baseline".to_string(), base_val.speed_rms());
     speed.insert("extended".to_string(), ext_val.speed_rms());
     let channels = fitted_channel_names(runs);
-    let gain_pair = replay::compare(base_val, ext_val);
+    let replay::ComparedRms {
+        reference: rms_baseline,
+        candidate: rms_extended,
+    } = replay::compare(base_val, ext_val);
     Gain {
         metric: format!(
             "rms on validation data of the replay errors of {channels}, each over its noise level \
              (1 = noise), over the 1 s windows where the baseline or the extension errs beyond \
              1.5 x noise (all data if none); m/s figures of the speeds alone in speed_rms_mps"
         ),
-        baseline: gain_pair.0,
-        extended: gain_pair.1,
-        reduction: if gain_pair.0 > 0.0 {
-            1.0 - gain_pair.1 / gain_pair.0
+        baseline: rms_baseline,
+        extended: rms_extended,
+        reduction: if rms_baseline > 0.0 {
+            1.0 - rms_extended / rms_baseline
         } else {
             0.0
         },
