@@ -968,118 +968,12 @@ pub fn replay(run: &Prepared, model: &Model) -> Option<Replay> {
         params.thermal.ambient_rise = td;
     }
     let dt = run.dt;
-    let mut plant = Plant::<f64>::with_step(&params, run.rail, run.v0, dt).ok()?;
     let caliper = Caliper::<f64>::new(&params.brake);
-    let friction = DiscPadFriction::<f64>::new(&params.friction);
-    let measured_temp = params.friction.model == hils_plant::FrictionModel::Variable;
     let lag = lag_gain(dt, model.actuator_lag_s);
-    let r_w = params.vehicle.wheel_radius;
-    let clamp_of = |j: usize, x: f64| -> f64 {
-        let reading = x / model.input_gain[j];
-        match run.input_kind[j] {
-            InputKind::ClampForce => reading,
-            InputKind::Pressure => caliper.clamp_force(reading),
-        }
-    };
-    let at = |x: &[f64], k: usize| -> f64 {
-        let (i, w) = run.step_map[k];
-        let i = i as usize;
-        if i + 1 < x.len() {
-            x[i] + (x[i + 1] - x[i]) * w as f64
-        } else {
-            x[i]
-        }
-    };
-    // Pressure-driven wheelsets: pad force lags the pressure.
-    let mut pad: [f64; WHEELSETS] = std::array::from_fn(|j| clamp_of(j, run.input[j][0]));
-    // Record traces at every step: v, a_x, then per wheelset speed, f_brake, q, t_disc, ... .
-    let steps = run.step_map.len() - 1;
-    let mut trace: Vec<[f64; TRACE]> = Vec::with_capacity(steps + 1);
-    let mut mu_trace: Vec<[f64; WHEELSETS]> = Vec::with_capacity(steps + 1);
-    let record = |o: &hils_plant::Outputs<f64>| -> [f64; TRACE] {
-        let mut row = [0.0; TRACE];
-        row[0] = o.vehicle_speed;
-        row[1] = o.carbody_accel;
-        for j in 0..WHEELSETS {
-            let w = &o.wheelsets[j];
-            row[4 + 4 * j] = w.omega * r_w;
-            row[5 + 4 * j] = w.brake_force;
-            row[6 + 4 * j] = w.axle_load;
-            row[7 + 4 * j] = w.disc_temp;
-        }
-        row
-    };
-    trace.push(record(plant.outputs()));
-    mu_trace.push(plant.outputs().wheelsets.map(|w| w.mu_d));
-    let mut inputs = [BrakeInput::ClampForce(0.0); WHEELSETS];
-    for k in 0..steps {
-        for j in 0..WHEELSETS {
-            let target = clamp_of(j, at(&run.input[j], k));
-            let f = match run.input_kind[j] {
-                InputKind::ClampForce => target,
-                InputKind::Pressure => {
-                    pad[j] += (target - pad[j]) * lag;
-                    pad[j]
-                }
-            };
-            // Eq (2) at the measured disc temperature: the pad force scaled by the ratio of
-            // the temperature brackets (measured over modelled disc temperature).
-            let f = match (&run.disc_temp_input[j], measured_temp) {
-                (Some(td), true) => {
-                    let model_td = plant.outputs().wheelsets[j].disc_temp;
-                    f * friction.temperature_factor(at(td, k))
-                        / friction.temperature_factor(model_td)
-                }
-                _ => f,
-            };
-            inputs[j] = BrakeInput::ClampForce(f);
-        }
-        let o = plant.step(&inputs);
-        trace.push(record(o));
-        mu_trace.push(o.wheelsets.map(|w| w.mu_d));
-    }
-    let flags = plant.sticky_flags().0;
-    if flags & hils_plant::Flags::NUMERIC_FAULT != 0 {
-        return None;
-    }
-    let interp = |col: usize, t: f64| -> f64 {
-        let x = t / dt;
-        let k = (x.floor() as usize).min(steps);
-        let w = x - k as f64;
-        if k < steps {
-            trace[k][col] + (trace[k + 1][col] - trace[k][col]) * w
-        } else {
-            trace[k][col]
-        }
-    };
-
-    // Pad force predicted from pressure (observation channel): Eq (1) with the sensor
-    // gain, lagged, at every step; then at the bin times.
-    let mut pad_obs: [Option<Vec<f64>>; WHEELSETS] = Default::default();
-    for j in 0..WHEELSETS {
-        if let Some(p) = &run.pressure_obs[j] {
-            let g = model.pressure_obs_gain[j];
-            let mut a = caliper.clamp_force(p[0] / g);
-            let mut series = Vec::with_capacity(steps + 1);
-            series.push(a);
-            for k in 0..steps {
-                let target = caliper.clamp_force(at(p, k) / g);
-                a += (target - a) * lag;
-                series.push(a);
-            }
-            pad_obs[j] = Some(series);
-        }
-    }
-    let interp_series = |s: &[f64], t: f64| -> f64 {
-        let x = t / dt;
-        let k = (x.floor() as usize).min(steps);
-        let w = x - k as f64;
-        if k < steps {
-            s[k] + (s[k + 1] - s[k]) * w
-        } else {
-            s[k]
-        }
-    };
+    let traces = drive(run, model, &params, &caliper, lag)?;
+    let pad_obs = pad_from_pressure(run, model, &caliper, lag);
+    let steps = traces.steps();
+    let interp = |col: usize, t: f64| -> f64 { at_time(|k| traces.trace[k][col], steps, dt, t) };
     // The measured clamp force is compared with the true pad force: reading / input gain.
     let predicted: Vec<Vec<f64>> = run
         .channels
@@ -1097,7 +991,7 @@ pub fn replay(run: &Prepared, model: &Model) -> Option<Replay> {
                     // Measured clamp reading = gain x true pad force; predicted reading:
                     Quantity::PadFromPressure(j) => pad_obs[j]
                         .as_ref()
-                        .map(|s| interp_series(s, t) * model.input_gain[j])
+                        .map(|s| at_time(|k| s[k], steps, dt, t) * model.input_gain[j])
                         .unwrap_or(f64::NAN),
                 })
                 .collect()
@@ -1114,7 +1008,7 @@ pub fn replay(run: &Prepared, model: &Model) -> Option<Replay> {
             .iter()
             .map(|&t| {
                 let k = ((t.min(run.duration) / dt).round() as usize).min(steps);
-                mu_trace[k][j]
+                traces.mu_trace[k][j]
             })
             .collect()
     };
@@ -1124,8 +1018,152 @@ pub fn replay(run: &Prepared, model: &Model) -> Option<Replay> {
         wheel_bin: std::array::from_fn(|j| bin_vals(4 + 4 * j)),
         mu_d_bin: std::array::from_fn(mu_bin),
         disc_temp_bin: std::array::from_fn(|j| bin_vals(7 + 4 * j)),
+        flags: traces.flags,
+    })
+}
+
+/// The plant's outputs at every replay step.
+struct Traces {
+    /// v, a_x, then per wheelset speed, f_brake, q, t_disc.
+    trace: Vec<[f64; TRACE]>,
+    mu_trace: Vec<[f64; WHEELSETS]>,
+    flags: u32,
+}
+
+impl Traces {
+    fn steps(&self) -> usize {
+        self.trace.len() - 1
+    }
+}
+
+/// Input `x` at replay step `k` (linear between the log's samples).
+fn at_step(run: &Prepared, x: &[f64], k: usize) -> f64 {
+    let (i, w) = run.step_map[k];
+    let i = i as usize;
+    if i + 1 < x.len() {
+        x[i] + (x[i + 1] - x[i]) * w as f64
+    } else {
+        x[i]
+    }
+}
+
+/// A series recorded at every step (`x(k)`, `steps` + 1 values) at time `t`, linear.
+fn at_time(x: impl Fn(usize) -> f64, steps: usize, dt: f64, t: f64) -> f64 {
+    let q = t / dt;
+    let k = (q.floor() as usize).min(steps);
+    let w = q - k as f64;
+    if k < steps {
+        x(k) + (x(k + 1) - x(k)) * w
+    } else {
+        x(k)
+    }
+}
+
+/// Drives the plant with the run's measured brake inputs (None: a numeric fault).
+fn drive(
+    run: &Prepared,
+    model: &Model,
+    params: &Params,
+    caliper: &Caliper<f64>,
+    lag: f64,
+) -> Option<Traces> {
+    let mut plant = Plant::<f64>::with_step(params, run.rail, run.v0, run.dt).ok()?;
+    let friction = DiscPadFriction::<f64>::new(&params.friction);
+    let measured_temp = params.friction.model == hils_plant::FrictionModel::Variable;
+    let r_w = params.vehicle.wheel_radius;
+    let clamp_of = |j: usize, x: f64| -> f64 {
+        let reading = x / model.input_gain[j];
+        match run.input_kind[j] {
+            InputKind::ClampForce => reading,
+            InputKind::Pressure => caliper.clamp_force(reading),
+        }
+    };
+    // Pressure-driven wheelsets: pad force lags the pressure.
+    let mut pad: [f64; WHEELSETS] = std::array::from_fn(|j| clamp_of(j, run.input[j][0]));
+    let steps = run.step_map.len() - 1;
+    let mut trace: Vec<[f64; TRACE]> = Vec::with_capacity(steps + 1);
+    let mut mu_trace: Vec<[f64; WHEELSETS]> = Vec::with_capacity(steps + 1);
+    trace.push(trace_row(&plant.outputs(), r_w));
+    mu_trace.push(plant.outputs().wheelsets.map(|w| w.mu_d));
+    let mut inputs = [BrakeInput::ClampForce(0.0); WHEELSETS];
+    for k in 0..steps {
+        for j in 0..WHEELSETS {
+            let target = clamp_of(j, at_step(run, &run.input[j], k));
+            let f = match run.input_kind[j] {
+                InputKind::ClampForce => target,
+                InputKind::Pressure => {
+                    pad[j] += (target - pad[j]) * lag;
+                    pad[j]
+                }
+            };
+            // Eq (2) at the measured disc temperature: the pad force scaled by the ratio of
+            // the temperature brackets (measured over modelled disc temperature).
+            let f = match (&run.disc_temp_input[j], measured_temp) {
+                (Some(td), true) => {
+                    let model_td = plant.outputs().wheelsets[j].disc_temp;
+                    f * friction.temperature_factor(at_step(run, td, k))
+                        / friction.temperature_factor(model_td)
+                }
+                _ => f,
+            };
+            inputs[j] = BrakeInput::ClampForce(f);
+        }
+        plant.step(&inputs);
+        let o = plant.outputs();
+        trace.push(trace_row(&o, r_w));
+        mu_trace.push(o.wheelsets.map(|w| w.mu_d));
+    }
+    let flags = plant.sticky_flags().0;
+    if flags & hils_plant::Flags::NUMERIC_FAULT != 0 {
+        return None;
+    }
+    Some(Traces {
+        trace,
+        mu_trace,
         flags,
     })
+}
+
+/// One row of [`Traces::trace`] from the plant's outputs (`r_w`: wheel radius, m).
+fn trace_row(o: &hils_plant::Outputs<f64>, r_w: f64) -> [f64; TRACE] {
+    let mut row = [0.0; TRACE];
+    row[0] = o.vehicle_speed;
+    row[1] = o.carbody_accel;
+    for j in 0..WHEELSETS {
+        let w = &o.wheelsets[j];
+        row[4 + 4 * j] = w.omega * r_w;
+        row[5 + 4 * j] = w.brake_force;
+        row[6 + 4 * j] = w.axle_load;
+        row[7 + 4 * j] = w.disc_temp;
+    }
+    row
+}
+
+/// Pad force predicted from pressure (observation channel): Eq (1) with the sensor gain,
+/// lagged, at every step.
+fn pad_from_pressure(
+    run: &Prepared,
+    model: &Model,
+    caliper: &Caliper<f64>,
+    lag: f64,
+) -> [Option<Vec<f64>>; WHEELSETS] {
+    let steps = run.step_map.len() - 1;
+    let mut pad_obs: [Option<Vec<f64>>; WHEELSETS] = Default::default();
+    for j in 0..WHEELSETS {
+        if let Some(p) = &run.pressure_obs[j] {
+            let g = model.pressure_obs_gain[j];
+            let mut a = caliper.clamp_force(p[0] / g);
+            let mut series = Vec::with_capacity(steps + 1);
+            series.push(a);
+            for k in 0..steps {
+                let target = caliper.clamp_force(at_step(run, p, k) / g);
+                a += (target - a) * lag;
+                series.push(a);
+            }
+            pad_obs[j] = Some(series);
+        }
+    }
+    pad_obs
 }
 
 /// Which bins a score uses.

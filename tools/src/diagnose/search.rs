@@ -683,157 +683,182 @@ fn grow(
     // Below 0.7 x noise no addition can be significant (it must remove half a variance).
     while !current.effects.is_empty() && current.effects.len() < MAX_EFFECTS && current.val() >= 0.7
     {
-        let Some(j_s) = current.jacobian.clone() else {
-            break;
-        };
-        let probes = probe_others(d, &current, singles, applicable);
-        let mut ranked: Vec<(f64, &Probe, Vec<f64>)> = probes
-            .iter()
-            .map(|p| {
-                let (ssr, delta) =
-                    lsq::linear_ssr(&p.shifted(&current.residuals), &hcat(&j_s, &p.columns));
-                let own = delta[j_s.ncols()..].to_vec();
-                (ssr, p, own)
-            })
-            .collect();
-        ranked.sort_by(|a, b| a.0.total_cmp(&b.0));
-        if std::env::var_os("HILS_DIAG_DEBUG").is_some() {
-            let ssr0: f64 = current.residuals.iter().map(|r| r * r).sum();
-            for (ssr, p, _) in &ranked {
-                eprintln!(
-                    "  probe {:?} at {:?}: ssr {ssr0:.0} -> {ssr:.0}",
-                    p.effect, current.effects
-                );
-            }
-        }
-        let best_pred = ranked.first().map(|r| r.0).unwrap_or(0.0);
-        // Stop when even the best linearised prediction (with 20 % to spare) is not a
-        // significant improvement on the fit data.
-        let n_fit = current.residuals.len().max(1) as f64;
-        let rms_now = (current.residuals.iter().map(|r| r * r).sum::<f64>() / n_fit).sqrt();
-        if !significant(rms_now, 0.8 * (best_pred / n_fit).sqrt()) {
-            break;
-        }
-        // The best probes, and the friction factors always: their exponential shapes are
-        // the least linear, so a linearised probe underrates them (the paper's second
-        // factor only shows once the first is in). A factor starts from its fit alone when
-        // that one is material, else from the generic start.
-        let mut chosen: Vec<(Effect, Vec<f64>)> = ranked
-            .iter()
-            .take(CANDIDATES_PER_STEP)
-            .filter(|r| r.0 <= 1.5 * best_pred + 1.0)
-            .map(|(_, p, delta)| (p.effect, probe_start(p, delta)))
-            .collect();
-        for factor in [Effect::FrictionSpeed, Effect::FrictionTemperature] {
-            let candidate = applicable.contains(&factor)
-                && !current.effects.iter().any(|c| c.name() == factor.name());
-            if candidate && !chosen.iter().any(|(e, _)| *e == factor) {
-                let single = singles
-                    .iter()
-                    .find(|s| s.effects == [factor])
-                    .filter(|s| d.material(s, 0));
-                let start = match single {
-                    Some(s) => s.x[0].clone(),
-                    None => factor
-                        .params(&d.baseline, d.rail())
-                        .into_iter()
-                        .map(|(_, p)| p.start)
-                        .collect(),
-                };
-                chosen.push((factor, start));
-            }
-        }
-        let trials: Vec<SetFit> = chosen
-            .par_iter()
-            .filter_map(|(effect, own_start)| {
-                let mut effects = current.effects.clone();
-                effects.push(*effect);
-                let mut start = current.x.clone();
-                start.push(own_start.clone());
-                // Scan the added effect coarsely first (slides make the landscape rough:
-                // LM may not leave its start).
-                let ssr = d
-                    .residuals(&effects, &start)
-                    .map(|r| r.iter().map(|v| v * v).sum())
-                    .unwrap_or(f64::INFINITY);
-                let (start, _) = d.coordinate_search_of(
-                    &effects,
-                    start,
-                    ssr,
-                    &COARSE_STEPS,
-                    1,
-                    Some(effects.len() - 1),
-                );
-                d.fit_set(&effects, Some(&start))
-            })
-            .collect();
-        let Some(best) = pick(trials) else { break };
-        if current.improved_by(&best) && d.material(&best, best.effects.len() - 1) {
-            current = best;
-        } else {
-            break;
+        match forward_step(d, &current, singles, applicable) {
+            Some(better) => current = better,
+            None => break,
         }
     }
     debug(started, d.replays_done(), "forward selection");
-
     // Backward elimination: drop an effect the others make redundant (another optimum may
     // explain the data as well with fewer effects: parsimony).
     while current.effects.len() >= 2 {
-        let redundant: Vec<usize> = (0..current.effects.len()).collect();
-        // Refit without k from two starts: the current values (the others may have
-        // compensated for k) and each remaining effect's fit alone.
-        let starts: Vec<(usize, Vec<Vec<f64>>)> = redundant
-            .iter()
-            .flat_map(|&k| {
-                let mut from_current = current.x.clone();
-                from_current.remove(k);
-                let mut from_singles = Vec::new();
-                for (i, e) in current.effects.iter().enumerate() {
-                    if i != k {
-                        let single = singles
-                            .iter()
-                            .find(|s| s.effects == [*e])
-                            .map(|s| s.x[0].clone());
-                        from_singles.push(single.unwrap_or_else(|| current.x[i].clone()));
-                    }
-                }
-                if from_singles == from_current {
-                    vec![(k, from_current)]
-                } else {
-                    vec![(k, from_current), (k, from_singles)]
-                }
-            })
-            .collect();
-        let without: Vec<SetFit> = starts
-            .into_par_iter()
-            .filter_map(|(k, start)| {
-                let mut effects = current.effects.clone();
-                effects.remove(k);
-                // One effect left, started from its own fit alone: that fit is the answer.
-                if let Some(single) = singles
-                    .iter()
-                    .find(|s| s.effects == effects && s.x == start)
-                {
-                    return Some(single.clone());
-                }
-                d.fit_set(&effects, Some(&start))
-            })
-            .collect();
-        let Some(best) = without
-            .into_iter()
-            .min_by(|a, b| a.val().total_cmp(&b.val()))
-        else {
-            break;
-        };
-        if !best.improved_by(&current) {
-            current = best;
-        } else {
-            break;
+        match backward_step(d, &current, singles) {
+            Some(simpler) => current = simpler,
+            None => break,
         }
     }
     debug(started, d.replays_done(), "backward elimination");
-
     current
+}
+
+/// One step of the forward selection: `current` with the best added effect, when that
+/// is a significant and material improvement.
+fn forward_step(
+    d: &Diagnoser,
+    current: &SetFit,
+    singles: &[SetFit],
+    applicable: &[Effect],
+) -> Option<SetFit> {
+    let j_s = current.jacobian.clone()?;
+    let probes = probe_others(d, current, singles, applicable);
+    let mut ranked: Vec<(f64, &Probe, Vec<f64>)> = probes
+        .iter()
+        .map(|p| {
+            let (ssr, delta) =
+                lsq::linear_ssr(&p.shifted(&current.residuals), &hcat(&j_s, &p.columns));
+            let own = delta[j_s.ncols()..].to_vec();
+            (ssr, p, own)
+        })
+        .collect();
+    ranked.sort_by(|a, b| a.0.total_cmp(&b.0));
+    if std::env::var_os("HILS_DIAG_DEBUG").is_some() {
+        let ssr0: f64 = current.residuals.iter().map(|r| r * r).sum();
+        for (ssr, p, _) in &ranked {
+            eprintln!(
+                "  probe {:?} at {:?}: ssr {ssr0:.0} -> {ssr:.0}",
+                p.effect, current.effects
+            );
+        }
+    }
+    let best_pred = ranked.first().map(|r| r.0).unwrap_or(0.0);
+    // Stop when even the best linearised prediction (with 20 % to spare) is not a
+    // significant improvement on the fit data.
+    let n_fit = current.residuals.len().max(1) as f64;
+    let rms_now = (current.residuals.iter().map(|r| r * r).sum::<f64>() / n_fit).sqrt();
+    if !significant(rms_now, 0.8 * (best_pred / n_fit).sqrt()) {
+        return None;
+    }
+    let mut chosen: Vec<(Effect, Vec<f64>)> = ranked
+        .iter()
+        .take(CANDIDATES_PER_STEP)
+        .filter(|r| r.0 <= 1.5 * best_pred + 1.0)
+        .map(|(_, p, delta)| (p.effect, probe_start(p, delta)))
+        .collect();
+    add_friction_factors(d, current, singles, applicable, &mut chosen);
+    let best = pick(fit_additions(d, current, &chosen))?;
+    (current.improved_by(&best) && d.material(&best, best.effects.len() - 1)).then_some(best)
+}
+
+/// The best probes are joined by the friction factors always: their exponential shapes
+/// are the least linear, so a linearised probe underrates them (the paper's second factor
+/// only shows once the first is in). A factor starts from its fit alone when that one is
+/// material, else from the generic start.
+fn add_friction_factors(
+    d: &Diagnoser,
+    current: &SetFit,
+    singles: &[SetFit],
+    applicable: &[Effect],
+    chosen: &mut Vec<(Effect, Vec<f64>)>,
+) {
+    for factor in [Effect::FrictionSpeed, Effect::FrictionTemperature] {
+        let candidate = applicable.contains(&factor)
+            && !current.effects.iter().any(|c| c.name() == factor.name());
+        if candidate && !chosen.iter().any(|(e, _)| *e == factor) {
+            let single = singles
+                .iter()
+                .find(|s| s.effects == [factor])
+                .filter(|s| d.material(s, 0));
+            let start = match single {
+                Some(s) => s.x[0].clone(),
+                None => factor
+                    .params(&d.baseline, d.rail())
+                    .into_iter()
+                    .map(|(_, p)| p.start)
+                    .collect(),
+            };
+            chosen.push((factor, start));
+        }
+    }
+}
+
+/// `current` with each chosen effect added (from its start), fitted (in parallel).
+fn fit_additions(d: &Diagnoser, current: &SetFit, chosen: &[(Effect, Vec<f64>)]) -> Vec<SetFit> {
+    chosen
+        .par_iter()
+        .filter_map(|(effect, own_start)| {
+            let mut effects = current.effects.clone();
+            effects.push(*effect);
+            let mut start = current.x.clone();
+            start.push(own_start.clone());
+            // Scan the added effect coarsely first (slides make the landscape rough:
+            // LM may not leave its start).
+            let ssr = d
+                .residuals(&effects, &start)
+                .map(|r| r.iter().map(|v| v * v).sum())
+                .unwrap_or(f64::INFINITY);
+            let (start, _) = d.coordinate_search_of(
+                &effects,
+                start,
+                ssr,
+                &COARSE_STEPS,
+                1,
+                Some(effects.len() - 1),
+            );
+            d.fit_set(&effects, Some(&start))
+        })
+        .collect()
+}
+
+/// One step of the backward elimination: the best set without one of `current`'s
+/// effects, when it is not significantly worse.
+fn backward_step(d: &Diagnoser, current: &SetFit, singles: &[SetFit]) -> Option<SetFit> {
+    let without: Vec<SetFit> = elimination_starts(current, singles)
+        .into_par_iter()
+        .filter_map(|(k, start)| {
+            let mut effects = current.effects.clone();
+            effects.remove(k);
+            // One effect left, started from its own fit alone: that fit is the answer.
+            if let Some(single) = singles
+                .iter()
+                .find(|s| s.effects == effects && s.x == start)
+            {
+                return Some(single.clone());
+            }
+            d.fit_set(&effects, Some(&start))
+        })
+        .collect();
+    let best = without
+        .into_iter()
+        .min_by(|a, b| a.val().total_cmp(&b.val()))?;
+    (!best.improved_by(current)).then_some(best)
+}
+
+/// Starts of the refits without effect k, for every k: the current values (the others
+/// may have compensated for k) and each remaining effect's fit alone.
+fn elimination_starts(current: &SetFit, singles: &[SetFit]) -> Vec<(usize, Vec<Vec<f64>>)> {
+    let redundant: Vec<usize> = (0..current.effects.len()).collect();
+    redundant
+        .iter()
+        .flat_map(|&k| {
+            let mut from_current = current.x.clone();
+            from_current.remove(k);
+            let mut from_singles = Vec::new();
+            for (i, e) in current.effects.iter().enumerate() {
+                if i != k {
+                    let single = singles
+                        .iter()
+                        .find(|s| s.effects == [*e])
+                        .map(|s| s.x[0].clone());
+                    from_singles.push(single.unwrap_or_else(|| current.x[i].clone()));
+                }
+            }
+            if from_singles == from_current {
+                vec![(k, from_current)]
+            } else {
+                vec![(k, from_current), (k, from_singles)]
+            }
+        })
+        .collect()
 }
 
 /// Look-alikes the linearised screen can miss (a swap whose linearisation fails, e.g. the
@@ -959,10 +984,45 @@ pub(super) fn search(d: &Diagnoser, base: &SetFit, started: Instant) -> Search {
         .filter_map(|e| d.fit_set(&[*e], None))
         .collect();
     debug(started, d.replays_done(), "single effects fitted");
-
     // Forward selection and backward elimination from the best first effects (a beam:
     // two effects alone can explain about as much, and only one of them may lead to the
     // right combination); the best final set wins, the simplest among equals.
+    let finals: Vec<SetFit> = first_effects(d, base, &singles)
+        .into_par_iter()
+        .map(|f| grow(d, f, &singles, &applicable, started))
+        .collect();
+    let mut current = pick(finals).unwrap_or_else(|| base.clone());
+    // Confounded: could another effect stand in for a cause? Screen each swap with the
+    // linearised fit, confirm the promising ones with a real fit on validation data.
+    let mut confounded = Vec::new();
+    if let (false, Some(j_s)) = (current.effects.is_empty(), current.jacobian.clone()) {
+        let probes = probe_others(d, &current, &singles, &applicable);
+        let swaps = screen_swaps(d, &current, &j_s, &probes);
+        let confirmed = confirm_swaps(d, &current, &singles, &swaps);
+        confounded = confounded_groups(&current, &confirmed);
+        current = choose_by_links(d, current, &confirmed, &confounded);
+    }
+    debug(started, d.replays_done(), "confounded alternatives");
+    // Polish: the fit that produced the result may have been cut by its budget on the way
+    // (a flat valley of compensating parameters); continue it.
+    if !current.effects.is_empty() {
+        if let Some(p) = d.fit_set(&current.effects, Some(&current.x)) {
+            if p.fit.rms() <= current.fit.rms() {
+                current = p;
+            }
+        }
+        debug(started, d.replays_done(), "polished");
+    }
+    Search {
+        singles,
+        result: current,
+        confounded,
+    }
+}
+
+/// The start paths of the beam: the best material single effect that improves on the
+/// baseline, and a second one only when its effect alone explains nearly as much.
+fn first_effects(d: &Diagnoser, base: &SetFit, singles: &[SetFit]) -> Vec<SetFit> {
     let mut firsts: Vec<SetFit> = Vec::new();
     let material: Vec<SetFit> = singles
         .iter()
@@ -988,106 +1048,108 @@ pub(super) fn search(d: &Diagnoser, base: &SetFit, started: Instant) -> Search {
                 .cloned(),
         );
     }
-    let finals: Vec<SetFit> = firsts
-        .into_par_iter()
-        .map(|f| grow(d, f, &singles, &applicable, started))
-        .collect();
-    let mut current = pick(finals).unwrap_or_else(|| base.clone());
+    firsts
+}
 
-    // Confounded: could another effect stand in for a cause? Screen each swap with the
-    // linearised fit, confirm the promising ones with a real fit on validation data.
-    let mut confounded = Vec::new();
-    if let (false, Some(j_s)) = (current.effects.is_empty(), current.jacobian.clone()) {
-        let probes = probe_others(d, &current, &singles, &applicable);
-        let ssr_s: f64 = current.residuals.iter().map(|r| r * r).sum();
-        let mut swaps: Vec<(usize, &Probe, Vec<f64>, Vec<Vec<f64>>)> = Vec::new();
-        for k in 0..current.effects.len() {
-            let mut effects = current.effects.clone();
-            let mut xs = current.x.clone();
-            effects.remove(k);
-            xs.remove(k);
-            let Some(r_without) = d.residuals(&effects, &xs) else {
-                continue;
-            };
-            let keep: Vec<usize> = (0..j_s.ncols())
-                .filter(|c| !current.columns_of(k).contains(c))
-                .collect();
-            let j_rest = j_s.select_columns(&keep);
-            for p in &probes {
-                let (ssr, delta) =
-                    lsq::linear_ssr(&p.shifted(&r_without), &hcat(&j_rest, &p.columns));
-                // Worth a real fit when the linearised swap comes near the result, or
-                // explains the data to within the noise (then a small relative gap means
-                // nothing).
-                let screen = CONFOUND_TOLERANCE * CONFOUND_TOLERANCE * 1.5;
-                let n_fit = r_without.len().max(1) as f64;
-                if ssr <= (screen * ssr_s).max(n_fit) {
-                    let own = delta[j_rest.ncols()..].to_vec();
-                    swaps.push((k, p, own, xs.clone()));
-                }
-            }
-        }
-        let confirmed: Vec<(usize, Effect, SetFit)> = swaps
-            .par_iter()
-            .filter_map(|(k, p, delta, xs)| {
-                let mut effects = current.effects.clone();
-                effects.remove(*k);
-                effects.push(p.effect);
-                let mut start = xs.clone();
-                start.push(probe_start(p, delta));
-                d.fit_set(&effects, Some(&start)).map(|f| (*k, p.effect, f))
-            })
+/// A swap worth a real fit: cause k replaced by a probed effect (its linearised start),
+/// the other causes' parameters.
+type Swap<'a> = (usize, &'a Probe, Vec<f64>, Vec<Vec<f64>>);
+
+/// Swaps of each cause for each probed effect that the linearised fit puts near the
+/// result.
+fn screen_swaps<'a>(
+    d: &Diagnoser,
+    current: &SetFit,
+    j_s: &DMatrix<f64>,
+    probes: &'a [Probe],
+) -> Vec<Swap<'a>> {
+    let ssr_s: f64 = current.residuals.iter().map(|r| r * r).sum();
+    let mut swaps: Vec<Swap> = Vec::new();
+    for k in 0..current.effects.len() {
+        let mut effects = current.effects.clone();
+        let mut xs = current.x.clone();
+        effects.remove(k);
+        xs.remove(k);
+        let Some(r_without) = d.residuals(&effects, &xs) else {
+            continue;
+        };
+        let keep: Vec<usize> = (0..j_s.ncols())
+            .filter(|c| !current.columns_of(k).contains(c))
             .collect();
-        let mut confirmed = confirmed;
-        confirmed.extend(lookalike_swaps(d, &current, &singles, &confirmed));
-        // A single cause: the other effects' fits alone are the swaps (no refit needed).
-        if current.effects.len() == 1 {
-            for s1 in &singles {
-                let a = s1.effects[0];
-                if a.name() != current.effects[0].name()
-                    && d.material(s1, 0)
-                    && !confirmed.iter().any(|(_, b, _)| *b == a)
-                {
-                    confirmed.push((0, a, s1.clone()));
-                }
+        let j_rest = j_s.select_columns(&keep);
+        for p in probes {
+            let (ssr, delta) = lsq::linear_ssr(&p.shifted(&r_without), &hcat(&j_rest, &p.columns));
+            // Worth a real fit when the linearised swap comes near the result, or
+            // explains the data to within the noise (then a small relative gap means
+            // nothing).
+            let screen = CONFOUND_TOLERANCE * CONFOUND_TOLERANCE * 1.5;
+            let n_fit = r_without.len().max(1) as f64;
+            if ssr <= (screen * ssr_s).max(n_fit) {
+                let own = delta[j_rest.ncols()..].to_vec();
+                swaps.push((k, p, own, xs.clone()));
             }
         }
-        for (k, e) in current.effects.iter().enumerate() {
-            let mut group = vec![e.name().to_string()];
-            for (kk, a, f) in &confirmed {
-                let replay::ComparedRms {
-                    reference: now,
-                    candidate: alt,
-                } = replay::compare(&current.validation, &f.validation);
-                // Confounded: within the tolerance, or not significantly worse (below the
-                // noise, relative differences mean nothing).
-                if *kk == k
-                    && (alt <= CONFOUND_TOLERANCE * now || !significant(alt, now))
-                    && !group.contains(&a.name().to_string())
-                {
-                    group.push(a.name().to_string());
-                }
-            }
-            if group.len() > 1 {
-                confounded.push(group);
+    }
+    swaps
+}
+
+/// The swaps fitted (in parallel), the look-alikes the screen misses, and for a single
+/// cause every other material effect alone.
+fn confirm_swaps(
+    d: &Diagnoser,
+    current: &SetFit,
+    singles: &[SetFit],
+    swaps: &[Swap],
+) -> Vec<(usize, Effect, SetFit)> {
+    let mut confirmed: Vec<(usize, Effect, SetFit)> = swaps
+        .par_iter()
+        .filter_map(|(k, p, delta, xs)| {
+            let mut effects = current.effects.clone();
+            effects.remove(*k);
+            effects.push(p.effect);
+            let mut start = xs.clone();
+            start.push(probe_start(p, delta));
+            d.fit_set(&effects, Some(&start)).map(|f| (*k, p.effect, f))
+        })
+        .collect();
+    confirmed.extend(lookalike_swaps(d, current, singles, &confirmed));
+    // A single cause: the other effects' fits alone are the swaps (no refit needed).
+    if current.effects.len() == 1 {
+        for s1 in singles {
+            let a = s1.effects[0];
+            if a.name() != current.effects[0].name()
+                && d.material(s1, 0)
+                && !confirmed.iter().any(|(_, b, _)| *b == a)
+            {
+                confirmed.push((0, a, s1.clone()));
             }
         }
-        current = choose_by_links(d, current, &confirmed, &confounded);
     }
-    debug(started, d.replays_done(), "confounded alternatives");
-    // Polish: the fit that produced the result may have been cut by its budget on the way
-    // (a flat valley of compensating parameters); continue it.
-    if !current.effects.is_empty() {
-        if let Some(p) = d.fit_set(&current.effects, Some(&current.x)) {
-            if p.fit.rms() <= current.fit.rms() {
-                current = p;
+    confirmed
+}
+
+/// Each cause with the effects that explain the validation data as well in its place.
+fn confounded_groups(current: &SetFit, confirmed: &[(usize, Effect, SetFit)]) -> Vec<Vec<String>> {
+    let mut confounded = Vec::new();
+    for (k, e) in current.effects.iter().enumerate() {
+        let mut group = vec![e.name().to_string()];
+        for (kk, a, f) in confirmed {
+            let replay::ComparedRms {
+                reference: now,
+                candidate: alt,
+            } = replay::compare(&current.validation, &f.validation);
+            // Confounded: within the tolerance, or not significantly worse (below the
+            // noise, relative differences mean nothing).
+            if *kk == k
+                && (alt <= CONFOUND_TOLERANCE * now || !significant(alt, now))
+                && !group.contains(&a.name().to_string())
+            {
+                group.push(a.name().to_string());
             }
         }
-        debug(started, d.replays_done(), "polished");
+        if group.len() > 1 {
+            confounded.push(group);
+        }
     }
-    Search {
-        singles,
-        result: current,
-        confounded,
-    }
+    confounded
 }
