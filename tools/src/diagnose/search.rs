@@ -452,45 +452,10 @@ impl Diagnoser {
             .into_iter()
             .map(|(_, p)| p)
             .collect();
-        // Start values: the effect's fit alone, unless a parameter ended on a bound there
-        // (then it carries no shape information; the generic start is used).
-        let starts: Vec<f64> = specs
-            .iter()
-            .enumerate()
-            .map(|(i, p)| match hint {
-                Some(h) if h[i] > p.min && h[i] < p.max => h[i],
-                _ => p.start,
-            })
-            .collect();
-        let neutral = a.neutral(&model, rail, &starts);
+        let neutral = a.neutral(&model, rail, &probe_starts(&specs, hint));
         let mut effects = s.effects.clone();
         effects.push(a);
-        // Directions to probe: each parameter; for a friction factor that is absent
-        // (n = 0), the slope in m is zero, so the factor's amplitude is probed at three
-        // decay constants instead (m/3, m, 3m; m from its fit alone).
-        let factor_absent =
-            matches!(a, Effect::FrictionSpeed | Effect::FrictionTemperature) && neutral[0] == 0.0;
-        let directions: Vec<Vec<f64>> = if factor_absent {
-            let m = neutral[1].max(1e-6);
-            [m / 3.0, m, 3.0 * m]
-                .iter()
-                .map(|&mm| vec![FD_STEP * specs[0].scale * 5.0, mm - m])
-                .collect()
-        } else {
-            (0..specs.len())
-                .map(|i| {
-                    let sp = &specs[i];
-                    let h = if neutral[i] + FD_STEP * sp.scale > sp.max {
-                        -FD_STEP
-                    } else {
-                        FD_STEP
-                    };
-                    let mut d = vec![0.0; specs.len()];
-                    d[i] = h * sp.scale;
-                    d
-                })
-                .collect()
-        };
+        let (factor_absent, directions) = probe_directions(a, &neutral, &specs);
         let mut xs0 = s.x.clone();
         xs0.push(neutral.clone());
         let r0 = self.residuals(&effects, &xs0)?;
@@ -553,6 +518,49 @@ pub const CANDIDATES_PER_STEP: usize = 2;
 /// The best of several fits of the same step: the lowest validation error, unless a fit
 /// with fewer parameters explains the data as well (within [`PARSIMONY_TOLERANCE`]; then
 /// the simplest such): a friction factor that does not decay is a friction level.
+/// Start values of a probed effect: its fit alone (`hint`), unless a parameter ended on a
+/// bound there (then it carries no shape information; the generic start is used).
+fn probe_starts(specs: &[lsq::ParamSpec], hint: Option<&[f64]>) -> Vec<f64> {
+    specs
+        .iter()
+        .enumerate()
+        .map(|(i, p)| match hint {
+            Some(h) if h[i] > p.min && h[i] < p.max => h[i],
+            _ => p.start,
+        })
+        .collect()
+}
+
+/// Directions to probe effect `a` at `neutral`: each parameter; for a friction factor that
+/// is absent (n = 0), the slope in m is zero, so the factor's amplitude is probed at three
+/// decay constants instead (m/3, m, 3m; m from its fit alone). With whether it is absent.
+fn probe_directions(a: Effect, neutral: &[f64], specs: &[lsq::ParamSpec]) -> (bool, Vec<Vec<f64>>) {
+    let factor_absent =
+        matches!(a, Effect::FrictionSpeed | Effect::FrictionTemperature) && neutral[0] == 0.0;
+    let directions: Vec<Vec<f64>> = if factor_absent {
+        let m = neutral[1].max(1e-6);
+        [m / 3.0, m, 3.0 * m]
+            .iter()
+            .map(|&mm| vec![FD_STEP * specs[0].scale * 5.0, mm - m])
+            .collect()
+    } else {
+        (0..specs.len())
+            .map(|i| {
+                let sp = &specs[i];
+                let h = if neutral[i] + FD_STEP * sp.scale > sp.max {
+                    -FD_STEP
+                } else {
+                    FD_STEP
+                };
+                let mut d = vec![0.0; specs.len()];
+                d[i] = h * sp.scale;
+                d
+            })
+            .collect()
+    };
+    (factor_absent, directions)
+}
+
 fn pick(trials: Vec<SetFit>) -> Option<SetFit> {
     let best_idx =
         (0..trials.len()).min_by(|&a, &b| trials[a].val().total_cmp(&trials[b].val()))?;
