@@ -27,16 +27,16 @@ pub struct BenchArgs {
     #[arg(long)]
     pub json: bool,
     /// Plant steps per timed repetition.
-    #[arg(long, default_value_t = 300_000, value_parser = crate::cli::steps)]
+    #[arg(long, default_value_t = 300_000, value_parser = crate::flags::steps)]
     pub steps: usize,
     /// Repetitions (the best is reported).
-    #[arg(long, default_value_t = 5, value_parser = crate::cli::repeat)]
+    #[arg(long, default_value_t = 5, value_parser = crate::flags::repeat)]
     pub repeat: usize,
     /// Instead of the plant: time and peak memory of reading this measured file.
     #[arg(long)]
     pub reader: Option<std::path::PathBuf>,
     /// With --reader: first write a synthetic run log of about this many MB to the file.
-    #[arg(long, requires = "reader", value_parser = crate::cli::log_mb)]
+    #[arg(long, requires = "reader", value_parser = crate::flags::log_mb)]
     pub write_log_mb: Option<f64>,
 }
 

@@ -48,7 +48,7 @@ pub struct DecodeArgs {
     #[arg(short, long)]
     pub out: PathBuf,
     /// Decode only this run of the log (1 = the first).
-    #[arg(long, value_parser = crate::cli::run_index)]
+    #[arg(long, value_parser = crate::flags::run_index)]
     pub run: Option<usize>,
 }
 

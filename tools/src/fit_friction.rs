@@ -180,27 +180,7 @@ pub fn fit_points(v: &[f64], t: &[f64], mu: &[f64], c: f64) -> Result<FrictionFi
     let mu_min = mu.iter().cloned().fold(f64::INFINITY, f64::min);
     let v_max = v.iter().cloned().fold(0.0f64, f64::max).max(1.0);
     let t_max = t.iter().cloned().fold(0.0f64, f64::max).max(1.0);
-    // Starts: decay constants spread over the data's ranges (1/m between a tenth and
-    // twice the range); the best fit wins.
-    let mut best: Option<lsq::Fit> = None;
-    for kv in [0.3, 1.0, 3.0] {
-        for kt in [0.3, 1.0, 3.0] {
-            let m_v = kv / v_max * 3.0;
-            let m_t = kt / t_max * 3.0;
-            let specs = [
-                ParamSpec::new(mu_min / c, 0.05, 1e-3, 2.0),
-                ParamSpec::new(0.1, 0.1, 0.0, 10.0),
-                ParamSpec::new(m_v, m_v, 0.0, 10.0),
-                ParamSpec::new(0.1, 0.1, 0.0, 10.0),
-                ParamSpec::new(m_t, m_t, 0.0, 10.0),
-            ];
-            if let Some(f) = lsq::fit(&model, &specs, 1e-6, 600, 1e-10, 1.0) {
-                if best.as_ref().is_none_or(|b| f.ssr < b.ssr) {
-                    best = Some(f);
-                }
-            }
-        }
-    }
+    let best = best_of_starts(&model, mu_min / c, v_max, t_max);
     let Some(best) = best else {
         bail!("the fit failed from every start")
     };
@@ -211,42 +191,7 @@ pub fn fit_points(v: &[f64], t: &[f64], mu: &[f64], c: f64) -> Result<FrictionFi
     for (i, name) in NAMES.iter().enumerate() {
         ci95.insert(name.to_string(), [x[i] - half[i], x[i] + half[i]]);
     }
-    let mut correlated = Vec::new();
-    for a in 0..5 {
-        for b in a + 1..5 {
-            let r = correlation[a * 5 + b];
-            if r.abs() > 0.95 || r.is_nan() {
-                correlated.push((NAMES[a].to_string(), NAMES[b].to_string(), r));
-            }
-        }
-    }
-    if !correlated.is_empty() {
-        warnings.push(format!(
-            "parameters not separately identifiable from these points (|correlation| > 0.95: {}); \
-             add points at higher friction speed / disc temperature",
-            correlated
-                .iter()
-                .map(|(a, b, r)| format!("{a}-{b} {r:.3}"))
-                .collect::<Vec<_>>()
-                .join(", ")
-        ));
-    }
-    if half.iter().any(|h| !h.is_finite()) {
-        warnings
-            .push("some confidence intervals are undefined (singular information matrix)".into());
-    }
-    let decay_v = x[2] * v_max;
-    let decay_t = x[4] * t_max;
-    if decay_v < 2.0 {
-        warnings.push(format!(
-            "the speed factor decays by only e^-{decay_v:.1} over the points' speed range: mu_d0 and n_v are confounded"
-        ));
-    }
-    if decay_t < 2.0 {
-        warnings.push(format!(
-            "the temperature factor decays by only e^-{decay_t:.1} over the points' temperature range: mu_d0 and n_t are confounded"
-        ));
-    }
+    let correlated = identifiability(x, &half, &correlation, v_max, t_max, &mut warnings);
     let rms = (best.ssr / n as f64).sqrt();
     Ok(FrictionFit {
         mu_d0: x[0],
@@ -264,6 +209,85 @@ pub fn fit_points(v: &[f64], t: &[f64], mu: &[f64], c: f64) -> Result<FrictionFi
         correlated,
         wall_s: started.elapsed().as_secs_f64(),
     })
+}
+
+/// The best Levenberg-Marquardt fit of Eq (2) from starts whose decay constants spread over
+/// the data's ranges (1/m between a tenth and twice the range; `v_max` m/s, `t_max` degC).
+fn best_of_starts(
+    model: &(dyn Fn(&[f64]) -> Option<Vec<f64>> + Sync),
+    mu_d0_start: f64,
+    v_max: f64,
+    t_max: f64,
+) -> Option<lsq::Fit> {
+    let mut best: Option<lsq::Fit> = None;
+    for kv in [0.3, 1.0, 3.0] {
+        for kt in [0.3, 1.0, 3.0] {
+            let m_v = kv / v_max * 3.0;
+            let m_t = kt / t_max * 3.0;
+            let specs = [
+                ParamSpec::new(mu_d0_start, 0.05, 1e-3, 2.0),
+                ParamSpec::new(0.1, 0.1, 0.0, 10.0),
+                ParamSpec::new(m_v, m_v, 0.0, 10.0),
+                ParamSpec::new(0.1, 0.1, 0.0, 10.0),
+                ParamSpec::new(m_t, m_t, 0.0, 10.0),
+            ];
+            if let Some(f) = lsq::fit(model, &specs, 1e-6, 600, 1e-10, 1.0) {
+                if best.as_ref().is_none_or(|b| f.ssr < b.ssr) {
+                    best = Some(f);
+                }
+            }
+        }
+    }
+    best
+}
+
+/// The pairs of parameters the points cannot separate, with warnings for them, for
+/// undefined intervals and for factors that hardly decay over the points' ranges.
+fn identifiability(
+    x: &[f64],
+    half: &[f64],
+    correlation: &[f64],
+    v_max: f64,
+    t_max: f64,
+    warnings: &mut Vec<String>,
+) -> Vec<(String, String, f64)> {
+    let mut correlated = Vec::new();
+    for a in 0..5 {
+        for b in a + 1..5 {
+            let r = correlation[a * 5 + b];
+            if r.abs() > 0.95 || r.is_nan() {
+                correlated.push((NAMES[a].to_string(), NAMES[b].to_string(), r));
+            }
+        }
+    }
+    if !correlated.is_empty() {
+        warnings.push(format!(
+            "parameters not separately identifiable from these points (|correlation| > 0.95: {}); \
+         add points at higher friction speed / disc temperature",
+            correlated
+                .iter()
+                .map(|(a, b, r)| format!("{a}-{b} {r:.3}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
+    if half.iter().any(|h| !h.is_finite()) {
+        warnings
+            .push("some confidence intervals are undefined (singular information matrix)".into());
+    }
+    let decay_v = x[2] * v_max;
+    let decay_t = x[4] * t_max;
+    if decay_v < 2.0 {
+        warnings.push(format!(
+        "the speed factor decays by only e^-{decay_v:.1} over the points' speed range: mu_d0 and n_v are confounded"
+    ));
+    }
+    if decay_t < 2.0 {
+        warnings.push(format!(
+        "the temperature factor decays by only e^-{decay_t:.1} over the points' temperature range: mu_d0 and n_t are confounded"
+    ));
+    }
+    correlated
 }
 
 /// `hils fit-friction`.

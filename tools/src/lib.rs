@@ -12,6 +12,7 @@ pub mod cli;
 pub mod decode;
 pub mod diagnose;
 pub mod fit_friction;
+pub mod flags;
 pub mod measured;
 pub mod outputs;
 pub mod params_file;

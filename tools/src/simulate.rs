@@ -72,13 +72,13 @@ pub struct SimulateArgs {
     #[arg(long, value_enum)]
     pub rail: Option<RailArg>,
     /// Initial speed, km/h (default: the scenario's).
-    #[arg(long, value_parser = crate::cli::speed_kmh)]
+    #[arg(long, value_parser = crate::flags::speed_kmh)]
     pub speed_kmh: Option<f64>,
     /// Output directory (created).
     #[arg(long)]
     pub out: PathBuf,
     /// Sample rate of run.csv, Hz (a divisor of the plant rate).
-    #[arg(long, default_value_t = 1000.0, value_parser = crate::cli::sample_rate_hz)]
+    #[arg(long, default_value_t = 1000.0, value_parser = crate::flags::sample_rate_hz)]
     pub sample_rate_hz: f64,
     /// Plant precision (f32 is what the target runs).
     #[arg(long, value_enum, default_value = "f32")]
@@ -225,17 +225,36 @@ fn label(run: &Run) -> &'static str {
 
 /// Draws the paper's Figs 8A, 8B, 9, 10, 11 for `main` with `other` overlaid.
 pub fn draw_figures(dir: &Path, params: &Params, main: &Run, other: &Run) -> Result<Vec<PathBuf>> {
-    let r = params.vehicle.wheel_radius;
-    let mut files = Vec::new();
     let (var, con) = match main.friction {
         FrictionModel::Variable => (main, other),
         FrictionModel::Constant => (other, main),
     };
-    let series_of = |run: &Run, f: &dyn Fn(&crate::scenario::Sample) -> f64| -> Vec<(f64, f64)> {
-        run.samples.iter().map(|s| (s.t_s, f(s))).collect()
-    };
+    let files: Vec<PathBuf> = [
+        "fig8a_wheel_speeds.svg",
+        "fig8b_axle_loads.svg",
+        "fig9_mu_d.svg",
+        "fig10_brake_force_ws4.svg",
+        "fig11_adhesion_creepage.svg",
+    ]
+    .iter()
+    .map(|f| dir.join(f))
+    .collect();
+    fig8a(&files[0], params.vehicle.wheel_radius, main)?;
+    fig8b(&files[1], main)?;
+    fig9(&files[2], params, var)?;
+    fig10(&files[3], var, con)?;
+    // Fig 11: adhesion coefficient vs creepage at ~3 s, with the anti-skid limits.
+    fig11(&files[4], params, main.rail, var, con)?;
+    Ok(files)
+}
 
-    // Fig 8A: circumferential wheel speeds.
+/// A quantity of every sample of `run` against time.
+fn series_of(run: &Run, f: &dyn Fn(&crate::scenario::Sample) -> f64) -> Vec<(f64, f64)> {
+    run.samples.iter().map(|s| (s.t_s, f(s))).collect()
+}
+
+/// Fig 8A: circumferential wheel speeds (`r`: wheel radius, m).
+fn fig8a(path: &Path, r: f64, main: &Run) -> Result<()> {
     let mut chart = Chart::new(
         &format!("Fig 8A: wheel speeds during EB ({})", label(main)),
         "time, s",
@@ -255,10 +274,11 @@ pub fn draw_figures(dir: &Path, params: &Params, main: &Run, other: &Run) -> Res
             j,
         ));
     }
-    files.push(dir.join("fig8a_wheel_speeds.svg"));
-    chart.save_svg(files.last().unwrap())?;
+    chart.save_svg(path)
+}
 
-    // Fig 8B: axle loads.
+/// Fig 8B: axle loads.
+fn fig8b(path: &Path, main: &Run) -> Result<()> {
     let mut chart = Chart::new(
         &format!("Fig 8B: axle loads during EB ({})", label(main)),
         "time, s",
@@ -272,10 +292,11 @@ pub fn draw_figures(dir: &Path, params: &Params, main: &Run, other: &Run) -> Res
             j,
         ));
     }
-    files.push(dir.join("fig8b_axle_loads.svg"));
-    chart.save_svg(files.last().unwrap())?;
+    chart.save_svg(path)
+}
 
-    // Fig 9: friction coefficient.
+/// Fig 9: friction coefficient of the variable run up to its stop, and mu_d0.
+fn fig9(path: &Path, params: &Params, var: &Run) -> Result<()> {
     let stop = var.summary.stop_time_s.unwrap_or(f64::INFINITY);
     let mut chart = Chart::new("Fig 9: disc-pad friction during EB", "time, s", "mu_d");
     chart.series.push(Series::new(
@@ -296,10 +317,11 @@ pub fn draw_figures(dir: &Path, params: &Params, main: &Run, other: &Run) -> Res
         2,
     ));
     chart.legend_lower_right = true;
-    files.push(dir.join("fig9_mu_d.svg"));
-    chart.save_svg(files.last().unwrap())?;
+    chart.save_svg(path)
+}
 
-    // Fig 10: tangential brake force on the disc of wheelset 4.
+/// Fig 10: tangential brake force on the disc of wheelset 4.
+fn fig10(path: &Path, var: &Run, con: &Run) -> Result<()> {
     let mut chart = Chart::new(
         "Fig 10: brake force on the disc, wheelset 4",
         "time, s",
@@ -317,13 +339,7 @@ pub fn draw_figures(dir: &Path, params: &Params, main: &Run, other: &Run) -> Res
         Style::Dotted,
         2,
     ));
-    files.push(dir.join("fig10_brake_force_ws4.svg"));
-    chart.save_svg(files.last().unwrap())?;
-
-    // Fig 11: adhesion coefficient vs creepage at ~3 s, with the anti-skid limits.
-    files.push(dir.join("fig11_adhesion_creepage.svg"));
-    fig11(files.last().unwrap(), params, main.rail, var, con)?;
-    Ok(files)
+    chart.save_svg(path)
 }
 
 /// The adhesion a wheelset needs not to slide (the paper's "anti-skid limit") at sample

@@ -1,9 +1,10 @@
 //! Every numeric flag of `hils` refuses 0 (where it means nothing), negatives, NaN, inf,
 //! huge values and non-numbers with an error naming the flag, before anything runs or is
-//! written (issue 12 item 2). Property test over each flag of `hils::cli::FLAGS`.
+//! written (issue 12 item 2). Property test over each flag of `hils::flags::FLAGS`.
 
 use clap::Parser;
-use hils::cli::{Cli, FLAGS, FlagRange};
+use hils::cli::Cli;
+use hils::flags::{FLAGS, FlagRange};
 use proptest::prelude::*;
 
 /// A command line that sets `flag` to `value` (and whatever else the command needs). A
@@ -99,7 +100,7 @@ fn zero_is_refused_by_every_flag_and_good_values_pass() {
         );
     }
     // Counts take whole numbers only.
-    rejected(&hils::cli::REPEAT, "2.5").unwrap();
+    rejected(&hils::flags::REPEAT, "2.5").unwrap();
 }
 
 /// The binary: a bad flag exits with clap's usage error (2), prints the flag, and creates
@@ -168,5 +169,8 @@ fn rig_values_reach_the_command_and_bad_script_values_name_the_value() {
 #[test]
 fn rig_start_speed_range_is_the_wheel_speed_frames_range() {
     let top = hils::decode::rig_core::can::WHEEL_SPEED_MAX_KMH as f64;
-    assert!((hils::cli::RIG_SPEED_KMH.max - top).abs() < 0.005, "{top}");
+    assert!(
+        (hils::flags::RIG_SPEED_KMH.max - top).abs() < 0.005,
+        "{top}"
+    );
 }

@@ -380,28 +380,16 @@ impl BinSums {
     }
 }
 
-impl Prepared {
-    /// Prepares a run for replays at plant step `dt` with the baseline parameters
-    /// (`rail` from the file's metadata, else the baseline's scenario rail).
-    pub fn new(log: &RunLog, baseline: &Params, dt: f64) -> Prepared {
-        let t0 = log.t_s[0];
-        let t: Vec<f64> = log.t_s.iter().map(|x| x - t0).collect();
-        let n = t.len();
-        let duration = *t.last().unwrap_or(&0.0);
-        let mut notes = Vec::new();
-        let (rail, rail_from_metadata) = match log.rail {
-            Some(r) => (r, true),
-            None => {
-                notes.push(format!(
-                    "no `rail` metadata: the baseline scenario's rail ({:?}) is used",
-                    Rail::default()
-                ));
-                (Rail::default(), false)
-            }
-        };
-        let r_w = baseline.vehicle.wheel_radius;
+/// The measured brake inputs of a run, gaps filled: clamp forces or cylinder pressures
+/// per wheelset, and the pressures logged beside clamp forces (for the Eq 1 check).
+struct BrakeInputs {
+    kind: [InputKind; WHEELSETS],
+    input: [Vec<f64>; WHEELSETS],
+    pressure_obs: [Option<Vec<f64>>; WHEELSETS],
+}
 
-        // Inputs.
+impl BrakeInputs {
+    fn new(log: &RunLog, t: &[f64], notes: &mut Vec<String>) -> Self {
         let mut input_kind = [InputKind::Pressure; WHEELSETS];
         let mut input: [Vec<f64>; WHEELSETS] = Default::default();
         let mut pressure_obs: [Option<Vec<f64>>; WHEELSETS] = Default::default();
@@ -417,7 +405,7 @@ impl Prepared {
                 notes.push(format!("{name}: no value at all; the input is taken as 0"));
                 x.iter_mut().for_each(|v| *v = 0.0);
             }
-            let filled = fill_gaps(&t, &mut x);
+            let filled = fill_gaps(t, &mut x);
             if filled > 0 {
                 notes.push(format!(
                     "{name}: {filled} empty cell(s) of the brake input filled by linear interpolation"
@@ -425,166 +413,173 @@ impl Prepared {
             }
             input[j] = x;
             if kind == InputKind::ClampForce {
-                if let Some(p) = &log.p_cyl_pa[j] {
-                    let mut p = p.clone();
-                    if p.iter().any(|v| v.is_finite()) {
-                        let filled = fill_gaps(&t, &mut p);
-                        if filled > 0 {
-                            notes.push(format!(
-                                "p_cyl{}_pa: {filled} empty cell(s) filled by interpolation for the pressure-to-pad-force check",
-                                j + 1
-                            ));
-                        }
-                        pressure_obs[j] = Some(p);
-                    }
-                }
+                pressure_obs[j] = pressure_beside_clamp(log, t, j, notes);
             }
         }
-
-        let disc_temp_input: [Option<Vec<f64>>; WHEELSETS] = std::array::from_fn(|j| {
-            let mut x = log.t_disc_c[j].clone()?;
-            let known = x.iter().filter(|v| v.is_finite()).count();
-            // Too sparse to drive the friction (fewer than one reading per second).
-            if (known as f64) < duration.max(1.0) {
-                return None;
-            }
-            fill_gaps(&t, &mut x);
-            Some(x)
-        });
-        if disc_temp_input.iter().any(|x| x.is_some()) {
-            notes.push(
-                "t_disc logged: Eq (2) is evaluated at the measured disc temperature (empty cells interpolated); the thermal model is checked on the disc-thermal link".to_string(),
-            );
+        BrakeInputs {
+            kind: input_kind,
+            input,
+            pressure_obs,
         }
+    }
 
-        // Bins and validation blocks.
+    /// The clamp force per sample, mean of the wheelsets (pressures through Eq 1), N.
+    fn mean_clamp_force(&self, baseline: &Params, n: usize) -> Vec<f64> {
+        let caliper = Caliper::<f64>::new(&baseline.brake);
+        (0..n)
+            .map(|i| {
+                (0..WHEELSETS)
+                    .map(|j| match self.kind[j] {
+                        InputKind::ClampForce => self.input[j][i],
+                        InputKind::Pressure => caliper.clamp_force(self.input[j][i]),
+                    })
+                    .sum::<f64>()
+                    / WHEELSETS as f64
+            })
+            .collect()
+    }
+}
+
+/// The cylinder pressure of wheelset `j` logged beside its clamp force, gaps filled.
+fn pressure_beside_clamp(
+    log: &RunLog,
+    t: &[f64],
+    j: usize,
+    notes: &mut Vec<String>,
+) -> Option<Vec<f64>> {
+    let mut p = log.p_cyl_pa[j].clone()?;
+    if !p.iter().any(|v| v.is_finite()) {
+        return None;
+    }
+    let filled = fill_gaps(t, &mut p);
+    if filled > 0 {
+        notes.push(format!(
+            "p_cyl{}_pa: {filled} empty cell(s) filled by interpolation for the pressure-to-pad-force check",
+            j + 1
+        ));
+    }
+    Some(p)
+}
+
+/// Measured disc temperatures that drive Eq (2) (at least one reading per second).
+fn disc_temp_inputs(
+    log: &RunLog,
+    t: &[f64],
+    duration: f64,
+    notes: &mut Vec<String>,
+) -> [Option<Vec<f64>>; WHEELSETS] {
+    let disc_temp_input: [Option<Vec<f64>>; WHEELSETS] = std::array::from_fn(|j| {
+        let mut x = log.t_disc_c[j].clone()?;
+        let known = x.iter().filter(|v| v.is_finite()).count();
+        // Too sparse to drive the friction (fewer than one reading per second).
+        if (known as f64) < duration.max(1.0) {
+            return None;
+        }
+        fill_gaps(t, &mut x);
+        Some(x)
+    });
+    if disc_temp_input.iter().any(|x| x.is_some()) {
+        notes.push(
+            "t_disc logged: Eq (2) is evaluated at the measured disc temperature (empty cells interpolated); the thermal model is checked on the disc-thermal link".to_string(),
+        );
+    }
+    disc_temp_input
+}
+
+/// The comparison bins of a run and its validation blocks.
+struct Bins {
+    bin_s: f64,
+    n_bins: usize,
+    validation: Vec<bool>,
+    bin_time: Vec<f64>,
+}
+
+impl Bins {
+    fn new(log: &RunLog, duration: f64) -> Self {
         let bin_s = bin_width(log.median_interval_s());
         let n_bins = ((duration / bin_s).floor() as usize + 1).max(1);
-        let bin_of = |ti: f64| ((ti / bin_s) as usize).min(n_bins - 1);
-        let validation: Vec<bool> = (0..n_bins)
-            .map(|b| ((b as f64 * bin_s / VALIDATION_BLOCK_S) as usize) % 3 == 2)
-            .collect();
-        let bin_time: Vec<f64> = (0..n_bins).map(|b| (b as f64 + 0.5) * bin_s).collect();
+        Bins {
+            bin_s,
+            n_bins,
+            validation: (0..n_bins)
+                .map(|b| ((b as f64 * bin_s / VALIDATION_BLOCK_S) as usize) % 3 == 2)
+                .collect(),
+            bin_time: (0..n_bins).map(|b| (b as f64 + 0.5) * bin_s).collect(),
+        }
+    }
 
-        let bin_means = |x: &[f64]| -> Vec<f64> {
-            let sums = BinSums::new(&t[..n], x, n_bins, bin_of);
-            (0..n_bins).map(|b| sums.mean(b)).collect()
-        };
-        let v_bin = bin_means(&log.v_ref_mps);
-        let wheel_speed: [Vec<f64>; WHEELSETS] =
-            std::array::from_fn(|j| log.omega_radps[j].iter().map(|w| w * r_w).collect());
-        let wheel_bin: [Vec<f64>; WHEELSETS] = std::array::from_fn(|j| bin_means(&wheel_speed[j]));
+    fn bin_of(&self, ti: f64) -> usize {
+        ((ti / self.bin_s) as usize).min(self.n_bins - 1)
+    }
 
-        // Initial speed: the median of the intercepts of v_ref and the wheel speeds (the
-        // wheels roll freely before the brakes act; a radar's slow error or one sensor's
-        // offset does not move the median).
-        let v0 = {
-            let mut v: Vec<f64> = std::iter::once(initial_speed(&t, &log.v_ref_mps))
-                .chain(wheel_speed.iter().map(|w| initial_speed(&t, w)))
-                .filter(|x| x.is_finite())
-                .collect();
-            v.sort_by(f64::total_cmp);
-            v[v.len() / 2]
-        };
+    fn sums(&self, t: &[f64], x: &[f64]) -> BinSums {
+        BinSums::new(t, x, self.n_bins, |ti| self.bin_of(ti))
+    }
 
-        // Channels.
+    /// Bin means of the finite samples of `x`; NaN in empty bins.
+    fn means(&self, t: &[f64], x: &[f64]) -> Vec<f64> {
+        let sums = self.sums(t, x);
+        (0..self.n_bins).map(|b| sums.mean(b)).collect()
+    }
+}
+
+/// Initial speed: the median of the intercepts of v_ref and the wheel speeds (the wheels
+/// roll freely before the brakes act; a radar's slow error or one sensor's offset does not
+/// move the median), m/s.
+fn initial_speed_median(t: &[f64], v_ref: &[f64], wheel_speed: &[Vec<f64>; WHEELSETS]) -> f64 {
+    let mut v: Vec<f64> = std::iter::once(initial_speed(t, v_ref))
+        .chain(wheel_speed.iter().map(|w| initial_speed(t, w)))
+        .filter(|x| x.is_finite())
+        .collect();
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Measured slip per bin that weighs a wheel speed less while the wheel slides. A slide
+/// is a transient: the slip above its running 20 % quantile over +-2.5 s counts (a slowly
+/// drifting offset between v_ref and the wheels, e.g. a speed-sensor drift, is not a slide
+/// and keeps the wheel speeds' full weight; repeated WSP cycles still leave the quantile at
+/// the rolling wheel's slip).
+fn slide_inflation(v_bin: &[f64], wheel_bin: &[f64], bin_s: f64) -> Vec<f64> {
+    let slip: Vec<f64> = v_bin.iter().zip(wheel_bin).map(|(v, w)| v - w).collect();
+    let slow = running_quantile(&slip, ((2.5 / bin_s) as usize).max(1), 0.2);
+    slip.iter()
+        .zip(&slow)
+        .map(|(s, m)| {
+            let transient = if m.is_finite() { s.min(s - m) } else { *s };
+            if transient.is_finite() && transient > 0.3 {
+                transient
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// What the compared channels of a run are built from.
+struct ChannelSetup<'a> {
+    t: &'a [f64],
+    bins: &'a Bins,
+    v_bin: &'a [f64],
+    wheel_bin: &'a [Vec<f64>; WHEELSETS],
+    v0: f64,
+}
+
+impl ChannelSetup<'_> {
+    /// Every compared channel of the log, in the order of [`Quantity`]'s groups.
+    fn channels(
+        &self,
+        log: &RunLog,
+        wheel_speed: &[Vec<f64>; WHEELSETS],
+        pressure_obs: &[Option<Vec<f64>>; WHEELSETS],
+    ) -> Vec<Channel> {
         let mut channels = Vec::new();
         let mut add = |quantity: Quantity, x: &[f64], slip_inflate: Option<&[f64]>| {
-            let noise = noise_sigma(&t, x);
-            // Speeds: noise that grows with the speed (sensor's relative error).
-            let level_noise = if quantity.group() == Group::Speeds {
-                noise_by_level(&t, x)
-            } else {
-                (0.0, 0.0)
-            };
-            let BinSums {
-                sum,
-                t_sum: tsum,
-                count: cnt,
-            } = BinSums::new(&t[..n], x, n_bins, bin_of);
-            // A brake force at standstill is static friction (any value up to the limit
-            // holds the wheel): compared only while the wheelset turns.
-            let turning = |b: usize| match quantity {
-                Quantity::BrakeForce(j) => {
-                    let w = wheel_bin[j][b];
-                    !(w.is_finite() && w < STANDSTILL_MPS && v_bin[b].abs() < STANDSTILL_MPS)
-                }
-                _ => true,
-            };
-            let bins: Vec<usize> = (0..n_bins).filter(|&b| cnt[b] > 0 && turning(b)).collect();
-            if bins.is_empty() {
-                return;
-            }
-            let measured: Vec<f64> = bins.iter().map(|&b| sum[b] / cnt[b] as f64).collect();
-            let scale = measured.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-            let floor = quantity.group().floor(scale);
-            // Speeds: a relative resolution of the integrated deceleration too.
-            let speed_floor = |b: usize| -> f64 {
-                let lost = v0 - v_bin[b];
-                if quantity.group() == Group::Speeds && lost.is_finite() {
-                    floor.max(SPEED_RESOLUTION * lost)
-                } else {
-                    floor
-                }
-            };
-            // Noise of the bin means seen directly (catches correlated sensor noise that
-            // the sample-to-sample estimate divided by sqrt(n) would underrate).
-            let bin_t: Vec<f64> = bins.iter().map(|&b| tsum[b] / cnt[b] as f64).collect();
-            let bin_noise = noise_sigma(&bin_t, &measured);
-            let bin_level = if quantity.group() == Group::Speeds {
-                noise_by_level(&bin_t, &measured)
-            } else {
-                (0.0, 0.0)
-            };
-            let at_level = |(a, r): (f64, f64), x: f64| (a * a + (r * x).powi(2)).sqrt();
-            let sigma = bins
-                .iter()
-                .zip(&measured)
-                .map(|(&b, &m)| {
-                    let sample = noise.max(at_level(level_noise, m));
-                    let s = (sample / (cnt[b] as f64).sqrt())
-                        .max(bin_noise.max(at_level(bin_level, m)))
-                        .max(speed_floor(b));
-                    match slip_inflate {
-                        Some(slip) if slip[b].is_finite() => {
-                            let extra = 0.1 * slip[b].abs();
-                            (s * s + extra * extra).sqrt()
-                        }
-                        _ => s,
-                    }
-                })
-                .collect();
-            channels.push(Channel {
-                quantity,
-                times: bins.iter().map(|&b| tsum[b] / cnt[b] as f64).collect(),
-                bins,
-                measured,
-                sigma,
-                noise,
-                scale,
-            });
+            channels.extend(self.channel(quantity, x, slip_inflate));
         };
         add(Quantity::VRef, &log.v_ref_mps, None);
         for j in 0..WHEELSETS {
-            // Measured slip per bin: wheel speed weighs less while the wheel slides. A
-            // slide is a transient: the slip above its running 20 % quantile over +-2.5 s
-            // counts (a slowly drifting offset between v_ref and the wheels, e.g. a
-            // speed-sensor drift, is not a slide and keeps the wheel speeds' full weight;
-            // repeated WSP cycles still leave the quantile at the rolling wheel's slip).
-            let slip: Vec<f64> = (0..n_bins).map(|b| v_bin[b] - wheel_bin[j][b]).collect();
-            let slow = running_quantile(&slip, ((2.5 / bin_s) as usize).max(1), 0.2);
-            let inflate: Vec<f64> = slip
-                .iter()
-                .zip(&slow)
-                .map(|(s, m)| {
-                    let transient = if m.is_finite() { s.min(s - m) } else { *s };
-                    if transient.is_finite() && transient > 0.3 {
-                        transient
-                    } else {
-                        0.0
-                    }
-                })
-                .collect();
+            let inflate = slide_inflation(self.v_bin, &self.wheel_bin[j], self.bins.bin_s);
             add(Quantity::WheelSpeed(j), &wheel_speed[j], Some(&inflate));
         }
         for j in 0..WHEELSETS {
@@ -612,67 +607,175 @@ impl Prepared {
         if let Some(a) = &log.a_x_mps2 {
             add(Quantity::Accel, a, None);
         }
+        channels
+    }
 
-        let disc_temp0 = {
-            let firsts: Vec<f64> = log
-                .t_disc_c
-                .iter()
-                .flatten()
-                .filter_map(|c| {
-                    let k: Vec<f64> = c
-                        .iter()
-                        .take(10)
-                        .filter(|x| x.is_finite())
-                        .copied()
-                        .collect();
-                    (!k.is_empty()).then(|| k.iter().sum::<f64>() / k.len() as f64)
-                })
-                .collect();
-            (!firsts.is_empty()).then(|| firsts.iter().sum::<f64>() / firsts.len() as f64)
+    /// One compared channel: bin means of `x` with their noise (None: no bin to compare).
+    fn channel(
+        &self,
+        quantity: Quantity,
+        x: &[f64],
+        slip_inflate: Option<&[f64]>,
+    ) -> Option<Channel> {
+        let (t, v_bin, wheel_bin, v0) = (self.t, self.v_bin, self.wheel_bin, self.v0);
+        let noise = noise_sigma(t, x);
+        // Speeds: noise that grows with the speed (sensor's relative error).
+        let level_noise = if quantity.group() == Group::Speeds {
+            noise_by_level(t, x)
+        } else {
+            (0.0, 0.0)
         };
-
-        let wsp_any = std::array::from_fn(|j| {
-            log.wsp[j]
-                .as_ref()
-                .is_some_and(|w| w.iter().any(|&x| x == 1.0))
-        });
-        let wsp_logged = log.wsp.iter().any(|w| w.is_some());
-        let caliper = Caliper::<f64>::new(&baseline.brake);
-        let clamp_samples: Vec<f64> = (0..n)
-            .map(|i| {
-                (0..WHEELSETS)
-                    .map(|j| match input_kind[j] {
-                        InputKind::ClampForce => input[j][i],
-                        InputKind::Pressure => caliper.clamp_force(input[j][i]),
-                    })
-                    .sum::<f64>()
-                    / WHEELSETS as f64
-            })
+        let BinSums {
+            sum,
+            t_sum: tsum,
+            count: cnt,
+        } = self.bins.sums(t, x);
+        // A brake force at standstill is static friction (any value up to the limit
+        // holds the wheel): compared only while the wheelset turns.
+        let turning = |b: usize| match quantity {
+            Quantity::BrakeForce(j) => {
+                let w = wheel_bin[j][b];
+                !(w.is_finite() && w < STANDSTILL_MPS && v_bin[b].abs() < STANDSTILL_MPS)
+            }
+            _ => true,
+        };
+        let bins: Vec<usize> = (0..self.bins.n_bins)
+            .filter(|&b| cnt[b] > 0 && turning(b))
             .collect();
-        let clamp_bin = bin_means(&clamp_samples);
-        let disc_temp_bin = {
-            let cols: Vec<&Vec<f64>> = log.t_disc_c.iter().flatten().collect();
-            if cols.is_empty() {
-                vec![f64::NAN; n_bins]
+        if bins.is_empty() {
+            return None;
+        }
+        let measured: Vec<f64> = bins.iter().map(|&b| sum[b] / cnt[b] as f64).collect();
+        let scale = measured.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let floor = quantity.group().floor(scale);
+        // Speeds: a relative resolution of the integrated deceleration too.
+        let speed_floor = |b: usize| -> f64 {
+            let lost = v0 - v_bin[b];
+            if quantity.group() == Group::Speeds && lost.is_finite() {
+                floor.max(SPEED_RESOLUTION * lost)
             } else {
-                let mean: Vec<f64> = (0..n)
-                    .map(|i| {
-                        let k: Vec<f64> = cols
-                            .iter()
-                            .map(|c| c[i])
-                            .filter(|x| x.is_finite())
-                            .collect();
-                        if k.is_empty() {
-                            f64::NAN
-                        } else {
-                            k.iter().sum::<f64>() / k.len() as f64
-                        }
-                    })
-                    .collect();
-                bin_means(&mean)
+                floor
             }
         };
+        // Noise of the bin means seen directly (catches correlated sensor noise that
+        // the sample-to-sample estimate divided by sqrt(n) would underrate).
+        let bin_t: Vec<f64> = bins.iter().map(|&b| tsum[b] / cnt[b] as f64).collect();
+        let bin_noise = noise_sigma(&bin_t, &measured);
+        let bin_level = if quantity.group() == Group::Speeds {
+            noise_by_level(&bin_t, &measured)
+        } else {
+            (0.0, 0.0)
+        };
+        let at_level = |(a, r): (f64, f64), x: f64| (a * a + (r * x).powi(2)).sqrt();
+        let sigma = bins
+            .iter()
+            .zip(&measured)
+            .map(|(&b, &m)| {
+                let sample = noise.max(at_level(level_noise, m));
+                let s = (sample / (cnt[b] as f64).sqrt())
+                    .max(bin_noise.max(at_level(bin_level, m)))
+                    .max(speed_floor(b));
+                match slip_inflate {
+                    Some(slip) if slip[b].is_finite() => {
+                        let extra = 0.1 * slip[b].abs();
+                        (s * s + extra * extra).sqrt()
+                    }
+                    _ => s,
+                }
+            })
+            .collect();
+        Some(Channel {
+            quantity,
+            times: bin_t,
+            bins,
+            measured,
+            sigma,
+            noise,
+            scale,
+        })
+    }
+}
 
+/// Initial disc temperature: the mean over the logged discs of their first readings, degC.
+fn disc_temp0(log: &RunLog) -> Option<f64> {
+    let firsts: Vec<f64> = log
+        .t_disc_c
+        .iter()
+        .flatten()
+        .filter_map(|c| {
+            let k: Vec<f64> = c
+                .iter()
+                .take(10)
+                .filter(|x| x.is_finite())
+                .copied()
+                .collect();
+            (!k.is_empty()).then(|| k.iter().sum::<f64>() / k.len() as f64)
+        })
+        .collect();
+    (!firsts.is_empty()).then(|| firsts.iter().sum::<f64>() / firsts.len() as f64)
+}
+
+/// Bin means of the mean logged disc temperature (NaN where none is logged), degC.
+fn disc_temp_bin(log: &RunLog, t: &[f64], bins: &Bins) -> Vec<f64> {
+    let cols: Vec<&Vec<f64>> = log.t_disc_c.iter().flatten().collect();
+    if cols.is_empty() {
+        return vec![f64::NAN; bins.n_bins];
+    }
+    let mean: Vec<f64> = (0..t.len())
+        .map(|i| {
+            let k: Vec<f64> = cols
+                .iter()
+                .map(|c| c[i])
+                .filter(|x| x.is_finite())
+                .collect();
+            if k.is_empty() {
+                f64::NAN
+            } else {
+                k.iter().sum::<f64>() / k.len() as f64
+            }
+        })
+        .collect();
+    bins.means(t, &mean)
+}
+
+impl Prepared {
+    /// Prepares a run for replays at plant step `dt` with the baseline parameters
+    /// (`rail` from the file's metadata, else the baseline's scenario rail).
+    pub fn new(log: &RunLog, baseline: &Params, dt: f64) -> Prepared {
+        let t0 = log.t_s[0];
+        let t: Vec<f64> = log.t_s.iter().map(|x| x - t0).collect();
+        let duration = *t.last().unwrap_or(&0.0);
+        let mut notes = Vec::new();
+        let (rail, rail_from_metadata) = match log.rail {
+            Some(r) => (r, true),
+            None => {
+                notes.push(format!(
+                    "no `rail` metadata: the baseline scenario's rail ({:?}) is used",
+                    Rail::default()
+                ));
+                (Rail::default(), false)
+            }
+        };
+        let inputs = BrakeInputs::new(log, &t, &mut notes);
+        let disc_temp_input = disc_temp_inputs(log, &t, duration, &mut notes);
+        let bins = Bins::new(log, duration);
+        let v_bin = bins.means(&t, &log.v_ref_mps);
+        let r_w = baseline.vehicle.wheel_radius;
+        let wheel_speed: [Vec<f64>; WHEELSETS] =
+            std::array::from_fn(|j| log.omega_radps[j].iter().map(|w| w * r_w).collect());
+        let wheel_bin: [Vec<f64>; WHEELSETS] =
+            std::array::from_fn(|j| bins.means(&t, &wheel_speed[j]));
+        let v0 = initial_speed_median(&t, &log.v_ref_mps, &wheel_speed);
+        let channels = ChannelSetup {
+            t: &t,
+            bins: &bins,
+            v_bin: &v_bin,
+            wheel_bin: &wheel_bin,
+            v0,
+        }
+        .channels(log, &wheel_speed, &inputs.pressure_obs);
+        let clamp_bin = bins.means(&t, &inputs.mean_clamp_force(baseline, t.len()));
+        let disc_temp_bin = disc_temp_bin(log, &t, &bins);
         let mut run = Prepared {
             name: log.name(),
             rail,
@@ -681,20 +784,24 @@ impl Prepared {
             t,
             duration,
             v0,
-            disc_temp0,
-            input_kind,
-            input,
-            pressure_obs,
+            disc_temp0: disc_temp0(log),
+            input_kind: inputs.kind,
+            input: inputs.input,
+            pressure_obs: inputs.pressure_obs,
             disc_temp_input,
-            bin_s,
-            n_bins,
-            validation,
+            bin_s: bins.bin_s,
+            n_bins: bins.n_bins,
+            validation: bins.validation,
             channels,
             v_bin,
             wheel_bin,
-            bin_time,
-            wsp_any,
-            wsp_logged,
+            bin_time: bins.bin_time,
+            wsp_any: std::array::from_fn(|j| {
+                log.wsp[j]
+                    .as_ref()
+                    .is_some_and(|w| w.iter().any(|&x| x == 1.0))
+            }),
+            wsp_logged: log.wsp.iter().any(|w| w.is_some()),
             clamp_bin,
             disc_temp_bin,
             notes,
@@ -861,119 +968,12 @@ pub fn replay(run: &Prepared, model: &Model) -> Option<Replay> {
         params.thermal.ambient_rise = td;
     }
     let dt = run.dt;
-    let mut plant = Plant::<f64>::with_step(&params, run.rail, run.v0, dt).ok()?;
     let caliper = Caliper::<f64>::new(&params.brake);
-    let friction = DiscPadFriction::<f64>::new(&params.friction);
-    let measured_temp = params.friction.model == hils_plant::FrictionModel::Variable;
     let lag = lag_gain(dt, model.actuator_lag_s);
-    let r_w = params.vehicle.wheel_radius;
-    let clamp_of = |j: usize, x: f64| -> f64 {
-        let reading = x / model.input_gain[j];
-        match run.input_kind[j] {
-            InputKind::ClampForce => reading,
-            InputKind::Pressure => caliper.clamp_force(reading),
-        }
-    };
-    let at = |x: &[f64], k: usize| -> f64 {
-        let (i, w) = run.step_map[k];
-        let i = i as usize;
-        if i + 1 < x.len() {
-            x[i] + (x[i + 1] - x[i]) * w as f64
-        } else {
-            x[i]
-        }
-    };
-    // Pressure-driven wheelsets: pad force lags the pressure.
-    let mut pad: [f64; WHEELSETS] = std::array::from_fn(|j| clamp_of(j, run.input[j][0]));
-    // Record traces at every step: v, a_x, then per wheelset speed, f_brake, q, t_disc, ... .
-    let steps = run.step_map.len() - 1;
-    let mut trace: Vec<[f64; TRACE]> = Vec::with_capacity(steps + 1);
-    let mut mu_trace: Vec<[f64; WHEELSETS]> = Vec::with_capacity(steps + 1);
-    let record = |o: &hils_plant::Outputs<f64>| -> [f64; TRACE] {
-        let mut row = [0.0; TRACE];
-        row[0] = o.vehicle_speed;
-        row[1] = o.carbody_accel;
-        for j in 0..WHEELSETS {
-            let w = &o.wheelsets[j];
-            row[4 + 4 * j] = w.omega * r_w;
-            row[5 + 4 * j] = w.brake_force;
-            row[6 + 4 * j] = w.axle_load;
-            row[7 + 4 * j] = w.disc_temp;
-        }
-        row
-    };
-    trace.push(record(&plant.outputs()));
-    mu_trace.push(plant.outputs().wheelsets.map(|w| w.mu_d));
-    let mut inputs = [BrakeInput::ClampForce(0.0); WHEELSETS];
-    for k in 0..steps {
-        for j in 0..WHEELSETS {
-            let target = clamp_of(j, at(&run.input[j], k));
-            let f = match run.input_kind[j] {
-                InputKind::ClampForce => target,
-                InputKind::Pressure => {
-                    pad[j] += (target - pad[j]) * lag;
-                    pad[j]
-                }
-            };
-            // Eq (2) at the measured disc temperature: the pad force scaled by the ratio of
-            // the temperature brackets (measured over modelled disc temperature).
-            let f = match (&run.disc_temp_input[j], measured_temp) {
-                (Some(td), true) => {
-                    let model_td = plant.outputs().wheelsets[j].disc_temp;
-                    f * friction.temperature_factor(at(td, k))
-                        / friction.temperature_factor(model_td)
-                }
-                _ => f,
-            };
-            inputs[j] = BrakeInput::ClampForce(f);
-        }
-        plant.step(&inputs);
-        let o = plant.outputs();
-        trace.push(record(&o));
-        mu_trace.push(o.wheelsets.map(|w| w.mu_d));
-    }
-    let flags = plant.sticky_flags().0;
-    if flags & hils_plant::Flags::NUMERIC_FAULT != 0 {
-        return None;
-    }
-    let interp = |col: usize, t: f64| -> f64 {
-        let x = t / dt;
-        let k = (x.floor() as usize).min(steps);
-        let w = x - k as f64;
-        if k < steps {
-            trace[k][col] + (trace[k + 1][col] - trace[k][col]) * w
-        } else {
-            trace[k][col]
-        }
-    };
-
-    // Pad force predicted from pressure (observation channel): Eq (1) with the sensor
-    // gain, lagged, at every step; then at the bin times.
-    let mut pad_obs: [Option<Vec<f64>>; WHEELSETS] = Default::default();
-    for j in 0..WHEELSETS {
-        if let Some(p) = &run.pressure_obs[j] {
-            let g = model.pressure_obs_gain[j];
-            let mut a = caliper.clamp_force(p[0] / g);
-            let mut series = Vec::with_capacity(steps + 1);
-            series.push(a);
-            for k in 0..steps {
-                let target = caliper.clamp_force(at(p, k) / g);
-                a += (target - a) * lag;
-                series.push(a);
-            }
-            pad_obs[j] = Some(series);
-        }
-    }
-    let interp_series = |s: &[f64], t: f64| -> f64 {
-        let x = t / dt;
-        let k = (x.floor() as usize).min(steps);
-        let w = x - k as f64;
-        if k < steps {
-            s[k] + (s[k + 1] - s[k]) * w
-        } else {
-            s[k]
-        }
-    };
+    let traces = drive(run, model, &params, &caliper, lag)?;
+    let pad_obs = pad_from_pressure(run, model, &caliper, lag);
+    let steps = traces.steps();
+    let interp = |col: usize, t: f64| -> f64 { at_time(|k| traces.trace[k][col], steps, dt, t) };
     // The measured clamp force is compared with the true pad force: reading / input gain.
     let predicted: Vec<Vec<f64>> = run
         .channels
@@ -991,7 +991,7 @@ pub fn replay(run: &Prepared, model: &Model) -> Option<Replay> {
                     // Measured clamp reading = gain x true pad force; predicted reading:
                     Quantity::PadFromPressure(j) => pad_obs[j]
                         .as_ref()
-                        .map(|s| interp_series(s, t) * model.input_gain[j])
+                        .map(|s| at_time(|k| s[k], steps, dt, t) * model.input_gain[j])
                         .unwrap_or(f64::NAN),
                 })
                 .collect()
@@ -1008,7 +1008,7 @@ pub fn replay(run: &Prepared, model: &Model) -> Option<Replay> {
             .iter()
             .map(|&t| {
                 let k = ((t.min(run.duration) / dt).round() as usize).min(steps);
-                mu_trace[k][j]
+                traces.mu_trace[k][j]
             })
             .collect()
     };
@@ -1018,8 +1018,152 @@ pub fn replay(run: &Prepared, model: &Model) -> Option<Replay> {
         wheel_bin: std::array::from_fn(|j| bin_vals(4 + 4 * j)),
         mu_d_bin: std::array::from_fn(mu_bin),
         disc_temp_bin: std::array::from_fn(|j| bin_vals(7 + 4 * j)),
+        flags: traces.flags,
+    })
+}
+
+/// The plant's outputs at every replay step.
+struct Traces {
+    /// v, a_x, then per wheelset speed, f_brake, q, t_disc.
+    trace: Vec<[f64; TRACE]>,
+    mu_trace: Vec<[f64; WHEELSETS]>,
+    flags: u32,
+}
+
+impl Traces {
+    fn steps(&self) -> usize {
+        self.trace.len() - 1
+    }
+}
+
+/// Input `x` at replay step `k` (linear between the log's samples).
+fn at_step(run: &Prepared, x: &[f64], k: usize) -> f64 {
+    let (i, w) = run.step_map[k];
+    let i = i as usize;
+    if i + 1 < x.len() {
+        x[i] + (x[i + 1] - x[i]) * w as f64
+    } else {
+        x[i]
+    }
+}
+
+/// A series recorded at every step (`x(k)`, `steps` + 1 values) at time `t`, linear.
+fn at_time(x: impl Fn(usize) -> f64, steps: usize, dt: f64, t: f64) -> f64 {
+    let q = t / dt;
+    let k = (q.floor() as usize).min(steps);
+    let w = q - k as f64;
+    if k < steps {
+        x(k) + (x(k + 1) - x(k)) * w
+    } else {
+        x(k)
+    }
+}
+
+/// Drives the plant with the run's measured brake inputs (None: a numeric fault).
+fn drive(
+    run: &Prepared,
+    model: &Model,
+    params: &Params,
+    caliper: &Caliper<f64>,
+    lag: f64,
+) -> Option<Traces> {
+    let mut plant = Plant::<f64>::with_step(params, run.rail, run.v0, run.dt).ok()?;
+    let friction = DiscPadFriction::<f64>::new(&params.friction);
+    let measured_temp = params.friction.model == hils_plant::FrictionModel::Variable;
+    let r_w = params.vehicle.wheel_radius;
+    let clamp_of = |j: usize, x: f64| -> f64 {
+        let reading = x / model.input_gain[j];
+        match run.input_kind[j] {
+            InputKind::ClampForce => reading,
+            InputKind::Pressure => caliper.clamp_force(reading),
+        }
+    };
+    // Pressure-driven wheelsets: pad force lags the pressure.
+    let mut pad: [f64; WHEELSETS] = std::array::from_fn(|j| clamp_of(j, run.input[j][0]));
+    let steps = run.step_map.len() - 1;
+    let mut trace: Vec<[f64; TRACE]> = Vec::with_capacity(steps + 1);
+    let mut mu_trace: Vec<[f64; WHEELSETS]> = Vec::with_capacity(steps + 1);
+    trace.push(trace_row(&plant.outputs(), r_w));
+    mu_trace.push(plant.outputs().wheelsets.map(|w| w.mu_d));
+    let mut inputs = [BrakeInput::ClampForce(0.0); WHEELSETS];
+    for k in 0..steps {
+        for j in 0..WHEELSETS {
+            let target = clamp_of(j, at_step(run, &run.input[j], k));
+            let f = match run.input_kind[j] {
+                InputKind::ClampForce => target,
+                InputKind::Pressure => {
+                    pad[j] += (target - pad[j]) * lag;
+                    pad[j]
+                }
+            };
+            // Eq (2) at the measured disc temperature: the pad force scaled by the ratio of
+            // the temperature brackets (measured over modelled disc temperature).
+            let f = match (&run.disc_temp_input[j], measured_temp) {
+                (Some(td), true) => {
+                    let model_td = plant.outputs().wheelsets[j].disc_temp;
+                    f * friction.temperature_factor(at_step(run, td, k))
+                        / friction.temperature_factor(model_td)
+                }
+                _ => f,
+            };
+            inputs[j] = BrakeInput::ClampForce(f);
+        }
+        plant.step(&inputs);
+        let o = plant.outputs();
+        trace.push(trace_row(&o, r_w));
+        mu_trace.push(o.wheelsets.map(|w| w.mu_d));
+    }
+    let flags = plant.sticky_flags().0;
+    if flags & hils_plant::Flags::NUMERIC_FAULT != 0 {
+        return None;
+    }
+    Some(Traces {
+        trace,
+        mu_trace,
         flags,
     })
+}
+
+/// One row of [`Traces::trace`] from the plant's outputs (`r_w`: wheel radius, m).
+fn trace_row(o: &hils_plant::Outputs<f64>, r_w: f64) -> [f64; TRACE] {
+    let mut row = [0.0; TRACE];
+    row[0] = o.vehicle_speed;
+    row[1] = o.carbody_accel;
+    for j in 0..WHEELSETS {
+        let w = &o.wheelsets[j];
+        row[4 + 4 * j] = w.omega * r_w;
+        row[5 + 4 * j] = w.brake_force;
+        row[6 + 4 * j] = w.axle_load;
+        row[7 + 4 * j] = w.disc_temp;
+    }
+    row
+}
+
+/// Pad force predicted from pressure (observation channel): Eq (1) with the sensor gain,
+/// lagged, at every step.
+fn pad_from_pressure(
+    run: &Prepared,
+    model: &Model,
+    caliper: &Caliper<f64>,
+    lag: f64,
+) -> [Option<Vec<f64>>; WHEELSETS] {
+    let steps = run.step_map.len() - 1;
+    let mut pad_obs: [Option<Vec<f64>>; WHEELSETS] = Default::default();
+    for j in 0..WHEELSETS {
+        if let Some(p) = &run.pressure_obs[j] {
+            let g = model.pressure_obs_gain[j];
+            let mut a = caliper.clamp_force(p[0] / g);
+            let mut series = Vec::with_capacity(steps + 1);
+            series.push(a);
+            for k in 0..steps {
+                let target = caliper.clamp_force(at_step(run, p, k) / g);
+                a += (target - a) * lag;
+                series.push(a);
+            }
+            pad_obs[j] = Some(series);
+        }
+    }
+    pad_obs
 }
 
 /// Which bins a score uses.
@@ -1141,14 +1285,27 @@ impl Score {
 /// each over the union of their flagged windows (over everything when neither has one).
 /// This is the metric of every decision and of `gain`: an error confined to a short
 /// transient (a brake application, a slide) is not diluted by the rest of the run.
-pub fn compare(a: &Score, b: &Score) -> (f64, f64) {
+pub fn compare(a: &Score, b: &Score) -> ComparedRms {
     let mut keys = a.flagged();
     keys.extend(b.flagged());
-    if keys.is_empty() {
+    let (reference, candidate) = if keys.is_empty() {
         (a.rms(), b.rms())
     } else {
         (a.rms_over(&keys), b.rms_over(&keys))
+    };
+    ComparedRms {
+        reference,
+        candidate,
     }
+}
+
+/// Two models' errors over the same windows ([`compare`]), in noise units.
+#[derive(Clone, Copy, Debug)]
+pub struct ComparedRms {
+    /// RMS of the first (the reference: baseline, current set, simpler fit).
+    pub reference: f64,
+    /// RMS of the second (the candidate compared with it).
+    pub candidate: f64,
 }
 
 pub fn score(run: &Prepared, rep: &Replay, split: Split) -> Score {

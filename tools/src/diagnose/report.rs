@@ -9,178 +9,11 @@ use anyhow::{Context, Result};
 use hils_plant::WHEELSETS;
 use hils_sil::KMH_PER_MPS;
 
-use super::Outcome;
+use super::analysis::{RunAnalysis, UNITS, VARIABLES};
+use super::json::{Report, Tried};
+use super::outcome::Outcome;
 use super::replay::{Group, Prepared, Quantity, Replay};
 use crate::plots::{Chart, Series, Style};
-
-/// What the baseline's error goes with, for one run.
-#[derive(Clone, Debug, Default)]
-pub struct RunAnalysis {
-    pub name: String,
-    /// First time the v_ref error exceeds 3 bin sigmas, s.
-    pub first_exceed_s: Option<f64>,
-    /// Time and value of the largest v_ref error (model - measured), s and m/s.
-    pub max_error: (f64, f64),
-    /// Mean relative deceleration error while braking (model decel / measured - 1).
-    pub mean_relative_decel_error: f64,
-    /// Pearson correlation of the relative deceleration error with each variable.
-    pub correlations: Vec<(&'static str, f64)>,
-    /// Points (variables, relative decel error) while braking: friction speed m/s, disc
-    /// temperature degC, vehicle speed m/s, clamp force N, time s, creepage, error.
-    pub points: Vec<[f64; 7]>,
-    /// Slide intervals (wheelset 1-based, start s, end s) in the measured data.
-    pub measured_slides: Vec<(usize, f64, f64)>,
-}
-
-/// What the baseline's error goes with, all runs.
-#[derive(Clone, Debug, Default)]
-pub struct Analysis {
-    pub runs: Vec<RunAnalysis>,
-}
-
-pub const VARIABLES: [&str; 6] = [
-    "friction speed",
-    "disc temperature",
-    "vehicle speed",
-    "clamp force",
-    "time",
-    "creepage",
-];
-const UNITS: [&str; 6] = ["m/s", "degC", "m/s", "kN", "s", ""];
-
-fn pearson(x: &[f64], y: &[f64]) -> f64 {
-    let n = x.len() as f64;
-    if x.len() < 3 {
-        return f64::NAN;
-    }
-    let mx = x.iter().sum::<f64>() / n;
-    let my = y.iter().sum::<f64>() / n;
-    let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
-    for (a, b) in x.iter().zip(y) {
-        sxy += (a - mx) * (b - my);
-        sxx += (a - mx) * (a - mx);
-        syy += (b - my) * (b - my);
-    }
-    if sxx <= 0.0 || syy <= 0.0 {
-        f64::NAN
-    } else {
-        sxy / (sxx * syy).sqrt()
-    }
-}
-
-/// Slide intervals from bin means (the slide threshold of [`super::replay::slides`]).
-fn slide_intervals(
-    run: &Prepared,
-    v: &[f64],
-    wheel: &[Vec<f64>; WHEELSETS],
-) -> Vec<(usize, f64, f64)> {
-    let mut out = Vec::new();
-    for j in 0..WHEELSETS {
-        let mut start: Option<f64> = None;
-        for b in 0..run.n_bins {
-            let (vb, wb) = (v[b], wheel[j][b]);
-            let sliding =
-                vb.is_finite() && wb.is_finite() && vb > 1.5 && vb - wb > (0.05 * vb).max(0.5);
-            match (sliding, start) {
-                (true, None) => start = Some(run.bin_time[b]),
-                (false, Some(s)) => {
-                    out.push((j + 1, s, run.bin_time[b]));
-                    start = None;
-                }
-                _ => {}
-            }
-        }
-        if let Some(s) = start {
-            out.push((j + 1, s, run.duration));
-        }
-    }
-    out
-}
-
-/// Analyses the baseline's error: when it grows, and what it goes with.
-pub fn analyse(runs: &[Prepared], baseline: &[Replay]) -> Analysis {
-    let mut out = Analysis::default();
-    for (run, rep) in runs.iter().zip(baseline) {
-        let mut a = RunAnalysis {
-            name: run.name.clone(),
-            ..Default::default()
-        };
-        let n = run.n_bins;
-        let e: Vec<f64> = (0..n).map(|b| rep.v_bin[b] - run.v_bin[b]).collect();
-        if let Some(c) = run.channels.iter().find(|c| c.quantity == Quantity::VRef) {
-            for (k, &b) in c.bins.iter().enumerate() {
-                if (rep.v_bin[b] - c.measured[k]).abs() > 3.0 * c.sigma[k] {
-                    a.first_exceed_s = Some(run.bin_time[b]);
-                    break;
-                }
-            }
-        }
-        for b in 0..n {
-            if e[b].is_finite() && e[b].abs() > a.max_error.1.abs() {
-                a.max_error = (run.bin_time[b], e[b]);
-            }
-        }
-        // Deceleration error over +-0.25 s.
-        let k = ((0.25 / run.bin_s).round() as usize).max(1);
-        let clamp_max = run
-            .clamp_bin
-            .iter()
-            .cloned()
-            .filter(|x| x.is_finite())
-            .fold(0.0f64, f64::max);
-        let slides = slide_intervals(run, &run.v_bin, &run.wheel_bin);
-        let in_slide = |t: f64| slides.iter().any(|(_, s, e)| t >= s - 0.3 && t <= e + 0.3);
-        let ratio = 0.275 / 0.43;
-        for b in k..n.saturating_sub(k) {
-            let span = 2.0 * k as f64 * run.bin_s;
-            let decel_meas = -(run.v_bin[b + k] - run.v_bin[b - k]) / span;
-            let decel_err = -(e[b + k] - e[b - k]) / span;
-            let v = run.v_bin[b];
-            let t = run.bin_time[b];
-            if !(decel_meas > 0.2
-                && v > 1.0
-                && run.clamp_bin[b] > 0.3 * clamp_max
-                && decel_err.is_finite())
-            {
-                continue;
-            }
-            if in_slide(t) {
-                continue;
-            }
-            let w: f64 =
-                (0..WHEELSETS).map(|j| run.wheel_bin[j][b]).sum::<f64>() / WHEELSETS as f64;
-            let temp = if run.disc_temp_bin[b].is_finite() {
-                run.disc_temp_bin[b]
-            } else {
-                rep.disc_temp_bin.iter().map(|x| x[b]).sum::<f64>() / WHEELSETS as f64
-            };
-            let creep = (v - w) / v.max(0.1);
-            a.points.push([
-                w * ratio,
-                temp,
-                v,
-                run.clamp_bin[b] / 1e3,
-                t,
-                creep,
-                decel_err / decel_meas,
-            ]);
-        }
-        if !a.points.is_empty() {
-            a.mean_relative_decel_error =
-                a.points.iter().map(|p| p[6]).sum::<f64>() / a.points.len() as f64;
-            let y: Vec<f64> = a.points.iter().map(|p| p[6]).collect();
-            for (i, name) in VARIABLES.iter().enumerate() {
-                let x: Vec<f64> = a.points.iter().map(|p| p[i]).collect();
-                a.correlations.push((name, pearson(&x, &y)));
-            }
-            a.correlations
-                .sort_by(|x, y| y.1.abs().total_cmp(&x.1.abs()));
-        }
-        a.measured_slides = slides;
-        out.runs.push(a);
-    }
-    out
-}
 
 fn words_for(a: &RunAnalysis) -> String {
     let mut s = String::new();
@@ -382,7 +215,34 @@ fn localisation_table(links: &[super::links::LinkCheck]) -> String {
     md + "\n"
 }
 
-/// Writes report.md and the SVG plots into `dir`.
+/// One run's part of the report being written: the run, its analysis and replays, the
+/// directory and the file-name prefix of its plots.
+struct RunPage<'a> {
+    dir: &'a Path,
+    tag: String,
+    run: &'a Prepared,
+    a: &'a RunAnalysis,
+    base: &'a Replay,
+    ext: &'a Replay,
+}
+
+impl RunPage<'_> {
+    /// Saves chart `c` as `{tag}{file}` and embeds it in `md`.
+    fn embed(
+        &self,
+        c: &Chart,
+        file: &str,
+        alt: &str,
+        caption: &str,
+        md: &mut String,
+        files: &mut Vec<PathBuf>,
+    ) -> Result<()> {
+        let f = self.dir.join(format!("{}{file}", self.tag));
+        embed_chart(c, f, alt, caption, md, files)
+    }
+}
+
+/// Writes report.md with its SVG plots into `dir`; returns the files written.
 pub fn write(dir: &Path, out: &Outcome) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let mut files = Vec::new();
@@ -396,7 +256,39 @@ pub fn write(dir: &Path, out: &Outcome) -> Result<Vec<PathBuf>> {
     );
     md += &localisation_table(&r.localisation);
     md += &cause_paragraph(out);
-    md += "\n\n## Result\n\n";
+    md += &result_section(r);
+    md += "## What is wrong: where and when the baseline's error grows\n\n";
+    for (i, (run, a)) in out.runs.iter().zip(&out.analysis.runs).enumerate() {
+        let page = RunPage {
+            dir,
+            tag: if out.runs.len() > 1 {
+                format!("run{}_", i + 1)
+            } else {
+                String::new()
+            },
+            run,
+            a,
+            base: &out.baseline_replays[i],
+            ext: &out.extended_replays[i],
+        };
+        run_section(&page, &mut md, &mut files)?;
+    }
+    if !r.notes.is_empty() {
+        md += "## Notes (skipped, repaired, unused)\n\n";
+        for n in &r.notes {
+            let _ = writeln!(md, "- {n}");
+        }
+        md += "\n";
+    }
+    let f = dir.join("report.md");
+    std::fs::write(&f, md).with_context(|| format!("cannot write {}", f.display()))?;
+    files.push(f);
+    Ok(files)
+}
+
+/// The result list, the findings table and every effect tried.
+fn result_section(r: &Report) -> String {
+    let mut md = String::from("\n\n## Result\n\n");
     let _ = writeln!(
         md,
         "- discrepancy: **{}**\n- causes: {}\n- confounded: {}\n- unexplained share: {:.3}\n- gain ({}): baseline {:.3}, extended {:.3}, reduction {:.3}\n- speeds alone: baseline {:.4} m/s, extended {:.4} m/s\n- slides: measured {:?}, baseline {:?}, extended {:?}\n",
@@ -440,9 +332,16 @@ pub fn write(dir: &Path, out: &Outcome) -> Result<Vec<PathBuf>> {
         }
         md += "\n";
     }
-    if !r.tried.is_empty() {
+    md += &tried_table(&r.tried);
+    md
+}
+
+/// Every effect fitted alone, on validation data.
+fn tried_table(tried: &[Tried]) -> String {
+    let mut md = String::new();
+    if !tried.is_empty() {
         md += "## Every effect fitted alone (validation data)\n\n| effect | parameters | validation error (x noise) | gain |\n|---|---|---|---|\n";
-        for t in &r.tried {
+        for t in tried {
             let p: Vec<String> = t
                 .params
                 .iter()
@@ -459,227 +358,240 @@ pub fn write(dir: &Path, out: &Outcome) -> Result<Vec<PathBuf>> {
         }
         md += "\n";
     }
+    md
+}
 
-    md += "## What is wrong: where and when the baseline's error grows\n\n";
-    for (i, (run, a)) in out.runs.iter().zip(&out.analysis.runs).enumerate() {
-        let base = &out.baseline_replays[i];
-        let ext = &out.extended_replays[i];
-        let tag = if out.runs.len() > 1 {
-            format!("run{}_", i + 1)
+/// One run: its text and table, then its plots.
+fn run_section(p: &RunPage, md: &mut String, files: &mut Vec<PathBuf>) -> Result<()> {
+    let rb = super::replay::channel_rms(p.run, p.base);
+    *md += &run_text(p, &rb);
+    speed_charts(p, md, files)?;
+    wheel_charts(p, md, files)?;
+    residual_charts(p, md, files)?;
+    mu_d_chart(p, md, files)?;
+    group_charts(p, &rb, md, files)
+}
+
+/// A run's conditions, what its error goes with, its slides and its channel errors.
+fn run_text(p: &RunPage, rb: &[(Quantity, f64, f64)]) -> String {
+    let (run, a) = (p.run, p.a);
+    let mut md = String::new();
+    let _ = writeln!(md, "### {}\n", run.name);
+    let _ = writeln!(
+        md,
+        "Initial speed {:.2} km/h (measured), rail {:?}{}, {} samples over {:.2} s, replay step {} ms, comparison bins of {} ms (every third 0.2 s block is validation data).\n",
+        run.v0 * KMH_PER_MPS,
+        run.rail,
+        if run.rail_from_metadata {
+            " (metadata)"
         } else {
-            String::new()
-        };
-        let _ = writeln!(md, "### {}\n", run.name);
+            " (baseline scenario: no `rail` metadata)"
+        },
+        run.t.len(),
+        run.duration,
+        run.dt * 1e3,
+        run.bin_s * 1e3
+    );
+    md += &words_for(a);
+    md += "\n\n";
+    if !a.measured_slides.is_empty() {
+        md += "Measured slides (wheel speed deficit beyond max(0.5 m/s, 5 %)):\n\n| wheelset | from s | to s |\n|---|---|---|\n";
+        for (j, s, e) in &a.measured_slides {
+            let _ = writeln!(md, "| {j} | {s:.2} | {e:.2} |");
+        }
+        md += "\n";
+    }
+    md += "| quantity | baseline rms | extended rms | noise (sample) |\n|---|---|---|---|\n";
+    let re = super::replay::channel_rms(run, p.ext);
+    for ((q, b, noise), (_, e, _)) in rb.iter().zip(&re) {
         let _ = writeln!(
             md,
-            "Initial speed {:.2} km/h (measured), rail {:?}{}, {} samples over {:.2} s, replay step {} ms, comparison bins of {} ms (every third 0.2 s block is validation data).\n",
-            run.v0 * KMH_PER_MPS,
-            run.rail,
-            if run.rail_from_metadata {
-                " (metadata)"
-            } else {
-                " (baseline scenario: no `rail` metadata)"
-            },
-            run.t.len(),
-            run.duration,
-            run.dt * 1e3,
-            run.bin_s * 1e3
+            "| {} ({}) | {b:.4} | {e:.4} | {noise:.4} |",
+            q.label(),
+            q.unit()
         );
-        md += &words_for(a);
-        md += "\n\n";
-        if !a.measured_slides.is_empty() {
-            md += "Measured slides (wheel speed deficit beyond max(0.5 m/s, 5 %)):\n\n| wheelset | from s | to s |\n|---|---|---|\n";
-            for (j, s, e) in &a.measured_slides {
-                let _ = writeln!(md, "| {j} | {s:.2} | {e:.2} |");
-            }
-            md += "\n";
-        }
-        md += "| quantity | baseline rms | extended rms | noise (sample) |\n|---|---|---|---|\n";
-        let rb = super::replay::channel_rms(run, base);
-        let re = super::replay::channel_rms(run, ext);
-        for ((q, b, noise), (_, e, _)) in rb.iter().zip(&re) {
-            let _ = writeln!(
-                md,
-                "| {} ({}) | {b:.4} | {e:.4} | {noise:.4} |",
-                q.label(),
-                q.unit()
-            );
-        }
-        md += "\n";
+    }
+    md += "\n";
+    md
+}
 
-        // Vehicle speed.
+/// Vehicle speed, and the speed errors of both models.
+fn speed_charts(p: &RunPage, md: &mut String, files: &mut Vec<PathBuf>) -> Result<()> {
+    let (run, base, ext) = (p.run, p.base, p.ext);
+    let mut c = Chart::new(
+        &format!("{}: vehicle speed", run.name),
+        "time, s",
+        "v_ref, km/h",
+    );
+    let kmh = |y: &[f64]| t_series(run, y, KMH_PER_MPS);
+    add_measured_and_models(
+        &mut c,
+        [kmh(&run.v_bin), kmh(&base.v_bin), kmh(&ext.v_bin)],
+        Style::Dotted,
+    );
+    p.embed(&c, "v_ref.svg", "vehicle speed", "", md, files)?;
+
+    let mut c = Chart::new(
+        &format!("{}: speed error, model - measured", run.name),
+        "time, s",
+        "error, m/s",
+    );
+    let err = |m: &[f64]| -> Vec<(f64, f64)> {
+        (0..run.n_bins)
+            .filter(|&b| m[b].is_finite() && run.v_bin[b].is_finite())
+            .map(|b| (run.bin_time[b], m[b] - run.v_bin[b]))
+            .collect()
+    };
+    c.series.push(Series::new(
+        "v_ref, baseline",
+        err(&base.v_bin),
+        Style::Solid,
+        1,
+    ));
+    c.series.push(Series::new(
+        "v_ref, extended",
+        err(&ext.v_bin),
+        Style::Solid,
+        2,
+    ));
+    p.embed(&c, "speed_error.svg", "speed error", "", md, files)
+}
+
+/// Wheel speeds (slides), one chart per wheelset.
+fn wheel_charts(p: &RunPage, md: &mut String, files: &mut Vec<PathBuf>) -> Result<()> {
+    let (run, base, ext) = (p.run, p.base, p.ext);
+    let kmh = |y: &[f64]| t_series(run, y, KMH_PER_MPS);
+    for j in 0..WHEELSETS {
         let mut c = Chart::new(
-            &format!("{}: vehicle speed", run.name),
+            &format!("{}: wheelset {} circumferential speed", run.name, j + 1),
             "time, s",
-            "v_ref, km/h",
+            "speed, km/h",
         );
-        let kmh = |y: &[f64]| t_series(run, y, KMH_PER_MPS);
+        c.series.push(Series::new(
+            "v_ref measured",
+            t_series(run, &run.v_bin, KMH_PER_MPS),
+            Style::Dotted,
+            6,
+        ));
         add_measured_and_models(
             &mut c,
-            [kmh(&run.v_bin), kmh(&base.v_bin), kmh(&ext.v_bin)],
-            Style::Dotted,
-        );
-        let f = dir.join(format!("{tag}v_ref.svg"));
-        embed_chart(&c, f, "vehicle speed", "", &mut md, &mut files)?;
-
-        // Speed errors.
-        let mut c = Chart::new(
-            &format!("{}: speed error, model - measured", run.name),
-            "time, s",
-            "error, m/s",
-        );
-        let err = |m: &[f64]| -> Vec<(f64, f64)> {
-            (0..run.n_bins)
-                .filter(|&b| m[b].is_finite() && run.v_bin[b].is_finite())
-                .map(|b| (run.bin_time[b], m[b] - run.v_bin[b]))
-                .collect()
-        };
-        c.series.push(Series::new(
-            "v_ref, baseline",
-            err(&base.v_bin),
+            [
+                kmh(&run.wheel_bin[j]),
+                kmh(&base.wheel_bin[j]),
+                kmh(&ext.wheel_bin[j]),
+            ],
             Style::Solid,
+        );
+        let alt = format!("wheelset {}", j + 1);
+        p.embed(&c, &format!("wheel{}.svg", j + 1), &alt, "", md, files)?;
+    }
+    Ok(())
+}
+
+/// The baseline's relative deceleration error against each variable.
+fn residual_charts(p: &RunPage, md: &mut String, files: &mut Vec<PathBuf>) -> Result<()> {
+    let (run, a) = (p.run, p.a);
+    if a.points.is_empty() {
+        return Ok(());
+    }
+    for (i, name) in VARIABLES.iter().enumerate() {
+        let mut c = Chart::new(
+            &format!(
+                "{}: baseline's relative deceleration error vs {name}",
+                run.name
+            ),
+            &format!(
+                "{name}{}",
+                if UNITS[i].is_empty() {
+                    String::new()
+                } else {
+                    format!(", {}", UNITS[i])
+                }
+            ),
+            "model decel / measured - 1",
+        );
+        c.series.push(Series::new(
+            "baseline (braking, no slide)",
+            a.points.iter().map(|p| (p[i], p[6])).collect(),
+            Style::Points,
             1,
         ));
+        let file = format!("residual_vs_{}.svg", name.replace(' ', "_"));
+        let r = a
+            .correlations
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|x| x.1)
+            .unwrap_or(f64::NAN);
+        let (alt, caption) = (format!("vs {name}"), format!(" (r = {r:.2})"));
+        p.embed(&c, &file, &alt, &caption, md, files)?;
+    }
+    Ok(())
+}
+
+/// Disc-pad friction of the models.
+fn mu_d_chart(p: &RunPage, md: &mut String, files: &mut Vec<PathBuf>) -> Result<()> {
+    let run = p.run;
+    let mut c = Chart::new(
+        &format!("{}: disc-pad friction mu_d (model)", run.name),
+        "time, s",
+        "mu_d",
+    );
+    for (name, rep, color) in [("baseline", p.base, 1usize), ("extended", p.ext, 2)] {
+        let mean: Vec<f64> = (0..run.n_bins)
+            .map(|b| rep.mu_d_bin.iter().map(|m| m[b]).sum::<f64>() / 4.0)
+            .collect();
         c.series.push(Series::new(
-            "v_ref, extended",
-            err(&ext.v_bin),
+            format!("{name}, mean of wheelsets"),
+            t_series(run, &mean, 1.0),
             Style::Solid,
-            2,
+            color,
         ));
-        let f = dir.join(format!("{tag}speed_error.svg"));
-        embed_chart(&c, f, "speed error", "", &mut md, &mut files)?;
+    }
+    p.embed(&c, "mu_d.svg", "mu_d", "", md, files)
+}
 
-        // Wheel speeds (slides).
-        for j in 0..WHEELSETS {
-            let mut c = Chart::new(
-                &format!("{}: wheelset {} circumferential speed", run.name, j + 1),
-                "time, s",
-                "speed, km/h",
-            );
-            c.series.push(Series::new(
-                "v_ref measured",
-                t_series(run, &run.v_bin, KMH_PER_MPS),
-                Style::Dotted,
-                6,
-            ));
-            add_measured_and_models(
-                &mut c,
-                [
-                    kmh(&run.wheel_bin[j]),
-                    kmh(&base.wheel_bin[j]),
-                    kmh(&ext.wheel_bin[j]),
-                ],
-                Style::Solid,
-            );
-            let f = dir.join(format!("{tag}wheel{}.svg", j + 1));
-            let alt = format!("wheelset {}", j + 1);
-            embed_chart(&c, f, &alt, "", &mut md, &mut files)?;
-        }
-
-        // Residuals against the variables.
-        if !a.points.is_empty() {
-            for (i, name) in VARIABLES.iter().enumerate() {
-                let mut c = Chart::new(
-                    &format!(
-                        "{}: baseline's relative deceleration error vs {name}",
-                        run.name
-                    ),
-                    &format!(
-                        "{name}{}",
-                        if UNITS[i].is_empty() {
-                            String::new()
-                        } else {
-                            format!(", {}", UNITS[i])
-                        }
-                    ),
-                    "model decel / measured - 1",
-                );
-                c.series.push(Series::new(
-                    "baseline (braking, no slide)",
-                    a.points.iter().map(|p| (p[i], p[6])).collect(),
-                    Style::Points,
-                    1,
-                ));
-                let f = dir.join(format!("{tag}residual_vs_{}.svg", name.replace(' ', "_")));
-                let r = a
-                    .correlations
-                    .iter()
-                    .find(|(n, _)| n == name)
-                    .map(|x| x.1)
-                    .unwrap_or(f64::NAN);
-                let (alt, caption) = (format!("vs {name}"), format!(" (r = {r:.2})"));
-                embed_chart(&c, f, &alt, &caption, &mut md, &mut files)?;
-            }
-        }
-
-        // Disc-pad friction of the models.
+/// Other logged quantities: the channel of each group with the largest baseline error.
+fn group_charts(
+    p: &RunPage,
+    rb: &[(Quantity, f64, f64)],
+    md: &mut String,
+    files: &mut Vec<PathBuf>,
+) -> Result<()> {
+    let run = p.run;
+    for group in [
+        Group::BrakeForces,
+        Group::AxleLoads,
+        Group::PadForces,
+        Group::DiscTemps,
+        Group::Accel,
+    ] {
+        let best = run
+            .channels
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| c.quantity.group() == group)
+            .max_by(|(i, _), (k, _)| rb[*i].1.total_cmp(&rb[*k].1));
+        let Some((ci, ch)) = best else { continue };
         let mut c = Chart::new(
-            &format!("{}: disc-pad friction mu_d (model)", run.name),
+            &format!("{}: {}", run.name, ch.quantity.label()),
             "time, s",
-            "mu_d",
+            &format!("{} ({})", ch.quantity.label(), ch.quantity.unit()),
         );
-        for (name, rep, color) in [("baseline", base, 1usize), ("extended", ext, 2)] {
-            let mean: Vec<f64> = (0..run.n_bins)
-                .map(|b| rep.mu_d_bin.iter().map(|m| m[b]).sum::<f64>() / 4.0)
-                .collect();
-            c.series.push(Series::new(
-                format!("{name}, mean of wheelsets"),
-                t_series(run, &mean, 1.0),
-                Style::Solid,
-                color,
-            ));
-        }
-        let f = dir.join(format!("{tag}mu_d.svg"));
-        embed_chart(&c, f, "mu_d", "", &mut md, &mut files)?;
-
-        // Other logged quantities: the channel of each group with the largest baseline error.
-        for group in [
-            Group::BrakeForces,
-            Group::AxleLoads,
-            Group::PadForces,
-            Group::DiscTemps,
-            Group::Accel,
-        ] {
-            let best = run
-                .channels
-                .iter()
-                .enumerate()
-                .filter(|(_, c)| c.quantity.group() == group)
-                .max_by(|(i, _), (k, _)| rb[*i].1.total_cmp(&rb[*k].1));
-            let Some((ci, ch)) = best else { continue };
-            let mut c = Chart::new(
-                &format!("{}: {}", run.name, ch.quantity.label()),
-                "time, s",
-                &format!("{} ({})", ch.quantity.label(), ch.quantity.unit()),
-            );
-            let pts = |v: &[f64]| -> Vec<(f64, f64)> {
-                ch.times.iter().zip(v).map(|(t, y)| (*t, *y)).collect()
-            };
-            add_measured_and_models(
-                &mut c,
-                [
-                    pts(&ch.measured),
-                    pts(&base.predicted[ci]),
-                    pts(&ext.predicted[ci]),
-                ],
-                Style::Solid,
-            );
-            let f = dir.join(format!(
-                "{tag}{}.svg",
-                ch.quantity.label().replace([' ', '*'], "_")
-            ));
-            embed_chart(&c, f, &ch.quantity.label(), "", &mut md, &mut files)?;
-        }
+        let pts = |v: &[f64]| -> Vec<(f64, f64)> {
+            ch.times.iter().zip(v).map(|(t, y)| (*t, *y)).collect()
+        };
+        add_measured_and_models(
+            &mut c,
+            [
+                pts(&ch.measured),
+                pts(&p.base.predicted[ci]),
+                pts(&p.ext.predicted[ci]),
+            ],
+            Style::Solid,
+        );
+        let file = format!("{}.svg", ch.quantity.label().replace([' ', '*'], "_"));
+        p.embed(&c, &file, &ch.quantity.label(), "", md, files)?;
     }
-    if !r.notes.is_empty() {
-        md += "## Notes (skipped, repaired, unused)\n\n";
-        for n in &r.notes {
-            let _ = writeln!(md, "- {n}");
-        }
-        md += "\n";
-    }
-    let f = dir.join("report.md");
-    std::fs::write(&f, md).with_context(|| format!("cannot write {}", f.display()))?;
-    files.push(f);
-    Ok(files)
+    Ok(())
 }

@@ -31,6 +31,18 @@ pub struct FrictionTest {
 /// force are brake-released samples: mu is undefined there, they are skipped (counted).
 pub const RELEASED_SHARE: f64 = 0.05;
 
+/// Where a friction test's mu comes from: its own column, or friction over clamp force.
+enum MuSource {
+    Direct(Vec<f64>),
+    Forces(Vec<f64>, Vec<f64>),
+}
+
+/// mu of one row: a value (NaN: a needed cell is empty), or the brake released.
+enum RowMu {
+    Value(f64),
+    Released,
+}
+
 /// A friction test from its table (every cell already checked against its column's
 /// limits; the time, when present, measured and increasing).
 pub(crate) fn from_table(mut table: Table) -> Result<FrictionTest, MeasuredError> {
@@ -47,32 +59,7 @@ pub(crate) fn from_table(mut table: Table) -> Result<FrictionTest, MeasuredError
         used[i] = true;
         table.numeric(i)
     });
-    enum MuSource {
-        Direct(Vec<f64>),
-        Forces(Vec<f64>, Vec<f64>),
-    }
-    let source = if let Some(i) = table.index(MU.name(0)) {
-        used[i] = true;
-        MuSource::Direct(table.numeric(i))
-    } else {
-        let i_c = table.index(F_CLAMP.name(0));
-        let i_f = table.index(F_FRICTION.name(0));
-        match (i_c, i_f) {
-            (Some(i_c), Some(i_f)) => {
-                used[i_c] = true;
-                used[i_f] = true;
-                MuSource::Forces(table.numeric(i_c), table.numeric(i_f))
-            }
-            _ => {
-                return Err(table.err(
-                    table.header_line,
-                    0,
-                    "mu",
-                    "required column is missing: `mu`, or both `f_clamp_n` and `f_friction_n`",
-                ));
-            }
-        }
-    };
+    let source = mu_source(&mut table, &mut used)?;
     let mut out = FrictionTest {
         path: table.path.clone(),
         metadata: table.metadata.clone(),
@@ -96,28 +83,11 @@ pub(crate) fn from_table(mut table: Table) -> Result<FrictionTest, MeasuredError
         MuSource::Direct(_) => 0.0,
     };
     for r in 0..table.rows() {
-        let mu = match &source {
-            MuSource::Direct(mu) => mu[r],
-            MuSource::Forces(c, f) => {
-                if c[r].is_nan() || f[r].is_nan() {
-                    f64::NAN
-                } else if c[r] < RELEASED_SHARE * clamp_max || c[r] <= 0.0 {
-                    released += 1;
-                    continue;
-                } else {
-                    let mu = f[r] / c[r];
-                    if !(0.0..=2.0).contains(&mu) {
-                        let i_f = table.index(F_FRICTION.name(0)).unwrap_or(0);
-                        return Err(table.row_err(
-                            r,
-                            i_f,
-                            format!(
-                                "friction coefficient f_friction / f_clamp = {mu:.4} outside [0, 2]"
-                            ),
-                        ));
-                    }
-                    mu
-                }
+        let mu = match row_mu(&table, &source, clamp_max, r)? {
+            RowMu::Value(mu) => mu,
+            RowMu::Released => {
+                released += 1;
+                continue;
             }
         };
         if mu.is_nan() || v[r].is_nan() || temp[r].is_nan() {
@@ -132,17 +102,7 @@ pub(crate) fn from_table(mut table: Table) -> Result<FrictionTest, MeasuredError
             kept_t.push(t[r]);
         }
     }
-    if empty > 0 {
-        out.notes.push(format!(
-            "{empty} row(s) skipped: a needed cell is empty (not measured)"
-        ));
-    }
-    if released > 0 {
-        out.notes.push(format!(
-            "{released} row(s) skipped: brake released (clamp force below {:.0} % of the largest, mu undefined)",
-            RELEASED_SHARE * 100.0
-        ));
-    }
+    out.notes.extend(skip_notes(empty, released));
     out.skipped = empty + released;
     if time.is_some() {
         out.t_s = Some(kept_t);
@@ -151,4 +111,74 @@ pub(crate) fn from_table(mut table: Table) -> Result<FrictionTest, MeasuredError
         return Err(table.err(0, 0, "", "no usable friction points (every row skipped)"));
     }
     Ok(out)
+}
+
+/// The `mu` column, else both `f_clamp_n` and `f_friction_n` (marked used).
+fn mu_source(table: &mut Table, used: &mut [bool]) -> Result<MuSource, MeasuredError> {
+    if let Some(i) = table.index(MU.name(0)) {
+        used[i] = true;
+        return Ok(MuSource::Direct(table.numeric(i)));
+    }
+    let i_c = table.index(F_CLAMP.name(0));
+    let i_f = table.index(F_FRICTION.name(0));
+    match (i_c, i_f) {
+        (Some(i_c), Some(i_f)) => {
+            used[i_c] = true;
+            used[i_f] = true;
+            Ok(MuSource::Forces(table.numeric(i_c), table.numeric(i_f)))
+        }
+        _ => Err(table.err(
+            table.header_line,
+            0,
+            "mu",
+            "required column is missing: `mu`, or both `f_clamp_n` and `f_friction_n`",
+        )),
+    }
+}
+
+/// mu of row `r`; a clamp force below [`RELEASED_SHARE`] of `clamp_max` is the brake
+/// released, a ratio outside [0, 2] an error naming the row.
+fn row_mu(
+    table: &Table,
+    source: &MuSource,
+    clamp_max: f64,
+    r: usize,
+) -> Result<RowMu, MeasuredError> {
+    let (c, f) = match source {
+        MuSource::Direct(mu) => return Ok(RowMu::Value(mu[r])),
+        MuSource::Forces(c, f) => (c, f),
+    };
+    if c[r].is_nan() || f[r].is_nan() {
+        return Ok(RowMu::Value(f64::NAN));
+    }
+    if c[r] < RELEASED_SHARE * clamp_max || c[r] <= 0.0 {
+        return Ok(RowMu::Released);
+    }
+    let mu = f[r] / c[r];
+    if !(0.0..=2.0).contains(&mu) {
+        let i_f = table.index(F_FRICTION.name(0)).unwrap_or(0);
+        return Err(table.row_err(
+            r,
+            i_f,
+            format!("friction coefficient f_friction / f_clamp = {mu:.4} outside [0, 2]"),
+        ));
+    }
+    Ok(RowMu::Value(mu))
+}
+
+/// The notes on the rows skipped: empty cells, brake released.
+fn skip_notes(empty: usize, released: usize) -> Vec<String> {
+    let mut notes = Vec::new();
+    if empty > 0 {
+        notes.push(format!(
+            "{empty} row(s) skipped: a needed cell is empty (not measured)"
+        ));
+    }
+    if released > 0 {
+        notes.push(format!(
+            "{released} row(s) skipped: brake released (clamp force below {:.0} % of the largest, mu undefined)",
+            RELEASED_SHARE * 100.0
+        ));
+    }
+    notes
 }

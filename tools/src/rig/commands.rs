@@ -24,7 +24,7 @@ use hils_rig_core::can::{
 };
 use hils_rig_core::rig::Faults;
 
-use super::monitor::{Alarm, BoardView, Seen};
+use super::monitor::{Alarm, BoardView, Seen, state_name};
 use super::record::Recorder;
 use super::transport::Transport;
 
@@ -68,18 +68,6 @@ pub fn command_name(c: &Command) -> &'static str {
         Command::Track(TrackCommand::Commit { .. }) => "track-commit",
         Command::Track(TrackCommand::Clear) => "track-clear",
         Command::Vehicle { .. } => "vehicle",
-    }
-}
-
-/// Lower-case name of a run state (as `hils decode` writes it).
-pub fn state_name(s: RigState) -> &'static str {
-    match s {
-        RigState::Idle => "idle",
-        RigState::Starting => "starting",
-        RigState::Running => "running",
-        RigState::Finished => "finished",
-        RigState::Stopped => "stopped",
-        RigState::Fault => "fault",
     }
 }
 

@@ -40,8 +40,8 @@ use hils_rig_core::can::{
 };
 use hils_rig_core::sensor::SensorKind;
 
-use commands::{Flow, Outcome, Session, state_name};
-use monitor::{Alarm, Seen};
+use commands::{Flow, Outcome, Session};
+use monitor::{Alarm, Seen, state_name};
 use record::Recorder;
 use sim::{SimBoard, SimFaults};
 use transport::{ProbeEvent, Received, Transport, TransportError};
@@ -55,14 +55,14 @@ pub struct RigArgs {
     #[arg(long, global = true, default_value = "can0")]
     pub interface: String,
     /// No frame from the board for this long (s) = board lost; 0.02-60 s.
-    #[arg(long, global = true, default_value_t = 0.5, value_parser = crate::cli::rig_lost_after_s)]
+    #[arg(long, global = true, default_value_t = 0.5, value_parser = crate::flags::rig_lost_after_s)]
     pub lost_after_s: f64,
     /// Sim: pace the board to the wall clock (else it runs as fast as the host steps it).
     #[arg(long, global = true)]
     pub realtime: bool,
     /// Sim: a fault at a board time, `board-lost=S`, `bus-off=S` or `alive-frozen=S`
     /// (repeatable); S is 0.001-86400 s.
-    #[arg(long = "sim-fault", global = true, value_parser = crate::cli::rig_sim_fault_text)]
+    #[arg(long = "sim-fault", global = true, value_parser = crate::flags::rig_sim_fault_text)]
     pub sim_faults: Vec<String>,
     #[command(subcommand)]
     pub command: RigCommand,
@@ -97,7 +97,7 @@ pub enum Line {
     Brake {
         demand: BrakeKind,
         /// Service deceleration, m/s^2 (for `service`): 0.01-5.
-        #[arg(value_parser = crate::cli::rig_service_decel_mps2)]
+        #[arg(value_parser = crate::flags::rig_service_decel_mps2)]
         decel_mps2: Option<f32>,
     },
     /// Inject a sensor fault on channel 1-4 (`none` removes it).
@@ -118,11 +118,11 @@ pub enum Line {
     /// Live view of the board (at the status rate on a terminal).
     Watch {
         /// Stop after this long (s, 0.001-86400); default: until the board is lost.
-        #[arg(long, value_parser = crate::cli::rig_for_s)]
+        #[arg(long, value_parser = crate::flags::rig_for_s)]
         for_s: Option<f64>,
         /// When the output is not a terminal: one view per this much board time, s
         /// (0.01-3600).
-        #[arg(long, default_value_t = 1.0, value_parser = crate::cli::rig_every_s)]
+        #[arg(long, default_value_t = 1.0, value_parser = crate::flags::rig_every_s)]
         every_s: f64,
     },
     /// Record the wheel-speed and status frames as a run log. Alone: until a run ends (or
@@ -131,13 +131,13 @@ pub enum Line {
         #[arg(long)]
         out: PathBuf,
         /// Record at most this long, s (0.001-86400).
-        #[arg(long, value_parser = crate::cli::rig_for_s)]
+        #[arg(long, value_parser = crate::flags::rig_for_s)]
         for_s: Option<f64>,
     },
     /// Wait: `--for-s S`, or `--until-end` (a run was running and no longer is).
     Wait {
         /// Wait this long, s (0.001-86400).
-        #[arg(long, value_parser = crate::cli::rig_for_s)]
+        #[arg(long, value_parser = crate::flags::rig_for_s)]
         for_s: Option<f64>,
         #[arg(long)]
         until_end: bool,
@@ -147,7 +147,7 @@ pub enum Line {
 #[derive(Args, Debug, Clone)]
 pub struct StartArgs {
     /// Initial speed, km/h: 1-655.34 (the top of the wheel-speed frames).
-    #[arg(long, value_parser = crate::cli::rig_speed_kmh)]
+    #[arg(long, value_parser = crate::flags::rig_speed_kmh)]
     pub speed_kmh: f32,
     #[arg(long, value_enum, default_value_t = RailArg::Wet)]
     pub rail: RailArg,
@@ -202,12 +202,12 @@ pub enum CalAction {
     Tare,
     /// Gain, N or Pa per ADC count: 0.01-10000.
     Gain {
-        #[arg(value_parser = crate::cli::rig_gain)]
+        #[arg(value_parser = crate::flags::rig_gain)]
         gain: f32,
     },
     /// Offset, ADC counts of the zero load: 81.9-4013.1 (inside the open/short thresholds).
     Offset {
-        #[arg(value_parser = crate::cli::rig_offset_counts)]
+        #[arg(value_parser = crate::flags::rig_offset_counts)]
         counts: f32,
     },
     /// The measured quantity (resets the calibration to the kind's default).
@@ -226,12 +226,12 @@ pub enum SensorKindArg {
 pub enum ConfigKind {
     /// Telemetry every STEPS plant steps: 1-10000.
     Divider {
-        #[arg(value_parser = crate::cli::rig_divider)]
+        #[arg(value_parser = crate::flags::rig_divider)]
         steps: u16,
     },
     /// Teeth of the simulated speed-sensor wheel: 1-1000.
     Teeth {
-        #[arg(value_parser = crate::cli::rig_teeth)]
+        #[arg(value_parser = crate::flags::rig_teeth)]
         teeth: u16,
     },
 }
@@ -313,7 +313,7 @@ fn command_of(line: &Line) -> Result<Option<Command>> {
             (BrakeKind::Eb, None) => BrakeCommand::Emergency,
             (BrakeKind::Release, None) => BrakeCommand::Release,
             (BrakeKind::Service, Some(d))
-                if crate::cli::RIG_SERVICE_DECEL_MPS2.contains(*d as f64) =>
+                if crate::flags::RIG_SERVICE_DECEL_MPS2.contains(*d as f64) =>
             {
                 BrakeCommand::Service {
                     deceleration_mps2: *d,
@@ -378,6 +378,15 @@ impl std::fmt::Display for Stop {
 impl From<Alarm> for Stop {
     fn from(a: Alarm) -> Self {
         Stop::Alarm(a)
+    }
+}
+/// A session's error: a rejection or an alarm as its text, an error with its causes.
+impl From<Stop> for anyhow::Error {
+    fn from(s: Stop) -> Self {
+        match s {
+            Stop::Error(e) => e,
+            other => anyhow!("{other}"),
+        }
     }
 }
 impl From<anyhow::Error> for Stop {
@@ -525,7 +534,8 @@ pub fn finish<T: Transport>(
 pub fn sim_faults(specs: &[String]) -> Result<SimFaults> {
     let mut f = SimFaults::default();
     for spec in specs {
-        let (kind, t) = crate::cli::rig_sim_fault(spec).map_err(|e| anyhow!("--sim-fault {e}"))?;
+        let (kind, t) =
+            crate::flags::rig_sim_fault(spec).map_err(|e| anyhow!("--sim-fault {e}"))?;
         match kind {
             "board-lost" => f.board_lost_at_s = Some(t),
             "bus-off" => f.bus_off_at_s = Some(t),
@@ -607,7 +617,7 @@ pub fn run_session<T: Transport>(s: &mut Session<T>, lines: &[Line], alone: bool
         Err(e) => format!("session ended early: {e}"),
     };
     finish(s, recording, &end)?;
-    result.map_err(|e| anyhow!("{e}"))
+    Ok(result?)
 }
 
 /// `hils rig`.

@@ -8,7 +8,7 @@
 //! `WheelSpeedFrame`, `StatusFrame`, `DiagFrame`): no bit position is known here.
 
 use hils_rig_core::can::{
-    ClassicFrame, CommandFrame, DecodeError, DiagFrame, StatusFrame, WheelSpeedFrame,
+    ClassicFrame, CommandFrame, DecodeError, DiagFrame, RigState, StatusFrame, WheelSpeedFrame,
 };
 
 use super::transport::{Received, TransportError};
@@ -227,6 +227,18 @@ fn check_alive(a: &mut AliveCheck, counter: u8, frame: &'static str) -> Result<(
         return Err(Alarm::AliveStuck { frame, repeats });
     }
     Ok(())
+}
+
+/// Lower-case name of a run state (as `hils decode` writes it).
+pub fn state_name(s: RigState) -> &'static str {
+    match s {
+        RigState::Idle => "idle",
+        RigState::Starting => "starting",
+        RigState::Running => "running",
+        RigState::Finished => "finished",
+        RigState::Stopped => "stopped",
+        RigState::Fault => "fault",
+    }
 }
 
 #[cfg(test)]

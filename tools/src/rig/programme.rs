@@ -62,8 +62,9 @@ use hils_rig_core::can::{
 };
 use rayon::prelude::*;
 
-use super::commands::{Flow, Session, state_name};
+use super::commands::{Flow, Session};
 use super::monitor::Seen;
+use super::monitor::state_name;
 use super::record::{Recorder, RunMeta};
 use super::track;
 use super::transport::Transport;
@@ -85,11 +86,11 @@ pub struct RunArgs {
     #[arg(long, value_enum, default_value_t = FrictionArg::Variable)]
     pub friction: FrictionArg,
     /// Longest a run may take (board time, s: 1-3600); then it is stopped.
-    #[arg(long, default_value_t = 180.0, value_parser = crate::cli::rig_max_run_s)]
+    #[arg(long, default_value_t = 180.0, value_parser = crate::flags::rig_max_run_s)]
     pub max_run_s: f64,
     /// Wait after releasing the brake before each start, s (the controller under test
     /// vents its cylinders; nothing in `hils.dbc` shows their pressure): 0.1-600 s.
-    #[arg(long, default_value_t = 3.0, value_parser = crate::cli::rig_settle_s)]
+    #[arg(long, default_value_t = 3.0, value_parser = crate::flags::rig_settle_s)]
     pub settle_s: f64,
     /// Only the runs whose name contains this.
     #[arg(long)]

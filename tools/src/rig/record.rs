@@ -33,7 +33,7 @@ use hils_sil::Cmd;
 use hils_sil::record::Channel;
 use hils_sil::record::run_log::*;
 
-use super::commands::state_name;
+use super::monitor::state_name;
 use super::monitor::{Seen, WheelSpeeds};
 use super::transport::ProbeEvent;
 use crate::runlog;
@@ -201,13 +201,34 @@ impl Recorder {
         let r_w = m
             .wheel_radius_m
             .unwrap_or(Params::default().vehicle.wheel_radius);
-        // Frames up to the (first) start command belong to an earlier run (a frame stamped
-        // at the send's instant was made before the board took the command).
-        let t_from = self
-            .commands
+        let t_from = self.run_start_s();
+        let s = self.live_series(t_from);
+        let channels = s.channels();
+        let mut written = Written {
+            rows: 0,
+            outside_status: 0,
+            not_available: 0,
+            probe_records: s.pressure.iter().map(Vec::len).max().unwrap_or(0),
+        };
+        let (rows, t0) = self.rows(&s, &channels, r_w, t_from, &mut written);
+        written.rows = rows.len();
+        let meta = self.metadata(m, t_from, t0, &written);
+        let header = runlog::column_names(&channels);
+        runlog::write_table(out, &meta, &header, rows)?;
+        Ok(written)
+    }
+
+    /// Frames up to the (first) start command belong to an earlier run (a frame stamped
+    /// at the send's instant was made before the board took the command): its time, s.
+    fn run_start_s(&self) -> f64 {
+        self.commands
             .iter()
             .find(|(_, c)| matches!(c, Command::Start { .. }))
-            .map_or(f64::NEG_INFINITY, |&(t, _)| t);
+            .map_or(f64::NEG_INFINITY, |&(t, _)| t)
+    }
+
+    /// The series interpolated to the rows, after `t_from`.
+    fn live_series(&self, t_from: f64) -> LiveSeries {
         // Outside a live run the status frame's speed and deceleration are 0 by rule (safe
         // state), not measurements: only live frames are interpolated.
         let live: Vec<&(f64, StatusFrame)> = self
@@ -217,36 +238,32 @@ impl Recorder {
                 *t > t_from && matches!(s.state, RigState::Running | RigState::Finished)
             })
             .collect();
-        let v: Vec<(f64, f64)> = live
-            .iter()
-            .map(|(t, s)| (*t, s.vehicle_speed_kmh as f64 / KMH_PER_MPS as f64))
-            .collect();
-        let a: Vec<(f64, f64)> = live
-            .iter()
-            .map(|(t, s)| (*t, -s.deceleration_mps2 as f64))
-            .collect();
-        let pressure: [Vec<(f64, f64)>; WHEELSETS] =
-            core::array::from_fn(|j| self.probe_series(j, true, t_from));
-        let clamp: [Vec<(f64, f64)>; WHEELSETS] =
-            core::array::from_fn(|j| self.probe_series(j, false, t_from));
-        let has_clamp = clamp.iter().any(|c| !c.is_empty());
-        let surfaces = self.probe_surfaces(t_from);
-        let mut channels = vec![T, V_REF, OMEGA, P_CYL];
-        if has_clamp {
-            channels.push(F_CLAMP);
+        LiveSeries {
+            v: live
+                .iter()
+                .map(|(t, s)| (*t, s.vehicle_speed_kmh as f64 / KMH_PER_MPS as f64))
+                .collect(),
+            a: live
+                .iter()
+                .map(|(t, s)| (*t, -s.deceleration_mps2 as f64))
+                .collect(),
+            pressure: core::array::from_fn(|j| self.probe_series(j, true, t_from)),
+            clamp: core::array::from_fn(|j| self.probe_series(j, false, t_from)),
+            surfaces: self.probe_surfaces(t_from),
         }
-        channels.extend([A_X, CMD, STATE, FAULTS, STEP_MAX, STEP_MEAN, OVERRUNS]);
-        if !surfaces.is_empty() {
-            channels.extend([SURFACE, MU_AVAIL]);
-        }
-        let adhesion = super::track::board_adhesion();
+    }
 
-        let mut written = Written {
-            rows: 0,
-            outside_status: 0,
-            not_available: 0,
-            probe_records: pressure.iter().map(Vec::len).max().unwrap_or(0),
-        };
+    /// One row per wheel-speed frame after `t_from` with all speeds and inside the status
+    /// frames' span (the others counted in `written`); with the time of the first row.
+    fn rows(
+        &self,
+        s: &LiveSeries,
+        channels: &[Channel],
+        r_w: f64,
+        t_from: f64,
+        written: &mut Written,
+    ) -> (Vec<Vec<String>>, Option<f64>) {
+        let adhesion = super::track::board_adhesion();
         let mut t0 = None;
         let mut rows = Vec::new();
         for &(t, w) in self.wheel_speed.iter().filter(|(t, _)| *t > t_from) {
@@ -255,8 +272,8 @@ impl Recorder {
                 continue;
             };
             let (Some(v_ref), Some(a_x), Some(status)) = (
-                interpolate(&v, t),
-                interpolate(&a, t),
+                interpolate(&s.v, t),
+                interpolate(&s.a, t),
                 latest(&self.status, t),
             ) else {
                 written.outside_status += 1;
@@ -264,7 +281,7 @@ impl Recorder {
             };
             let t_rel = t - *t0.get_or_insert(t);
             let diag = latest(&self.diag, t);
-            let surface = latest(&surfaces, t);
+            let surface = latest(&s.surfaces, t);
             let num = |x: Option<f64>, d: usize| x.map_or(String::new(), |x| format!("{x:.d$}"));
             let row: Vec<String> = channels
                 .iter()
@@ -273,8 +290,8 @@ impl Recorder {
                     T => format!("{t_rel:.4}"),
                     V_REF => format!("{v_ref:.5}"),
                     OMEGA => format!("{:.5}", speeds[j] as f64 / KMH_PER_MPS as f64 / r_w),
-                    P_CYL => num(interpolate(&pressure[j], t), 1),
-                    F_CLAMP => num(interpolate(&clamp[j], t), 2),
+                    P_CYL => num(interpolate(&s.pressure[j], t), 1),
+                    F_CLAMP => num(interpolate(&s.clamp[j], t), 2),
                     A_X => format!("{a_x:.4}"),
                     CMD => self.cmd_at(t).map_or("", Cmd::text).to_string(),
                     STATE => state_name(status.state).to_string(),
@@ -289,25 +306,25 @@ impl Recorder {
                 .collect();
             rows.push(row);
         }
-        written.rows = rows.len();
+        (rows, t0)
+    }
+
+    /// The run log's metadata: source, run, start setup, command times from the first row
+    /// `t0`, frame counts, rows left out, where the brake inputs come from.
+    fn metadata(
+        &self,
+        m: &RunMeta,
+        t_from: f64,
+        t0: Option<f64>,
+        written: &Written,
+    ) -> Vec<(&'static str, String)> {
         let mut meta: Vec<(&str, String)> = vec![("source", m.source.clone())];
         if let Some(run) = &m.run {
             meta.push(("run", run.clone()));
         }
         meta.extend(start_metadata(m.start));
-        let first_brake = |code: Option<u8>| {
-            self.commands.iter().find(|(t, c)| {
-                *t > t_from
-                    && matches!(c, Command::Brake(b) if code.map_or(Cmd::of(*b) != Cmd::Release, |k| u8::from(Cmd::of(*b)) == k))
-            })
-        };
         if let Some(t0) = t0 {
-            if let Some(&(t_eb, _)) = first_brake(Some(Cmd::Emergency as u8)) {
-                meta.push(("eb_command_s", format!("{:.4}", (t_eb - t0).max(0.0))));
-            }
-            if let Some(&(t_b, _)) = first_brake(None) {
-                meta.push(("brake_command_s", format!("{:.4}", (t_b - t0).max(0.0))));
-            }
+            meta.extend(self.command_times(t_from, t0));
         }
         meta.push(("sample_rate_hz", "1000".into()));
         meta.push((
@@ -344,9 +361,51 @@ impl Recorder {
             "notes",
             "omega = RIG_WHEEL_SPEED / wheel radius; v_ref_mps, a_x_mps2 interpolated from RIG_STATUS (10 ms); state, faults = latest RIG_STATUS (faults = hils_rig_core::rig::Faults low 16 bits); step times from RIG_DIAG".into(),
         ));
-        let header = runlog::column_names(&channels);
-        runlog::write_table(out, &meta, &header, rows)?;
-        Ok(written)
+        meta
+    }
+
+    /// `eb_command_s` and `brake_command_s`: the first emergency and the first brake
+    /// command after `t_from`, s from the first row `t0`.
+    fn command_times(&self, t_from: f64, t0: f64) -> Vec<(&'static str, String)> {
+        let first_brake = |code: Option<u8>| {
+            self.commands.iter().find(|(t, c)| {
+                *t > t_from
+                    && matches!(c, Command::Brake(b) if code.map_or(Cmd::of(*b) != Cmd::Release, |k| u8::from(Cmd::of(*b)) == k))
+            })
+        };
+        let mut meta = Vec::new();
+        if let Some(&(t_eb, _)) = first_brake(Some(Cmd::Emergency as u8)) {
+            meta.push(("eb_command_s", format!("{:.4}", (t_eb - t0).max(0.0))));
+        }
+        if let Some(&(t_b, _)) = first_brake(None) {
+            meta.push(("brake_command_s", format!("{:.4}", (t_b - t0).max(0.0))));
+        }
+        meta
+    }
+}
+
+/// The recorded series interpolated to the rows (live status frames, probe records).
+struct LiveSeries {
+    v: Vec<(f64, f64)>,
+    a: Vec<(f64, f64)>,
+    pressure: [Vec<(f64, f64)>; WHEELSETS],
+    clamp: [Vec<(f64, f64)>; WHEELSETS],
+    surfaces: Vec<(f64, [Surface; WHEELSETS])>,
+}
+
+impl LiveSeries {
+    /// The run log's columns: f_clamp when the probe sent clamp forces, the surface and
+    /// the available adhesion when it sent surfaces.
+    fn channels(&self) -> Vec<Channel> {
+        let mut channels = vec![T, V_REF, OMEGA, P_CYL];
+        if self.clamp.iter().any(|c| !c.is_empty()) {
+            channels.push(F_CLAMP);
+        }
+        channels.extend([A_X, CMD, STATE, FAULTS, STEP_MAX, STEP_MEAN, OVERRUNS]);
+        if !self.surfaces.is_empty() {
+            channels.extend([SURFACE, MU_AVAIL]);
+        }
+        channels
     }
 }
 

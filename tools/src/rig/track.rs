@@ -29,11 +29,10 @@ use crate::wsp::programme::TrackSpec;
 pub fn load_track_file(path: &Path) -> Result<(Track, ContactSets)> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("cannot read track file {}", path.display()))?;
-    let spec: TrackSpec = toml::from_str(&text)
-        .map_err(|e| anyhow!("{}: invalid track file: {e}", path.display()))?;
-    let track = spec
-        .track()
-        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    let spec: TrackSpec =
+        toml::from_str(&text).with_context(|| format!("{}: invalid track file", path.display()))?;
+    let track = spec.track().with_context(|| path.display().to_string())?;
+    // ParamError (no_std) is a leaf with Display only: its text is the whole cause.
     spec.sets
         .validate()
         .map_err(|e| anyhow!("{}: {e}", path.display()))?;

@@ -8,7 +8,7 @@ use std::io::{IsTerminal, Write};
 
 use hils_rig_core::rig::Faults;
 
-use super::commands::state_name;
+use super::monitor::state_name;
 use super::monitor::{BoardView, Seen};
 
 /// The names of the fault bits set (sensor channels as `sensorN`, the other flags of

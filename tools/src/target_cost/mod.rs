@@ -76,7 +76,7 @@ pub struct TargetCostArgs {
     #[arg(long, default_value = "qemu-system-arm")]
     pub qemu: String,
     /// Give up on the emulator after this many seconds.
-    #[arg(long, default_value_t = 900, value_parser = crate::cli::timeout_s)]
+    #[arg(long, default_value_t = 900, value_parser = crate::flags::timeout_s)]
     pub timeout_s: u64,
     /// Also save the emulator's raw output (trajectory lines included) to this file.
     #[arg(long)]
