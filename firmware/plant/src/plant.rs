@@ -391,11 +391,20 @@ pub struct Plant<F: Real> {
     track_offset: [F; WHEELSETS],
 }
 
-/// The wheelset loop's trip count: hidden from the optimiser on the target (no unrolling),
-/// a constant on the host (unrolled).
+/// The wheelset loop's schedule, chosen here once for every build. On the Cortex-M4F (the
+/// board and the emulator: `arm` without an OS) one wheelset at a time, kept a loop (not
+/// unrolled): one wheelset's values fit its registers. Elsewhere (a host CPU) the four
+/// contacts (Eqs 9-12) are evaluated side by side before the loop, which is unrolled.
+/// Both compute the same values bit for bit: wheelset j's contact reads only wheelset j's
+/// state and the track, and the loop body for j writes only wheelset j's (`hils
+/// target-cost` and host-tests' `target_qemu` compare host and target bit for bit).
+const ONE_WHEELSET_AT_A_TIME: bool = cfg!(all(target_arch = "arm", target_os = "none"));
+
+/// The wheelset loop's trip count: hidden from the optimiser one wheelset at a time (no
+/// unrolling), a constant otherwise (unrolled).
 #[inline(always)]
-fn wheelset_loop_count() -> usize {
-    if cfg!(target_os = "none") {
+fn wheelset_loop_count<const ONE_AT_A_TIME: bool>() -> usize {
+    if ONE_AT_A_TIME {
         core::hint::black_box(WHEELSETS)
     } else {
         WHEELSETS
@@ -854,6 +863,7 @@ impl<F: Real> Plant<F> {
     /// for the Cortex-M4F's registers (live ranges, spills), and every change to it is
     /// measured per instruction by `hils target-cost`; its sections are marked `// ----`.
     pub fn step(&mut self, inputs: &[BrakeInput<F>; WHEELSETS]) -> Flags {
+        const ONE_AT_A_TIME: bool = ONE_WHEELSET_AT_A_TIME;
         let mut flags = 0u32;
         let half = F::of(0.5);
         let k = &self.k;
@@ -929,19 +939,18 @@ impl<F: Real> Plant<F> {
         // On the Cortex-M4F kept a loop (not unrolled four times: one wheelset's values fit
         // its registers); a host CPU runs the four unrolled faster. The same operations in
         // the same order either way (host/target bit identity).
-        // A host CPU evaluates the four contacts first, side by side (about 15 % faster
-        // there); the Cortex-M4F one wheelset at a time (no values kept across the loop).
-        // The same operations in the same order either way.
+        // The contacts side by side first, or one wheelset at a time in the loop
+        // ([`ONE_WHEELSET_AT_A_TIME`]: the same values either way).
         let mut host_contacts = [ContactForce::<F>::default(); WHEELSETS];
-        if !cfg!(target_os = "none") {
+        if !ONE_AT_A_TIME {
             for (j, contact) in host_contacts.iter_mut().enumerate() {
                 *contact = Self::wheelset_contact(track, &mut s.w[j], &r[j], j);
             }
         }
-        for j in 0..wheelset_loop_count() {
+        for j in 0..wheelset_loop_count::<ONE_AT_A_TIME>() {
             let j = j & (WHEELSETS - 1);
             let (v_w, omega, clamp) = (r[j].speed, r[j].omega, s.w[j].pad_force);
-            let contact = if cfg!(target_os = "none") {
+            let contact = if ONE_AT_A_TIME {
                 Self::wheelset_contact(track, &mut s.w[j], &r[j], j)
             } else {
                 host_contacts[j]
