@@ -403,8 +403,8 @@ const ONE_WHEELSET_AT_A_TIME: bool = cfg!(all(target_arch = "arm", target_os = "
 /// The wheelset loop's trip count: hidden from the optimiser one wheelset at a time (no
 /// unrolling), a constant otherwise (unrolled).
 #[inline(always)]
-fn wheelset_loop_count<const ONE_AT_A_TIME: bool>() -> usize {
-    if ONE_AT_A_TIME {
+fn wheelset_loop_count() -> usize {
+    if ONE_WHEELSET_AT_A_TIME {
         core::hint::black_box(WHEELSETS)
     } else {
         WHEELSETS
@@ -863,7 +863,6 @@ impl<F: Real> Plant<F> {
     /// for the Cortex-M4F's registers (live ranges, spills), and every change to it is
     /// measured per instruction by `hils target-cost`; its sections are marked `// ----`.
     pub fn step(&mut self, inputs: &[BrakeInput<F>; WHEELSETS]) -> Flags {
-        const ONE_AT_A_TIME: bool = ONE_WHEELSET_AT_A_TIME;
         let mut flags = 0u32;
         let half = F::of(0.5);
         let k = &self.k;
@@ -942,15 +941,15 @@ impl<F: Real> Plant<F> {
         // The contacts side by side first, or one wheelset at a time in the loop
         // ([`ONE_WHEELSET_AT_A_TIME`]: the same values either way).
         let mut host_contacts = [ContactForce::<F>::default(); WHEELSETS];
-        if !ONE_AT_A_TIME {
+        if !ONE_WHEELSET_AT_A_TIME {
             for (j, contact) in host_contacts.iter_mut().enumerate() {
                 *contact = Self::wheelset_contact(track, &mut s.w[j], &r[j], j);
             }
         }
-        for j in 0..wheelset_loop_count::<ONE_AT_A_TIME>() {
+        for j in 0..wheelset_loop_count() {
             let j = j & (WHEELSETS - 1);
             let (v_w, omega, clamp) = (r[j].speed, r[j].omega, s.w[j].pad_force);
-            let contact = if ONE_AT_A_TIME {
+            let contact = if ONE_WHEELSET_AT_A_TIME {
                 Self::wheelset_contact(track, &mut s.w[j], &r[j], j)
             } else {
                 host_contacts[j]
