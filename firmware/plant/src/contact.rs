@@ -38,9 +38,6 @@ pub struct ContactForce<F> {
     pub mu: F,
     /// Creepage s (Eq 12, with the speed floor).
     pub creepage: F,
-    /// 1/Q, 1/N, for the adhesion coefficient F/Q (Eq 13) without another division
-    /// (0 when the wheelset is unloaded or mu is 0: no adhesion).
-    pub inv_load: F,
 }
 
 impl<F: Real> Polach<F> {
@@ -112,7 +109,6 @@ impl<F: Real> Polach<F> {
                 chord: F::ZERO,
                 mu,
                 creepage: slip_velocity / v_floor,
-                inv_load: F::ZERO,
             };
         }
         // One division for Eqs (10) and (12): 1 / (V Q mu) gives 1/V, 1/(Q mu) and 1/Q.
@@ -131,7 +127,6 @@ impl<F: Real> Polach<F> {
             chord,
             mu,
             creepage,
-            inv_load: mu * v_floor * inv_v_load_mu,
         }
     }
 

@@ -74,7 +74,7 @@ impl<F: Real> DiscPadFriction<F> {
     }
 
     /// c mu_d0 times [`Self::temperature_factor_tracked`] (c mu_d0 folded in: the plant's
-    /// refresh in turn), mu_d0 with the constant model; for [`Self::mu_d_scaled_tracked`].
+    /// refresh in turn), mu_d0 with the constant model; for [`Self::scaled_brackets_tracked`].
     #[inline(always)]
     pub fn scaled_temperature_factor_tracked(&self, t_d: F, decay: &mut TrackedExp<F>) -> F {
         if self.variable {
@@ -125,20 +125,30 @@ impl<F: Real> DiscPadFriction<F> {
         })
     }
 
-    /// [`Self::mu_d_tracked`] with the temperature factor times c mu_d0 given
-    /// ([`Self::scaled_temperature_factor_tracked`]) and the speed factor's exponent
-    /// -m_v |v_d| given ([`Self::speed_exponent_per_spin`] times |omega|): two products
-    /// less per call.
+    /// Eq (2)'s two brackets times c mu_d0, c mu_d0 (n_v e^(-m_v v_d) + 1)(n_T e^(-m_T T_d)
+    /// + 1) (mu_d0 with the constant model), from the temperature bracket times c mu_d0
+    /// ([`Self::scaled_temperature_factor_tracked`]) and the speed bracket's exponent
+    /// -m_v |v_d| ([`Self::speed_exponent_per_spin`] times |omega|), e^x from a
+    /// [`TrackedExp`]. Both brackets follow quantities that change over seconds in braking
+    /// (and over tenths of a second in a slide), so the plant refreshes this factor in
+    /// turn; [`Self::mu_d_of_brackets`] gives mu_d from it every step.
     #[inline(always)]
-    pub fn mu_d_scaled_tracked(
+    pub fn scaled_brackets_tracked(
         &self,
         speed_exponent: F,
         scaled_temperature_factor: F,
-        f_clamp: F,
         decay: &mut TrackedExp<F>,
     ) -> F {
         let speed_factor = self.n_v * decay.exp(speed_exponent) + F::ONE;
-        speed_factor * scaled_temperature_factor * (F::ONE + self.k_p_per_n * f_clamp)
+        speed_factor * scaled_temperature_factor
+    }
+
+    /// mu_d of Eq (2) from its brackets times c mu_d0 ([`Self::scaled_brackets_tracked`])
+    /// and the pad clamp force `f_clamp` (N per face): times the pressure extension
+    /// (1 + k_p f_clamp / 10 kN).
+    #[inline(always)]
+    pub fn mu_d_of_brackets(&self, scaled_brackets: F, f_clamp: F) -> F {
+        scaled_brackets * (F::ONE + self.k_p_per_n * f_clamp)
     }
 
     /// Eq (2) with the speed factor's e^x from `exp`.

@@ -322,9 +322,6 @@ struct WheelsetRecord<F> {
     creepage: F,
     axle_load: F,
     adhesion_force: F,
-    /// 1/Q of the contact (0 unloaded): the adhesion coefficient F/Q of Eq (13) is
-    /// `adhesion_force * inv_load`.
-    inv_load: F,
     rail_mu: F,
     mu_d: F,
     brake_torque: F,
@@ -349,8 +346,12 @@ struct WheelsetState<F: Real> {
     disc_temp: F,
     /// Pad force state of the actuator-lag extension.
     pad_force: F,
-    /// Eq (2) temperature bracket times c mu_d0 (refreshed in turn).
+    /// Eq (2) temperature bracket times c mu_d0 (refreshed in turn, every 8 steps).
     temperature_factor: F,
+    /// Eq (2)'s speed and temperature brackets times c mu_d0 (refreshed in turn, every 4
+    /// steps: the speed bracket at that step's spin speed, with the temperature bracket
+    /// of the last refresh); mu_d is this times the pressure extension.
+    friction_brackets: F,
     /// Eq (5) loss coefficient alpha + beta v_w^0.8, W/K (refreshed in turn).
     heat_loss: F,
     /// Last valid brake input (clamp force, N).
@@ -643,6 +644,11 @@ impl<F: Real> Plant<F> {
                 .k
                 .friction
                 .speed_decay_at(v0 * self.k.inv_r * self.k.friction_radius);
+            w.friction_brackets = self.k.friction.scaled_brackets_tracked(
+                self.k.speed_exponent_per_spin * (v0 * self.k.inv_r).abs(),
+                w.temperature_factor,
+                &mut w.speed_decay,
+            );
         }
         self.steps = 0;
         self.carbody_accel = F::ZERO;
@@ -736,7 +742,7 @@ impl<F: Real> Plant<F> {
                     creepage: r.creepage,
                     axle_load: r.axle_load,
                     adhesion_force: r.adhesion_force,
-                    adhesion: r.adhesion_force * r.inv_load,
+                    adhesion: Self::adhesion_coefficient(r.adhesion_force, r.axle_load),
                     rail_mu: r.rail_mu,
                     mu_d: r.mu_d,
                     clamp_force: w.pad_force,
@@ -750,6 +756,16 @@ impl<F: Real> Plant<F> {
             damper_power: self.damper_power,
             external_power: self.external_power(),
             flags: self.flags,
+        }
+    }
+
+    /// The adhesion coefficient F/Q of Eq (13) from the adhesion force `force_n` and the
+    /// axle load `load_n` (N): 0 when the wheelset is unloaded (no contact force then).
+    fn adhesion_coefficient(force_n: F, load_n: F) -> F {
+        if load_n > F::ZERO {
+            force_n / load_n
+        } else {
+            F::ZERO
         }
     }
 
@@ -842,16 +858,15 @@ impl<F: Real> Plant<F> {
         *pad
     }
 
-    /// The wheel-rail contact of wheelset `j` at the step's start: Eq (11)'s mu (times the
-    /// track's recovery factor) and Eqs (9), (10), (12).
+    /// The wheel-rail contact of a wheelset at the step's start (its state `w`, record
+    /// `record`, the track's contact model `polach` under it and recovery factor
+    /// `mu_factor`): Eq (11)'s mu (times the factor) and Eqs (9), (10), (12).
     #[inline(always)]
     fn wheelset_contact(
-        track: &TrackAdhesion<F>,
+        (polach, mu_factor): (&Polach<F>, F),
         w: &mut WheelsetState<F>,
         record: &WheelsetRecord<F>,
-        j: usize,
     ) -> ContactForce<F> {
-        let (polach, mu_factor) = track.contact(j);
         let mu = polach.friction_tracked(w.slip, &mut w.rail_decay) * mu_factor;
         polach.evaluate_with_mu(w.slip, record.speed, record.axle_load, mu)
     }
@@ -907,20 +922,26 @@ impl<F: Real> Plant<F> {
             damper_power -= damping_l * d_rate;
         }
 
-        // ---- Slow factors: one per step, in turn (each every 8 steps) ----
+        // ---- Slow factors, in turn: of wheelset `slow`, Eq (2)'s brackets every 4 steps,
+        // and either its temperature bracket or Eq (5)'s loss coefficient (each every 8) ----
         let turn = self.steps % (2 * WHEELSETS as u32);
         let slow = (turn % WHEELSETS as u32) as usize;
+        let w = &mut s.w[slow];
         if turn < WHEELSETS as u32 {
-            let w = &mut s.w[slow];
             w.temperature_factor = k
                 .friction
                 .scaled_temperature_factor_tracked(w.disc_temp, &mut w.temperature_decay);
         } else {
-            let w = &mut s.w[slow];
             w.heat_loss = k
                 .thermal
                 .loss_coefficient_tracked(k.r * r[slow].omega, &mut w.speed_power);
         }
+        // The friction speed at this step's spin speed (Eq 2's v_d = l_p |omega|).
+        w.friction_brackets = k.friction.scaled_brackets_tracked(
+            k.speed_exponent_per_spin * r[slow].omega.abs(),
+            w.temperature_factor,
+            &mut w.speed_decay,
+        );
         // Zones and degraded adhesion along the track (crate::track): one wheelset per
         // step, in turn; nothing to do on a uniform track with degraded adhesion off.
         let track = &mut self.track;
@@ -943,24 +964,21 @@ impl<F: Real> Plant<F> {
         let mut host_contacts = [ContactForce::<F>::default(); WHEELSETS];
         if !ONE_WHEELSET_AT_A_TIME {
             for (j, contact) in host_contacts.iter_mut().enumerate() {
-                *contact = Self::wheelset_contact(track, &mut s.w[j], &r[j], j);
+                *contact = Self::wheelset_contact(track.contact(j), &mut s.w[j], &r[j]);
             }
         }
         for j in 0..wheelset_loop_count() {
             let j = j & (WHEELSETS - 1);
-            let (v_w, omega, clamp) = (r[j].speed, r[j].omega, s.w[j].pad_force);
+            let ws = &mut s.w[j];
+            let w = &mut r[j];
+            let (v_w, omega, clamp) = (w.speed, w.omega, ws.pad_force);
             let contact = if ONE_WHEELSET_AT_A_TIME {
-                Self::wheelset_contact(track, &mut s.w[j], &r[j], j)
+                Self::wheelset_contact(track.contact(j), ws, w)
             } else {
                 host_contacts[j]
             };
-            let w = &mut r[j];
-            let mu_d = k.friction.mu_d_scaled_tracked(
-                k.speed_exponent_per_spin * omega.abs(),
-                s.w[j].temperature_factor,
-                clamp,
-                &mut s.w[j].speed_decay,
-            );
+            // Eq (2) from its brackets, refreshed in turn (above).
+            let mu_d = k.friction.mu_d_of_brackets(ws.friction_brackets, clamp);
             let torque_kinetic = k.caliper.torque(mu_d, clamp);
 
             // Semi-implicit spin/slip update with the brake as a clutch. Unknowns at the
@@ -974,7 +992,7 @@ impl<F: Real> Plant<F> {
             let dv_explicit = w.f_pl * k.dt_inv_m_w - k.dt_g_along;
             let d = F::ONE + chord * k.dt_spin_compliance;
             let inv_d = F::ONE / d;
-            let u0 = (s.w[j].slip + dv_explicit) * inv_d;
+            let u0 = (ws.slip + dv_explicit) * inv_d;
             let omega0 = omega + chord * u0 * k.dt_r_inv_i_w;
             let g = k.dt_inv_i_w * (F::ONE + chord * k.dt_inv_m_w) * inv_d;
             let limit = g * torque_kinetic;
@@ -995,19 +1013,18 @@ impl<F: Real> Plant<F> {
             w.speed = v_w + w.dv_w;
             w.creepage = contact.creepage;
             w.adhesion_force = force;
-            w.inv_load = contact.inv_load;
             w.rail_mu = contact.mu;
             w.mu_d = mu_d;
             w.brake_torque = torque;
             w.brake_power = torque * half * (omega + omega_new);
-            w.contact_power = force * half * (s.w[j].slip + u_new);
-            s.w[j].slip = u_new;
+            w.contact_power = force * half * (ws.slip + u_new);
+            ws.slip = u_new;
 
             // Disc heat balance, Eqs (3)-(6) (explicit: time constant of minutes).
-            let heat_flow =
-                k.thermal
-                    .net_heat_flow(w.brake_power, s.w[j].disc_temp, s.w[j].heat_loss);
-            s.w[j].disc_temp += heat_flow * k.dt_inv_disc_heat_capacity;
+            let heat_flow = k
+                .thermal
+                .net_heat_flow(w.brake_power, ws.disc_temp, ws.heat_loss);
+            ws.disc_temp += heat_flow * k.dt_inv_disc_heat_capacity;
         }
 
         // ---- Secondary suspension (deviation from the static preloads), after the

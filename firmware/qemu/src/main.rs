@@ -403,13 +403,15 @@ mod emulator {
         fr: DiscPadFriction<f32>,
         th: DiscThermal<f32>,
         polach: hils_plant::contact::Polach<f32>,
-        friction_radius: f32,
         wheel_radius: f32,
+        /// Eq (2)'s speed exponent per rad/s of spin, -m_v l_p.
+        speed_exponent_per_spin: f32,
         /// Harness cost of four and of one trivial call.
         baseline: u32,
         baseline_one: u32,
         /// The step's trackers of e^(-B|w|) and e^(-m_v v_d), replayed from the same
-        /// arguments (the measurements follow the step's anchors).
+        /// arguments (the measurements follow the step's anchors; e^(-m_v v_d) at the
+        /// spin speed the anchor sits at, as the step's refresh in turn computes it).
         rail_decay: [TrackedExp<f32>; WHEELSETS],
         speed_decay: [TrackedExp<f32>; WHEELSETS],
     }
@@ -434,8 +436,11 @@ mod emulator {
                 fr,
                 th: DiscThermal::<f32>::new(&params.thermal),
                 polach: *sc.sim.plant.polach(),
-                friction_radius,
                 wheel_radius: params.vehicle.wheel_radius as f32,
+                speed_exponent_per_spin: DiscPadFriction::<f32>::speed_exponent_per_spin(
+                    &params.friction,
+                    params.brake.friction_radius,
+                ),
                 baseline,
                 baseline_one,
                 rail_decay: [TrackedExp::<f32>::default(); WHEELSETS],
@@ -450,7 +455,7 @@ mod emulator {
             cur: &hils_plant::Outputs<f32>,
         ) -> [u32; 3] {
             let (fr, th, polach) = (&self.fr, &self.th, &self.polach);
-            let (friction_radius, r) = (self.friction_radius, self.wheel_radius);
+            let r = self.wheel_radius;
             let (baseline, baseline_one) = (self.baseline, self.baseline_one);
             let w = |o: &hils_plant::Outputs<f32>, j: usize| o.wheelsets[j];
             let contact_args = [0, 1, 2, 3].map(|j| {
@@ -460,18 +465,23 @@ mod emulator {
                     w(cur, j).axle_load,
                 ]
             });
-            // Friction and heat as the step computes them: Eq (2) with the temperature
-            // bracket and Eq (5) with the loss coefficient, one of which the step refreshes
-            // for one wheelset (`slow`) in an 8-step turn, plus that refresh.
+            // Friction and heat as the step computes them: Eq (2) from its brackets (the
+            // step refreshes them for one wheelset, `slow`, every step: each every 4) and
+            // Eq (5) with the loss coefficient; the temperature bracket or the loss
+            // coefficient of `slow` refreshed in an 8-step turn.
             let turn = prev.steps % (2 * WHEELSETS as u32);
             let slow = (turn % WHEELSETS as u32) as usize;
             let friction_args = [0, 1, 2, 3].map(|j| {
                 [
-                    w(prev, j).omega * friction_radius,
                     fr.temperature_factor(w(prev, j).disc_temp),
                     w(cur, j).clamp_force,
+                    0.0,
                 ]
             });
+            let brackets_args = [
+                self.speed_exponent_per_spin * w(prev, slow).omega.abs(),
+                fr.temperature_factor(w(prev, slow).disc_temp),
+            ];
             let thermal_args = [0, 1, 2, 3].map(|j| {
                 [
                     w(cur, j).brake_power,
@@ -487,14 +497,21 @@ mod emulator {
             })
             .saturating_sub(baseline);
             let refresh_friction = turn < WHEELSETS as u32;
-            let friction = (four_tracked(timer, &friction_args, &mut self.speed_decay, |a, d| {
-                fr.mu_d_tracked(a[0], a[1], a[2], d)
-            }) + if refresh_friction {
-                one(timer, &refresh_args, |a| fr.temperature_factor(a[0]))
-            } else {
-                baseline_one
-            })
-            .saturating_sub(baseline + baseline_one);
+            let decay = &mut self.speed_decay[slow];
+            let brackets = timer
+                .measure(|| {
+                    let [x, t] = black_box(brackets_args);
+                    black_box(fr.scaled_brackets_tracked(x, t, decay));
+                })
+                .1;
+            let friction = (four(timer, &friction_args, |a| fr.mu_d_of_brackets(a[0], a[1]))
+                + brackets
+                + if refresh_friction {
+                    one(timer, &refresh_args, |a| fr.temperature_factor(a[0]))
+                } else {
+                    baseline_one
+                })
+            .saturating_sub(baseline + 2 * baseline_one);
             let thermal = (four(timer, &thermal_args, |a| th.rate_with(a[0], a[1], a[2]))
                 + if refresh_friction {
                     baseline_one
