@@ -32,11 +32,14 @@
 //!   holds the wheel at omega = 0 when that suffices, solved exactly in the same linear
 //!   update, so a wheel never spins backwards and the vehicle stops cleanly. Creepage uses
 //!   max(|v|, floor).
-//! * **Slow factors.** The temperature bracket of Eq (2) and the loss coefficient of
-//!   Eq (5) (alpha + beta v_w^0.8) follow the disc temperature and the wheel speed, which
-//!   change over seconds; each step refreshes one of them for one wheelset in turn (each
-//!   every 0.8 ms), which takes three of the four transcendental functions per wheelset
-//!   out of the 10 kHz step; v_w^0.8 is tracked by [`TrackedPow`] (a binomial series
+//! * **Slow factors.** Eq (2)'s speed and temperature brackets and the loss coefficient of
+//!   Eq (5) (alpha + beta v_w^0.8) follow the friction speed, the disc temperature and the
+//!   wheel speed, which change over seconds in braking (over tenths of a second in a
+//!   slide); each step refreshes, for one wheelset in turn, either Eq (2)'s product of
+//!   brackets or Eq (5)'s loss coefficient (each every 0.8 ms). mu_d thus lags the spin
+//!   speed by at most 0.7 ms: under 4e-4 relative at a slide's 100 rad/s^2 (Eq 2's speed
+//!   bracket changes by at most n_v m_v = 1.8 % per m/s of friction speed). This takes
+//!   three of the four transcendental functions per wheelset out of the 10 kHz step; v_w^0.8 is tracked by [`TrackedPow`] (a binomial series
 //!   about an exact anchor while v_w stays within 1/64 of it; within 8e-7 relative).
 //! * **Tracked exponentials.** e^(-B |w|) (Eq 11), e^(-m_v v_d) and e^(-m_T T_d) (Eq 2)
 //!   move little from step to step (or refresh to refresh): [`TrackedExp`] serves them
@@ -44,7 +47,7 @@
 //!   against the exact function) and evaluates e^x again only when the argument leaves a
 //!   window of 1/64.
 //! * **Bad input.** Brake inputs are clamped to [0, 1.5 x the physical maximum] and
-//!   flagged; a NaN/inf input holds the last valid value and is flagged. A non-finite state
+//!   flagged; a NaN/inf input holds the pad force where it is and is flagged. A non-finite state
 //!   (never seen with validated parameters) puts the plant in a safe state: at rest, flagged.
 
 use crate::brake::Caliper;
@@ -78,7 +81,7 @@ impl<F: Real> Default for BrakeInput<F> {
 pub struct Flags(pub u32);
 
 impl Flags {
-    /// Bits 0-3: wheelset 1-4 brake input NaN/inf; the last valid value was used.
+    /// Bits 0-3: wheelset 1-4 brake input NaN/inf; the pad force was held.
     pub const INPUT_NOT_FINITE: u32 = 0x000f;
     /// Bits 4-7: wheelset 1-4 brake input out of range; clamped.
     pub const INPUT_OUT_OF_RANGE: u32 = 0x00f0;
@@ -323,7 +326,6 @@ struct WheelsetRecord<F> {
     axle_load: F,
     adhesion_force: F,
     rail_mu: F,
-    mu_d: F,
     brake_torque: F,
     brake_power: F,
     contact_power: F,
@@ -346,16 +348,12 @@ struct WheelsetState<F: Real> {
     disc_temp: F,
     /// Pad force state of the actuator-lag extension.
     pad_force: F,
-    /// Eq (2) temperature bracket times c mu_d0 (refreshed in turn, every 8 steps).
-    temperature_factor: F,
-    /// Eq (2)'s speed and temperature brackets times c mu_d0 (refreshed in turn, every 4
-    /// steps: the speed bracket at that step's spin speed, with the temperature bracket
-    /// of the last refresh); mu_d is this times the pressure extension.
+    /// Eq (2)'s speed and temperature brackets times c mu_d0 (refreshed in turn, every 8
+    /// steps, at that step's spin speed and disc temperature); mu_d is this times the
+    /// pressure extension.
     friction_brackets: F,
     /// Eq (5) loss coefficient alpha + beta v_w^0.8, W/K (refreshed in turn).
     heat_loss: F,
-    /// Last valid brake input (clamp force, N).
-    last_clamp: F,
     /// e^(-B |w|) of Eq (11), tracked from an exact anchor.
     rail_decay: TrackedExp<F>,
     /// e^(-m_v v_d) of Eq (2), tracked from an exact anchor.
@@ -364,6 +362,9 @@ struct WheelsetState<F: Real> {
     temperature_decay: TrackedExp<F>,
     /// v_w^0.8 of Eq (5), tracked from an exact anchor.
     speed_power: TrackedPow<F>,
+    /// Unused: 16 values, a 64-byte stride (one shift per wheelset address on the
+    /// Cortex-M4F instead of a multiply-add pair).
+    _stride: F,
 }
 
 /// The plant: vehicle, contact, brakes, disc heat. `F` = f32 on the target.
@@ -634,7 +635,7 @@ impl<F: Real> Plant<F> {
         for (w, &disc_temp) in self.s.w.iter_mut().zip(disc_temps.iter()) {
             w.disc_temp = disc_temp;
             w.temperature_decay = self.k.friction.temperature_decay_at(disc_temp);
-            w.temperature_factor = self
+            let temperature_factor = self
                 .k
                 .friction
                 .scaled_temperature_factor_tracked(disc_temp, &mut w.temperature_decay);
@@ -646,22 +647,17 @@ impl<F: Real> Plant<F> {
                 .speed_decay_at(v0 * self.k.inv_r * self.k.friction_radius);
             w.friction_brackets = self.k.friction.scaled_brackets_tracked(
                 self.k.speed_exponent_per_spin * (v0 * self.k.inv_r).abs(),
-                w.temperature_factor,
+                temperature_factor,
                 &mut w.speed_decay,
             );
         }
         self.steps = 0;
         self.carbody_accel = F::ZERO;
-        for (w, &disc_temp) in self.record.iter_mut().zip(disc_temps.iter()) {
+        for w in self.record.iter_mut() {
             *w = WheelsetRecord {
                 omega: v0 * self.k.inv_r,
                 speed: v0,
                 axle_load: self.k.q_static,
-                mu_d: self.k.friction.mu_d(
-                    v0 * self.k.inv_r * self.k.friction_radius,
-                    disc_temp,
-                    F::ZERO,
-                ),
                 rail_mu: self.k.polach.friction(F::ZERO),
                 ..WheelsetRecord::default()
             };
@@ -735,6 +731,11 @@ impl<F: Real> Plant<F> {
             wheelsets: core::array::from_fn(|j| {
                 let r = &self.record[j];
                 let w = &s.w[j];
+                // Eq (2) as the step computed it: the state's brackets and pad force.
+                let mu_d = self
+                    .k
+                    .friction
+                    .mu_d_of_brackets(w.friction_brackets, w.pad_force);
                 WheelsetOutput {
                     omega: r.omega,
                     speed: r.speed,
@@ -744,10 +745,10 @@ impl<F: Real> Plant<F> {
                     adhesion_force: r.adhesion_force,
                     adhesion: Self::adhesion_coefficient(r.adhesion_force, r.axle_load),
                     rail_mu: r.rail_mu,
-                    mu_d: r.mu_d,
+                    mu_d,
                     clamp_force: w.pad_force,
                     brake_torque: r.brake_torque,
-                    brake_force: self.k.caliper.friction_force(r.mu_d, w.pad_force),
+                    brake_force: self.k.caliper.friction_force(mu_d, w.pad_force),
                     disc_temp: w.disc_temp,
                     brake_power: r.brake_power,
                     contact_power: r.contact_power,
@@ -790,11 +791,11 @@ impl<F: Real> Plant<F> {
     }
 
     /// Sanitises one brake input to a pad clamp force (N per face), flagging bad values;
-    /// `last_clamp` is the wheelset's last valid value.
+    /// a non-finite input gives `pad_force`, the pad force acting now (the pad holds).
     #[inline(always)]
     fn clamp_force_input(
         k: &Constants<F>,
-        last_clamp: &mut F,
+        pad_force: F,
         j: usize,
         input: BrakeInput<F>,
         flags: &mut u32,
@@ -802,7 +803,7 @@ impl<F: Real> Plant<F> {
         let cal = &k.caliper;
         // The usual case, a reading within [0, limit], by one integer compare (one per
         // input kind); the detailed checks only when it fails.
-        let clamp = match input {
+        match input {
             // Within [0, clamp_force_limit] by the limit's construction (Caliper::new).
             BrakeInput::CylinderPressure(p) if p.within_zero_and(cal.pressure_limit) => {
                 cal.clamp_force(p)
@@ -815,7 +816,7 @@ impl<F: Real> Plant<F> {
                 };
                 if !value.is_finite() {
                     *flags |= Flags::wheelset_bit(Flags::INPUT_NOT_FINITE, j);
-                    return *last_clamp;
+                    return pad_force;
                 }
                 // Below zero by more than 2 % of the range, or above the limit: out of
                 // range. Small negative readings are sensor noise around zero and clamp
@@ -829,9 +830,7 @@ impl<F: Real> Plant<F> {
                     BrakeInput::ClampForce(_) => value,
                 }
             }
-        };
-        *last_clamp = clamp;
-        clamp
+        }
     }
 
     /// The pad force acting on wheelset `j` (N per face): its input through the optional
@@ -844,7 +843,7 @@ impl<F: Real> Plant<F> {
         input: BrakeInput<F>,
         flags: &mut u32,
     ) -> F {
-        let target = Self::clamp_force_input(k, &mut w.last_clamp, j, input, flags);
+        let target = Self::clamp_force_input(k, w.pad_force, j, input, flags);
         let pad = &mut w.pad_force;
         // First-order lag, written from the target so that rate 1 (no lag) gives the
         // target exactly, and kept between the old value and the target: rounding may
@@ -922,26 +921,26 @@ impl<F: Real> Plant<F> {
             damper_power -= damping_l * d_rate;
         }
 
-        // ---- Slow factors, in turn: of wheelset `slow`, Eq (2)'s brackets every 4 steps,
-        // and either its temperature bracket or Eq (5)'s loss coefficient (each every 8) ----
+        // ---- Slow factors, in turn: of wheelset `slow`, either Eq (2)'s brackets or
+        // Eq (5)'s loss coefficient (each every 8 steps) ----
         let turn = self.steps % (2 * WHEELSETS as u32);
         let slow = (turn % WHEELSETS as u32) as usize;
         let w = &mut s.w[slow];
         if turn < WHEELSETS as u32 {
-            w.temperature_factor = k
+            // At this step's disc temperature and friction speed (v_d = l_p |omega|).
+            let temperature_factor = k
                 .friction
                 .scaled_temperature_factor_tracked(w.disc_temp, &mut w.temperature_decay);
+            w.friction_brackets = k.friction.scaled_brackets_tracked(
+                k.speed_exponent_per_spin * r[slow].omega.abs(),
+                temperature_factor,
+                &mut w.speed_decay,
+            );
         } else {
             w.heat_loss = k
                 .thermal
                 .loss_coefficient_tracked(k.r * r[slow].omega, &mut w.speed_power);
         }
-        // The friction speed at this step's spin speed (Eq 2's v_d = l_p |omega|).
-        w.friction_brackets = k.friction.scaled_brackets_tracked(
-            k.speed_exponent_per_spin * r[slow].omega.abs(),
-            w.temperature_factor,
-            &mut w.speed_decay,
-        );
         // Zones and degraded adhesion along the track (crate::track): one wheelset per
         // step, in turn; nothing to do on a uniform track with degraded adhesion off.
         let track = &mut self.track;
@@ -1014,7 +1013,6 @@ impl<F: Real> Plant<F> {
             w.creepage = contact.creepage;
             w.adhesion_force = force;
             w.rail_mu = contact.mu;
-            w.mu_d = mu_d;
             w.brake_torque = torque;
             w.brake_power = torque * half * (omega + omega_new);
             w.contact_power = force * half * (ws.slip + u_new);
@@ -1222,7 +1220,14 @@ mod tests {
         assert!(kept >= hot && kept <= 1.01 * hot, "{kept} vs {hot}");
         assert_eq!(o.wheelsets[1].disc_temp, 0.0);
         let friction = DiscPadFriction::<f32>::new(&params.friction);
-        assert_eq!(o.wheelsets[0].mu_d, friction.mu_d(0.0, kept, 0.0));
+        // Eq (2) at rest and the kept temperature (the plant's brackets are refreshed from
+        // exact anchors there: within a few roundings).
+        let exact = friction.mu_d(0.0, kept, 0.0);
+        let mu_d = o.wheelsets[0].mu_d;
+        assert!(
+            (mu_d - exact).abs() <= 4.0 * f32::EPSILON * exact,
+            "{mu_d} vs {exact}"
+        );
         for w in o.wheelsets {
             assert_eq!(w.omega, 0.0);
             assert!(w.values().iter().all(|x| x.is_finite()), "{w:?}");

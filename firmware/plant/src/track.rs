@@ -379,15 +379,22 @@ pub struct TrackAdhesion<F: Real> {
     active: bool,
     /// Surface under each wheelset (refreshed in turn).
     surface: [Surface; crate::params::WHEELSETS],
-    /// The contact model of each wheelset's surface (a copy: no lookup in the step).
-    wheel_polach: [Polach<F>; crate::params::WHEELSETS],
+    /// The contact model of each wheelset's surface (a copy: no lookup in the step) and
+    /// its friction factor, side by side (one address per wheelset in the step).
+    wheel: [WheelContact<F>; crate::params::WHEELSETS],
     /// Positions between which each wheelset's surface cannot change, `[lo, hi)`, m: the
     /// zones are looked up again only when a wheelset leaves its interval.
     lo: [F; crate::params::WHEELSETS],
     hi: [F; crate::params::WHEELSETS],
-    /// Friction factor 1 + (R - 1) lambda of each wheelset (exactly 1 when off).
-    mu_factor: [F; crate::params::WHEELSETS],
     degraded: Option<Recovery<F>>,
+}
+
+/// The contact under one wheelset: the model of its surface and the recovery's factor.
+#[derive(Clone, Copy, Debug)]
+struct WheelContact<F> {
+    polach: Polach<F>,
+    /// Friction factor 1 + (R - 1) lambda (exactly 1 when degraded adhesion is off).
+    mu_factor: F,
 }
 
 /// State of the recovery model.
@@ -460,12 +467,14 @@ impl<F: Real> TrackAdhesion<F> {
             starts,
             ends,
             active: !uniform || recovery.is_some(),
-            wheel_polach: [polach[base as usize]; crate::params::WHEELSETS],
+            wheel: [WheelContact {
+                polach: polach[base as usize],
+                mu_factor: F::ONE,
+            }; crate::params::WHEELSETS],
             polach,
             surface: [base; crate::params::WHEELSETS],
             lo: [lo; crate::params::WHEELSETS],
             hi: [hi; crate::params::WHEELSETS],
-            mu_factor: [F::ONE; crate::params::WHEELSETS],
             degraded: recovery,
         })
     }
@@ -478,7 +487,8 @@ impl<F: Real> TrackAdhesion<F> {
     /// The contact model under wheelset `j` (0-based) and its friction factor.
     #[inline(always)]
     pub fn contact(&self, j: usize) -> (&Polach<F>, F) {
-        (&self.wheel_polach[j & 3], self.mu_factor[j & 3])
+        let wheel = &self.wheel[j & 3];
+        (&wheel.polach, wheel.mu_factor)
     }
 
     /// Whether [`Self::step`] has anything to do: the track has zones or degraded adhesion
@@ -534,7 +544,7 @@ impl<F: Real> TrackAdhesion<F> {
             (lo, hi) = (F::of(f64::INFINITY), F::of(f64::NEG_INFINITY));
         }
         self.surface[j] = surface;
-        self.wheel_polach[j] = self.polach[surface as usize & 3];
+        self.wheel[j].polach = self.polach[surface as usize & 3];
         self.lo[j] = lo;
         self.hi[j] = hi;
     }
@@ -582,7 +592,7 @@ impl<F: Real> TrackAdhesion<F> {
         r.own_in_cell[j] += deposit;
         let per_metre = power / speed.abs().max(F::ONE);
         r.own[j] += (per_metre - r.own[j]) * r.own_gain;
-        self.mu_factor[j] = if surface.contaminated() {
+        self.wheel[j].mu_factor = if surface.contaminated() {
             let lambda = F::ONE - (-(ahead + r.own[j]) * r.inv_energy_scale).exp();
             F::ONE + r.ratio_minus_one * lambda
         } else {

@@ -409,11 +409,11 @@ mod emulator {
         /// Harness cost of four and of one trivial call.
         baseline: u32,
         baseline_one: u32,
-        /// The step's trackers of e^(-B|w|) and e^(-m_v v_d), replayed from the same
-        /// arguments (the measurements follow the step's anchors; e^(-m_v v_d) at the
-        /// spin speed the anchor sits at, as the step's refresh in turn computes it).
+        /// The step's trackers of e^(-B|w|), e^(-m_v v_d) and e^(-m_T T_d), replayed from
+        /// the same arguments (the measurements follow the step's anchors).
         rail_decay: [TrackedExp<f32>; WHEELSETS],
         speed_decay: [TrackedExp<f32>; WHEELSETS],
+        temperature_decay: [TrackedExp<f32>; WHEELSETS],
     }
 
     impl SubModels {
@@ -433,6 +433,7 @@ mod emulator {
             let v_d0 = sc.sim.outputs().wheelsets[0].omega * friction_radius;
             Self {
                 speed_decay: [fr.speed_decay_at(v_d0); WHEELSETS],
+                temperature_decay: [fr.temperature_decay_at(0.0); WHEELSETS],
                 fr,
                 th: DiscThermal::<f32>::new(&params.thermal),
                 polach: *sc.sim.plant.polach(),
@@ -465,10 +466,9 @@ mod emulator {
                     w(cur, j).axle_load,
                 ]
             });
-            // Friction and heat as the step computes them: Eq (2) from its brackets (the
-            // step refreshes them for one wheelset, `slow`, every step: each every 4) and
-            // Eq (5) with the loss coefficient; the temperature bracket or the loss
-            // coefficient of `slow` refreshed in an 8-step turn.
+            // Friction and heat as the step computes them: Eq (2) from its brackets and
+            // Eq (5) with the loss coefficient, one of which the step refreshes for one
+            // wheelset (`slow`) in an 8-step turn, plus that refresh.
             let turn = prev.steps % (2 * WHEELSETS as u32);
             let slow = (turn % WHEELSETS as u32) as usize;
             let friction_args = [0, 1, 2, 3].map(|j| {
@@ -480,7 +480,7 @@ mod emulator {
             });
             let brackets_args = [
                 self.speed_exponent_per_spin * w(prev, slow).omega.abs(),
-                fr.temperature_factor(w(prev, slow).disc_temp),
+                w(prev, slow).disc_temp,
             ];
             let thermal_args = [0, 1, 2, 3].map(|j| {
                 [
@@ -497,21 +497,22 @@ mod emulator {
             })
             .saturating_sub(baseline);
             let refresh_friction = turn < WHEELSETS as u32;
-            let decay = &mut self.speed_decay[slow];
-            let brackets = timer
-                .measure(|| {
-                    let [x, t] = black_box(brackets_args);
-                    black_box(fr.scaled_brackets_tracked(x, t, decay));
-                })
-                .1;
+            let refresh = if refresh_friction {
+                let speed_decay = &mut self.speed_decay[slow];
+                let temperature_decay = &mut self.temperature_decay[slow];
+                timer
+                    .measure(|| {
+                        let [x, t_d] = black_box(brackets_args);
+                        let t = fr.scaled_temperature_factor_tracked(t_d, temperature_decay);
+                        black_box(fr.scaled_brackets_tracked(x, t, speed_decay));
+                    })
+                    .1
+            } else {
+                baseline_one
+            };
             let friction = (four(timer, &friction_args, |a| fr.mu_d_of_brackets(a[0], a[1]))
-                + brackets
-                + if refresh_friction {
-                    one(timer, &refresh_args, |a| fr.temperature_factor(a[0]))
-                } else {
-                    baseline_one
-                })
-            .saturating_sub(baseline + 2 * baseline_one);
+                + refresh)
+                .saturating_sub(baseline + baseline_one);
             let thermal = (four(timer, &thermal_args, |a| th.rate_with(a[0], a[1], a[2]))
                 + if refresh_friction {
                     baseline_one
