@@ -564,7 +564,8 @@ impl<F: Real> TrackAdhesion<F> {
         let Some(r) = self.degraded.as_mut() else {
             return;
         };
-        // Follow the cell under the wheelset (a few cells per refresh at most).
+        // Follow the cell under the wheelset (a few cells per refresh at most; usually
+        // none: the first test finds it inside its cell).
         for _ in 0..4 {
             if x_m >= r.cell_end[j] {
                 r.cell[j] = r.cell[j].wrapping_add(1);
@@ -572,6 +573,8 @@ impl<F: Real> TrackAdhesion<F> {
             } else if x_m < r.cell_end[j] - r.cell_length {
                 r.cell[j] = r.cell[j].wrapping_sub(1);
                 r.cell_end[j] -= r.cell_length;
+            } else {
+                break;
             }
         }
         let tag = r.cell[j];
