@@ -61,20 +61,10 @@ impl<F: Real> DiscPadFriction<F> {
         }
     }
 
-    /// [`Self::temperature_factor`] with e^(-m_T T_d) from a [`TrackedExp`] (the plant's
-    /// refresh in turn: the disc temperature moves little between refreshes; within
-    /// [`crate::tracked::TRACK_MAX_REL_ERROR`] of the exact factor).
-    #[inline(always)]
-    pub fn temperature_factor_tracked(&self, t_d: F, decay: &mut TrackedExp<F>) -> F {
-        if self.variable {
-            self.n_t * decay.exp(-self.m_t * t_d) + F::ONE
-        } else {
-            F::ONE
-        }
-    }
-
-    /// c mu_d0 times [`Self::temperature_factor_tracked`] (c mu_d0 folded in: the plant's
-    /// refresh in turn), mu_d0 with the constant model; for [`Self::scaled_brackets_tracked`].
+    /// c mu_d0 times [`Self::temperature_factor`] with e^(-m_T T_d) from a [`TrackedExp`]
+    /// (the plant's refresh in turn: the disc temperature moves little between refreshes;
+    /// within [`crate::tracked::TRACK_MAX_REL_ERROR`] of the exact factor), mu_d0 with the
+    /// constant model; for [`Self::scaled_brackets_tracked`].
     #[inline(always)]
     pub fn scaled_temperature_factor_tracked(&self, t_d: F, decay: &mut TrackedExp<F>) -> F {
         if self.variable {
@@ -97,21 +87,12 @@ impl<F: Real> DiscPadFriction<F> {
     /// mu_d at friction speed `v_d` with a precomputed [`Self::temperature_factor`].
     #[inline(always)]
     pub fn mu_d_with(&self, v_d: F, temperature_factor: F, f_clamp: F) -> F {
-        self.mu_d_with_decay(|x: F| x.exp(), v_d, temperature_factor, f_clamp)
-    }
-
-    /// [`Self::mu_d_with`] with e^(-m_v v_d) from a [`TrackedExp`] (the plant's step: the
-    /// friction speed moves little from step to step; within
-    /// [`crate::tracked::TRACK_MAX_REL_ERROR`] of the exact factor).
-    #[inline(always)]
-    pub fn mu_d_tracked(
-        &self,
-        v_d: F,
-        temperature_factor: F,
-        f_clamp: F,
-        decay: &mut TrackedExp<F>,
-    ) -> F {
-        self.mu_d_with_decay(|x: F| decay.exp(x), v_d, temperature_factor, f_clamp)
+        // One formula for both models: the constant model has n_v = m_v = 0 and
+        // c mu_d0 = mu_d0, so the speed factor is exactly 1 and (temperature factor 1)
+        // the base exactly mu_d0.
+        let speed_factor = self.n_v * (-self.m_v * v_d.abs()).exp() + F::ONE;
+        let base = self.c_mu_d0 * speed_factor * temperature_factor;
+        base * (F::ONE + self.k_p_per_n * f_clamp)
     }
 
     /// -m_v l_p, s: the exponent of Eq (2)'s speed factor per rad/s of wheel spin (friction
@@ -149,22 +130,5 @@ impl<F: Real> DiscPadFriction<F> {
     #[inline(always)]
     pub fn mu_d_of_brackets(&self, scaled_brackets: F, f_clamp: F) -> F {
         scaled_brackets * (F::ONE + self.k_p_per_n * f_clamp)
-    }
-
-    /// Eq (2) with the speed factor's e^x from `exp`.
-    #[inline(always)]
-    fn mu_d_with_decay(
-        &self,
-        mut exp: impl FnMut(F) -> F,
-        v_d: F,
-        temperature_factor: F,
-        f_clamp: F,
-    ) -> F {
-        // One formula for both models (no branch in the step's wheelset loop): the constant
-        // model has n_v = m_v = 0 and c mu_d0 = mu_d0, so the speed factor is exactly 1 and
-        // (temperature factor 1) the base exactly mu_d0.
-        let speed_factor = self.n_v * exp(-self.m_v * v_d.abs()) + F::ONE;
-        let base = self.c_mu_d0 * speed_factor * temperature_factor;
-        base * (F::ONE + self.k_p_per_n * f_clamp)
     }
 }

@@ -36,10 +36,12 @@
 //!   Eq (5) (alpha + beta v_w^0.8) follow the friction speed, the disc temperature and the
 //!   wheel speed, which change over seconds in braking (over tenths of a second in a
 //!   slide); each step refreshes, for one wheelset in turn, either Eq (2)'s product of
-//!   brackets or Eq (5)'s loss coefficient (each every 0.8 ms). mu_d thus lags the spin
-//!   speed by at most 0.7 ms: under 4e-4 relative at a slide's 100 rad/s^2 (Eq 2's speed
-//!   bracket changes by at most n_v m_v = 1.8 % per m/s of friction speed). This takes
-//!   three of the four transcendental functions per wheelset out of the 10 kHz step; v_w^0.8 is tracked by [`TrackedPow`] (a binomial series
+//!   brackets or Eq (5)'s loss coefficient (each every 8 steps, 0.8 ms at 10 kHz). mu_d
+//!   thus lags the spin speed by at most 7 steps: its relative error is at most
+//!   n_v m_v l_p |d omega/dt| 7 dt (3.5e-4 at a slide's 100 rad/s^2 at 10 kHz; 10 times
+//!   that at the diagnosis replay's 1 ms step), checked in `tests/friction_refresh.rs`.
+//!   This takes every transcendental function of Eqs (2) and (5) out of the per-wheelset
+//!   work of the 10 kHz step; v_w^0.8 is tracked by [`TrackedPow`] (a binomial series
 //!   about an exact anchor while v_w stays within 1/64 of it; within 8e-7 relative).
 //! * **Tracked exponentials.** e^(-B |w|) (Eq 11), e^(-m_v v_d) and e^(-m_T T_d) (Eq 2)
 //!   move little from step to step (or refresh to refresh): [`TrackedExp`] serves them
@@ -47,7 +49,7 @@
 //!   against the exact function) and evaluates e^x again only when the argument leaves a
 //!   window of 1/64.
 //! * **Bad input.** Brake inputs are clamped to [0, 1.5 x the physical maximum] and
-//!   flagged; a NaN/inf input holds the pad force where it is and is flagged. A non-finite state
+//!   flagged; a NaN/inf input holds the last valid value and is flagged. A non-finite state
 //!   (never seen with validated parameters) puts the plant in a safe state: at rest, flagged.
 
 use crate::brake::Caliper;
@@ -81,7 +83,7 @@ impl<F: Real> Default for BrakeInput<F> {
 pub struct Flags(pub u32);
 
 impl Flags {
-    /// Bits 0-3: wheelset 1-4 brake input NaN/inf; the pad force was held.
+    /// Bits 0-3: wheelset 1-4 brake input NaN/inf; the last valid value was used.
     pub const INPUT_NOT_FINITE: u32 = 0x000f;
     /// Bits 4-7: wheelset 1-4 brake input out of range; clamped.
     pub const INPUT_OUT_OF_RANGE: u32 = 0x00f0;
@@ -313,7 +315,7 @@ struct State<F: Real> {
 
 /// What a step leaves of one wheelset besides its state: the values of
 /// [`WheelsetOutput`] that the state does not hold (the rest, and the derived ones, are
-/// computed on demand by [`Plant::outputs`], so the 10 kHz step stores 11 values per
+/// computed on demand by [`Plant::outputs`], so the 10 kHz step stores 9 values per
 /// wheelset instead of 15), and the step's own values of the wheelset, written and read
 /// in place (no copy on the stack).
 #[derive(Clone, Copy, Debug, Default)]
@@ -362,10 +364,14 @@ struct WheelsetState<F: Real> {
     temperature_decay: TrackedExp<F>,
     /// v_w^0.8 of Eq (5), tracked from an exact anchor.
     speed_power: TrackedPow<F>,
-    /// Unused: 16 values, a 64-byte stride (one shift per wheelset address on the
-    /// Cortex-M4F instead of a multiply-add pair).
-    _stride: F,
+    /// Last valid brake input (clamp force, N) with the actuator lag on (without it the
+    /// pad force is that value).
+    last_clamp: F,
 }
+
+// 16 values: a 64-byte stride, one shift per wheelset address on the Cortex-M4F (instead
+// of a multiply-add pair) in the step's wheelset loop.
+const _: () = assert!(core::mem::size_of::<WheelsetState<f32>>() == 64);
 
 /// The plant: vehicle, contact, brakes, disc heat. `F` = f32 on the target.
 #[derive(Clone, Debug)]
@@ -791,11 +797,12 @@ impl<F: Real> Plant<F> {
     }
 
     /// Sanitises one brake input to a pad clamp force (N per face), flagging bad values;
-    /// a non-finite input gives `pad_force`, the pad force acting now (the pad holds).
+    /// a non-finite input gives the wheelset's last valid value (`w`'s last clamp force
+    /// with the actuator lag on, else its pad force, which is that value).
     #[inline(always)]
     fn clamp_force_input(
         k: &Constants<F>,
-        pad_force: F,
+        w: &WheelsetState<F>,
         j: usize,
         input: BrakeInput<F>,
         flags: &mut u32,
@@ -816,7 +823,11 @@ impl<F: Real> Plant<F> {
                 };
                 if !value.is_finite() {
                     *flags |= Flags::wheelset_bit(Flags::INPUT_NOT_FINITE, j);
-                    return pad_force;
+                    return if k.actuator_lag {
+                        w.last_clamp
+                    } else {
+                        w.pad_force
+                    };
                 }
                 // Below zero by more than 2 % of the range, or above the limit: out of
                 // range. Small negative readings are sensor noise around zero and clamp
@@ -843,18 +854,20 @@ impl<F: Real> Plant<F> {
         input: BrakeInput<F>,
         flags: &mut u32,
     ) -> F {
-        let target = Self::clamp_force_input(k, w.pad_force, j, input, flags);
-        let pad = &mut w.pad_force;
+        let target = Self::clamp_force_input(k, w, j, input, flags);
         // First-order lag, written from the target so that rate 1 (no lag) gives the
         // target exactly, and kept between the old value and the target: rounding may
-        // not overshoot the (clamped) target. Without lag (rate 1): the target, skipped.
+        // not overshoot the (clamped) target. Without lag (rate 1): the target, skipped
+        // (the pad force is then the last valid input itself).
         if k.actuator_lag {
+            w.last_clamp = target;
+            let pad = &mut w.pad_force;
             let lagged = target - (target - *pad) * (F::ONE - k.actuator_lag_rate);
             *pad = lagged.clamp_to(pad.min(target), pad.max(target));
         } else {
-            *pad = target;
+            w.pad_force = target;
         }
-        *pad
+        w.pad_force
     }
 
     /// The wheel-rail contact of a wheelset at the step's start (its state `w`, record

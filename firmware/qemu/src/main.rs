@@ -56,7 +56,7 @@ mod emulator {
     use hils_plant::friction::DiscPadFriction;
     use hils_plant::thermal::DiscThermal;
     use hils_plant::track::ContactSets;
-    use hils_plant::tracked::TrackedExp;
+    use hils_plant::tracked::{TrackedExp, TrackedPow};
     use hils_plant::{BrakeInput, FrictionModel, Surface, Track, WHEELSETS, Zone};
     use hils_sil::trace::{LINE_LEN, PARTS, RECORD_EVERY};
     use hils_sil::{EbScenario, ParamFile, TraceRow};
@@ -118,6 +118,27 @@ mod emulator {
             );
         }
         (now, spins)
+    }
+
+    /// One `nop` (the timer's dithering).
+    #[inline(always)]
+    fn nop_1() {
+        // SAFETY: no operands, no effects.
+        unsafe { asm!("nop", options(nomem, nostack)) }
+    }
+
+    /// Two `nop`s.
+    #[inline(always)]
+    fn nop_2() {
+        // SAFETY: as in `nop_1`.
+        unsafe { asm!("nop", "nop", options(nomem, nostack)) }
+    }
+
+    /// Three `nop`s.
+    #[inline(always)]
+    fn nop_3() {
+        // SAFETY: as in `nop_1`.
+        unsafe { asm!("nop", "nop", "nop", options(nomem, nostack)) }
     }
 
     /// A loop of exactly `2 n` instructions (`subs`, `bne`), n >= 1.
@@ -281,11 +302,22 @@ mod emulator {
             instructions_per_tick: (2 * n + ticks / 2) / ticks,
             overhead: 0,
         };
-        // Overhead: the mean of empty measurements (each is off by up to one spin iteration
-        // depending on where the edges fall; the mean centres the error).
-        let reps = 64;
-        let total: u32 = (0..reps).map(|_| timer.raw(|| ()).1).sum();
-        let overhead = (total + reps / 2) / reps;
+        // Overhead: the mean of empty measurements, each is off by up to one spin iteration
+        // depending on where the end edge falls. The emulator is deterministic, so the same
+        // empty measurement always falls at the same phase: the measurements are dithered
+        // over the four phases of the spin by 0-3 `nop`s (their count subtracted), and the
+        // mean centres the error whatever the code layout.
+        let reps = 16;
+        let dithered = |nops: i64, raw: u32| i64::from(raw) - nops;
+        let total: i64 = (0..reps)
+            .map(|_| {
+                dithered(0, timer.raw(|| ()).1)
+                    + dithered(1, timer.raw(|| nop_1()).1)
+                    + dithered(2, timer.raw(|| nop_2()).1)
+                    + dithered(3, timer.raw(|| nop_3()).1)
+            })
+            .sum();
+        let overhead = u32::try_from((total + 2 * reps) / (4 * reps)).unwrap_or(0);
         timer.overhead = overhead;
         host.line(format_args!(
             "H hils-qemu math={} instructions_per_tick={} ticks_for_2000000={} overhead={} spin={}",
@@ -414,6 +446,8 @@ mod emulator {
         rail_decay: [TrackedExp<f32>; WHEELSETS],
         speed_decay: [TrackedExp<f32>; WHEELSETS],
         temperature_decay: [TrackedExp<f32>; WHEELSETS],
+        /// The step's trackers of v_w^0.8 (Eq 5), replayed likewise.
+        speed_power: [TrackedPow<f32>; WHEELSETS],
     }
 
     impl SubModels {
@@ -434,6 +468,9 @@ mod emulator {
             Self {
                 speed_decay: [fr.speed_decay_at(v_d0); WHEELSETS],
                 temperature_decay: [fr.temperature_decay_at(0.0); WHEELSETS],
+                speed_power: [DiscThermal::<f32>::new(&params.thermal)
+                    .speed_power_at(sc.sim.outputs().wheelsets[0].speed);
+                    WHEELSETS],
                 fr,
                 th: DiscThermal::<f32>::new(&params.thermal),
                 polach: *sc.sim.plant.polach(),
@@ -473,7 +510,8 @@ mod emulator {
             let slow = (turn % WHEELSETS as u32) as usize;
             let friction_args = [0, 1, 2, 3].map(|j| {
                 [
-                    fr.temperature_factor(w(prev, j).disc_temp),
+                    // mu_d_of_brackets has no data-dependent path: any bracket value.
+                    w(cur, j).mu_d,
                     w(cur, j).clamp_force,
                     0.0,
                 ]
@@ -486,7 +524,7 @@ mod emulator {
                 [
                     w(cur, j).brake_power,
                     w(prev, j).disc_temp,
-                    th.loss_coefficient(r * w(prev, j).omega),
+                    0.0, // any loss coefficient: rate_with has no data-dependent path
                 ]
             });
             let refresh_args = [[w(prev, slow).disc_temp, r * w(prev, slow).omega, 0.0]; 1];
@@ -517,7 +555,13 @@ mod emulator {
                 + if refresh_friction {
                     baseline_one
                 } else {
-                    one(timer, &refresh_args, |a| th.loss_coefficient(a[1]))
+                    let power = &mut self.speed_power[slow];
+                    timer
+                        .measure(|| {
+                            let a = black_box(refresh_args[0]);
+                            black_box(th.loss_coefficient_tracked(a[1], power));
+                        })
+                        .1
                 })
             .saturating_sub(baseline + baseline_one);
             [contact, friction, thermal]
