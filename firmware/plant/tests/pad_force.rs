@@ -54,3 +54,48 @@ fn pad_force_stays_within_its_clamp_and_its_target() {
         }
     }
 }
+
+/// A NaN brake input uses the wheelset's last valid value and is flagged: without lag the
+/// pad force stays at that value; with lag it keeps moving toward it, exactly as if that
+/// value had been sent again (plant.rs, "Bad input").
+#[test]
+fn a_nan_input_acts_as_the_last_valid_value() {
+    use hils_plant::Flags;
+    for lag_s in [0.0, 0.05] {
+        let mut p = Params::default();
+        p.brake.actuator_lag_s = lag_s;
+        let mut with_nan = Plant::<f32>::new(&p, Rail::Dry, 30.0).unwrap();
+        let mut repeated = with_nan.clone();
+        let valid = [BrakeInput::ClampForce(20_000.0); 4];
+        for _ in 0..100 {
+            with_nan.step(&valid);
+            repeated.step(&valid);
+        }
+        let mut nan = valid;
+        nan[1] = BrakeInput::ClampForce(f32::NAN);
+        let before = with_nan.outputs().wheelsets[1].clamp_force;
+        for _ in 0..20 {
+            let flags = with_nan.step(&nan);
+            assert!(flags.contains(Flags::wheelset_bit(Flags::INPUT_NOT_FINITE, 1)));
+            assert!(
+                !repeated
+                    .step(&valid)
+                    .contains(Flags::wheelset_bit(Flags::INPUT_NOT_FINITE, 1))
+            );
+            let (a, b) = (with_nan.outputs(), repeated.outputs());
+            assert_eq!(
+                a.wheelsets[1].clamp_force, b.wheelsets[1].clamp_force,
+                "lag {lag_s}"
+            );
+        }
+        let after = with_nan.outputs().wheelsets[1].clamp_force;
+        if lag_s > 0.0 {
+            assert!(
+                after > before,
+                "with lag the pad keeps rising: {before} -> {after}"
+            );
+        } else {
+            assert_eq!(after, 20_000.0);
+        }
+    }
+}
