@@ -106,8 +106,9 @@ impl<F: Real> DiscPadFriction<F> {
         })
     }
 
-    /// Eq (2)'s two brackets times c mu_d0, c mu_d0 (n_v e^(-m_v v_d) + 1)(n_T e^(-m_T T_d)
-    /// + 1) (mu_d0 with the constant model), from the temperature bracket times c mu_d0
+    /// Eq (2)'s two brackets times c mu_d0,
+    /// c mu_d0 (n_v e^(-m_v v_d) + 1) (n_T e^(-m_T T_d) + 1)
+    /// (mu_d0 with the constant model), from the temperature bracket times c mu_d0
     /// ([`Self::scaled_temperature_factor_tracked`]) and the speed bracket's exponent
     /// -m_v |v_d| ([`Self::speed_exponent_per_spin`] times |omega|), e^x from a
     /// [`TrackedExp`]. Both brackets follow quantities that change over seconds in braking

@@ -348,7 +348,8 @@ struct WheelsetState<F: Real> {
     /// Slip velocity v_w - r omega.
     slip: F,
     disc_temp: F,
-    /// Pad force state of the actuator-lag extension.
+    /// Pad force acting, N per face: the actuator-lag extension's state with the lag on,
+    /// else the last valid brake input itself.
     pad_force: F,
     /// Eq (2)'s speed and temperature brackets times c mu_d0 (refreshed in turn, every 8
     /// steps, at that step's spin speed and disc temperature); mu_d is this times the

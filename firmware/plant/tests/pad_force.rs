@@ -99,3 +99,41 @@ fn a_nan_input_acts_as_the_last_valid_value() {
         }
     }
 }
+
+/// Non-finite inputs of either kind (NaN, +-inf; clamp force or cylinder pressure), also
+/// as the very first input: flagged, and the last valid value (none yet: 0) used.
+#[test]
+fn non_finite_inputs_of_either_kind_use_the_last_valid_value() {
+    use hils_plant::Flags;
+    for lag_s in [0.0, 0.05] {
+        let mut p = Params::default();
+        p.brake.actuator_lag_s = lag_s;
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            let kinds = [
+                BrakeInput::ClampForce(bad),
+                BrakeInput::CylinderPressure(bad),
+            ];
+            for input in kinds {
+                let mut plant = Plant::<f32>::new(&p, Rail::Dry, 30.0).unwrap();
+                // The first input non-finite: nothing valid yet, no brake.
+                let flags = plant.step(&[input; 4]);
+                for j in 0..4 {
+                    assert!(flags.contains(Flags::wheelset_bit(Flags::INPUT_NOT_FINITE, j)));
+                    assert_eq!(plant.outputs().wheelsets[j].clamp_force, 0.0);
+                }
+                // After a valid pressure, the bad value acts as that pressure again.
+                let valid = BrakeInput::CylinderPressure(300e3);
+                let mut reference = plant.clone();
+                plant.step(&[valid; 4]);
+                reference.step(&[valid; 4]);
+                plant.step(&[input; 4]);
+                reference.step(&[valid; 4]);
+                let (a, b) = (plant.outputs(), reference.outputs());
+                for j in 0..4 {
+                    assert_eq!(a.wheelsets[j].clamp_force, b.wheelsets[j].clamp_force);
+                    assert!(a.wheelsets[j].clamp_force > 0.0);
+                }
+            }
+        }
+    }
+}

@@ -305,8 +305,9 @@ mod emulator {
         // Overhead: the mean of empty measurements, each is off by up to one spin iteration
         // depending on where the end edge falls. The emulator is deterministic, so the same
         // empty measurement always falls at the same phase: the measurements are dithered
-        // over the four phases of the spin by 0-3 `nop`s (their count subtracted), and the
-        // mean centres the error whatever the code layout.
+        // over the phases of the spin by 0-3 `nop`s (their count subtracted), and the mean
+        // centres the error to within about one instruction (the compiler may place a
+        // store in one variant's window).
         let reps = 16;
         let dithered = |nops: i64, raw: u32| i64::from(raw) - nops;
         let total: i64 = (0..reps)
