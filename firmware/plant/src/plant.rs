@@ -642,21 +642,13 @@ impl<F: Real> Plant<F> {
         for (w, &disc_temp) in self.s.w.iter_mut().zip(disc_temps.iter()) {
             w.disc_temp = disc_temp;
             w.temperature_decay = self.k.friction.temperature_decay_at(disc_temp);
-            let temperature_factor = self
-                .k
-                .friction
-                .scaled_temperature_factor_tracked(disc_temp, &mut w.temperature_decay);
             w.heat_loss = self.k.thermal.loss_coefficient(v0);
             w.speed_power = self.k.thermal.speed_power_at(v0);
             w.speed_decay = self
                 .k
                 .friction
                 .speed_decay_at(v0 * self.k.inv_r * self.k.friction_radius);
-            w.friction_brackets = self.k.friction.scaled_brackets_tracked(
-                self.k.speed_exponent_per_spin * (v0 * self.k.inv_r).abs(),
-                temperature_factor,
-                &mut w.speed_decay,
-            );
+            Self::refresh_friction_brackets(&self.k, w, v0 * self.k.inv_r);
         }
         self.steps = 0;
         self.carbody_accel = F::ZERO;
@@ -795,6 +787,21 @@ impl<F: Real> Plant<F> {
     /// Static axle load (all four equal), N.
     pub fn static_axle_load(&self) -> F {
         self.k.q_static
+    }
+
+    /// Eq (2)'s brackets of wheelset `w` (times c mu_d0) at spin speed `omega` (rad/s;
+    /// friction speed v_d = l_p |omega|) and its disc temperature, from its trackers: the
+    /// refresh in turn of the step, and the state's start.
+    #[inline(always)]
+    fn refresh_friction_brackets(k: &Constants<F>, w: &mut WheelsetState<F>, omega: F) {
+        let temperature_factor = k
+            .friction
+            .scaled_temperature_factor_tracked(w.disc_temp, &mut w.temperature_decay);
+        w.friction_brackets = k.friction.scaled_brackets_tracked(
+            k.speed_exponent_per_spin * omega.abs(),
+            temperature_factor,
+            &mut w.speed_decay,
+        );
     }
 
     /// Sanitises one brake input to a pad clamp force (N per face), flagging bad values;
@@ -941,15 +948,7 @@ impl<F: Real> Plant<F> {
         let slow = (turn % WHEELSETS as u32) as usize;
         let w = &mut s.w[slow];
         if turn < WHEELSETS as u32 {
-            // At this step's disc temperature and friction speed (v_d = l_p |omega|).
-            let temperature_factor = k
-                .friction
-                .scaled_temperature_factor_tracked(w.disc_temp, &mut w.temperature_decay);
-            w.friction_brackets = k.friction.scaled_brackets_tracked(
-                k.speed_exponent_per_spin * r[slow].omega.abs(),
-                temperature_factor,
-                &mut w.speed_decay,
-            );
+            Self::refresh_friction_brackets(k, w, r[slow].omega);
         } else {
             w.heat_loss = k
                 .thermal

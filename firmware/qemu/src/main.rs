@@ -120,25 +120,11 @@ mod emulator {
         (now, spins)
     }
 
-    /// One `nop` (the timer's dithering).
+    /// `N` `nop`s (the timer's dithering).
     #[inline(always)]
-    fn nop_1() {
-        // SAFETY: no operands, no effects.
-        unsafe { asm!("nop", options(nomem, nostack)) }
-    }
-
-    /// Two `nop`s.
-    #[inline(always)]
-    fn nop_2() {
-        // SAFETY: as in `nop_1`.
-        unsafe { asm!("nop", "nop", options(nomem, nostack)) }
-    }
-
-    /// Three `nop`s.
-    #[inline(always)]
-    fn nop_3() {
-        // SAFETY: as in `nop_1`.
-        unsafe { asm!("nop", "nop", "nop", options(nomem, nostack)) }
+    fn nops<const N: usize>() {
+        // SAFETY: no operands but the count, no effects.
+        unsafe { asm!(".rept {n}", "nop", ".endr", n = const N, options(nomem, nostack)) }
     }
 
     /// A loop of exactly `2 n` instructions (`subs`, `bne`), n >= 1.
@@ -313,9 +299,9 @@ mod emulator {
         let total: i64 = (0..reps)
             .map(|_| {
                 dithered(0, timer.raw(|| ()).1)
-                    + dithered(1, timer.raw(|| nop_1()).1)
-                    + dithered(2, timer.raw(|| nop_2()).1)
-                    + dithered(3, timer.raw(|| nop_3()).1)
+                    + dithered(1, timer.raw(nops::<1>).1)
+                    + dithered(2, timer.raw(nops::<2>).1)
+                    + dithered(3, timer.raw(nops::<3>).1)
             })
             .sum();
         let overhead = u32::try_from((total + 2 * reps) / (4 * reps)).unwrap_or(0);
@@ -455,6 +441,7 @@ mod emulator {
         fn new(timer: &Timer, file: &ParamFile, sc: &EbScenario<f32>) -> Self {
             let params = &file.plant;
             let fr = DiscPadFriction::<f32>::new(&params.friction);
+            let th = DiscThermal::<f32>::new(&params.thermal);
             let friction_radius = params.brake.friction_radius as f32;
             let zero = [[0.5f32, 20.0, 1.0e5]; WHEELSETS];
             let baseline = (0..8)
@@ -469,11 +456,9 @@ mod emulator {
             Self {
                 speed_decay: [fr.speed_decay_at(v_d0); WHEELSETS],
                 temperature_decay: [fr.temperature_decay_at(0.0); WHEELSETS],
-                speed_power: [DiscThermal::<f32>::new(&params.thermal)
-                    .speed_power_at(sc.sim.outputs().wheelsets[0].speed);
-                    WHEELSETS],
+                speed_power: [th.speed_power_at(sc.sim.outputs().wheelsets[0].speed); WHEELSETS],
                 fr,
-                th: DiscThermal::<f32>::new(&params.thermal),
+                th,
                 polach: *sc.sim.plant.polach(),
                 wheel_radius: params.vehicle.wheel_radius as f32,
                 speed_exponent_per_spin: DiscPadFriction::<f32>::speed_exponent_per_spin(
