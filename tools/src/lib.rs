@@ -11,6 +11,7 @@ pub mod bench;
 pub mod cli;
 pub mod decode;
 pub mod diagnose;
+pub mod figures;
 pub mod fit_friction;
 pub mod flags;
 pub mod measured;

@@ -1,0 +1,61 @@
+//! Figures as people read them: rounded to their resolution before they are printed or written
+//! to JSON (`641.795`, not `641.7945556640625`; `0.719`, not `0.7190000000000001`).
+//!
+//! Every command's JSON and terminal figures go through these two functions, so a figure's
+//! resolution is chosen where the figure is made (mm for distances, 0.1 l for air, 1 ms for
+//! times, 1e-4 for ratios, a few significant digits for fitted parameters).
+
+/// `x` rounded to `decimals` decimal places, as the f64 nearest to that decimal, so that JSON
+/// (serde_json's shortest round-trip form) prints exactly the rounded decimal. Non-finite
+/// values are returned unchanged.
+pub fn round_dp(x: f64, decimals: u32) -> f64 {
+    if !x.is_finite() {
+        return x;
+    }
+    format!("{x:.*}", decimals as usize).parse().unwrap_or(x)
+}
+
+/// `x` rounded to `digits` significant digits (fitted parameters, ratios of unknown size).
+/// Zero and non-finite values are returned unchanged; `digits` of 0 is taken as 1.
+pub fn round_sig(x: f64, digits: u32) -> f64 {
+    if !x.is_finite() || x == 0.0 {
+        return x;
+    }
+    let magnitude = x.abs().log10().floor() as i32;
+    let decimals = digits.max(1) as i32 - 1 - magnitude;
+    if decimals >= 0 {
+        round_dp(x, decimals as u32)
+    } else {
+        let unit = 10f64.powi(-decimals);
+        (x / unit).round() * unit
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn json_prints_the_rounded_decimal() {
+        let v = 641.7945556640625_f64;
+        assert_eq!(serde_json::to_string(&round_dp(v, 3)).unwrap(), "641.795");
+        assert_eq!(
+            serde_json::to_string(&round_dp(0.7190000000000001, 4)).unwrap(),
+            "0.719"
+        );
+        assert_eq!(
+            serde_json::to_string(&round_dp(2.77 * 1.0000000000000002, 1)).unwrap(),
+            "2.8"
+        );
+    }
+
+    #[test]
+    fn significant_digits_at_every_magnitude() {
+        assert_eq!(round_sig(0.184_437_7, 4), 0.1844);
+        assert_eq!(round_sig(-0.013_749, 3), -0.0137);
+        assert_eq!(round_sig(355_345.2, 4), 355_300.0);
+        assert_eq!(round_sig(0.0, 4), 0.0);
+        assert!(round_sig(f64::NAN, 4).is_nan());
+        assert_eq!(round_dp(f64::INFINITY, 3), f64::INFINITY);
+    }
+}
