@@ -8,6 +8,7 @@
 //! is a thin HAL shell that moves bytes between these types and the peripherals.
 //!
 //! Modules, one concern each:
+//! * [`arming`]: the arming gate: whether the outputs a real controller reads are live.
 //! * [`can`]: the CAN frame codec over [`embedded_can::Frame`] (wheel speeds, status,
 //!   diagnostics out; commands in), described by `hils.dbc` beside this crate.
 //! * [`sensor`]: ADC oversampling, offset/gain calibration, scaling to clamp force or
@@ -33,6 +34,7 @@
 #[cfg(test)]
 extern crate std;
 
+pub mod arming;
 pub mod bringup;
 pub mod bus;
 pub mod can;
