@@ -585,7 +585,7 @@ pub const FRAMES: [(u16, &[Signal]); 5] = [
     (ID_COMMAND, &command::ALL),
 ];
 
-/// The opcodes of `RIG_COMMAND` (byte 0), in one place: 1-10 in declaration order.
+/// The opcodes of `RIG_COMMAND` (byte 0), in one place: 1-12 in declaration order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, IntoPrimitive, TryFromPrimitive)]
 #[repr(u8)]
 pub enum Opcode {
@@ -609,6 +609,10 @@ pub enum Opcode {
     Track,
     /// [`Command::Vehicle`].
     Vehicle,
+    /// [`Command::Arm`].
+    Arm,
+    /// [`Command::Disarm`].
+    Disarm,
 }
 
 /// The code of a surface in `RIG_COMMAND` and telemetry: 0 dry, 1 wet, 2 low, 3 very low
@@ -1082,6 +1086,11 @@ pub enum Command {
         /// The value, in the unit of its `[vehicle]` key (kg, kg m^2, m).
         value: f32,
     },
+    /// Opcode 11: arm the rig for a controller: the outputs a controller reads go live in
+    /// the following rig-mode runs ([`crate::arming`]).
+    Arm,
+    /// Opcode 12: disarm: the outputs a controller reads go to their safe values at once.
+    Disarm,
 }
 
 impl Command {
@@ -1103,6 +1112,8 @@ impl Command {
             Command::TrackZone { .. } => Opcode::TrackZone,
             Command::Track(_) => Opcode::Track,
             Command::Vehicle { .. } => Opcode::Vehicle,
+            Command::Arm => Opcode::Arm,
+            Command::Disarm => Opcode::Disarm,
         }
     }
 }
@@ -1148,7 +1159,7 @@ impl CommandFrame {
                 START_EMERGENCY.put_raw(&mut d, start.emergency as u64);
                 START_SPEED.put(&mut d, start.initial_speed_kmh);
             }
-            Command::Stop | Command::ClearFaults => {}
+            Command::Stop | Command::ClearFaults | Command::Arm | Command::Disarm => {}
             Command::Brake(b) => {
                 BRAKE_DEMAND.put_raw(&mut d, brake_signal_code(b) as u64);
                 match b {
@@ -1229,6 +1240,8 @@ impl CommandFrame {
             Opcode::TrackZone => decode_zone(&d)?,
             Opcode::Track => decode_track(&d)?,
             Opcode::Vehicle => decode_vehicle(&d)?,
+            Opcode::Arm => Command::Arm,
+            Opcode::Disarm => Command::Disarm,
         };
         Ok(Self { command, counter })
     }

@@ -37,6 +37,16 @@
 //! Overruns, missed ticks, dropped frames or telemetry, CAN error passive and bus-off are
 //! flagged and counted but do not stop a run (the rig operator decides from the flags).
 //! `ClearFaults` clears latched faults whose cause is gone and takes `Fault` to `Stopped`.
+//!
+//! # Arming
+//!
+//! The outputs a real controller reads (pulse trains, wheel speeds, the controller I/O) are
+//! live only when the arming gate says so ([`crate::arming`], [`Rig::controller_outputs_live`]):
+//! armed by the `Arm` command, in a rig-mode run. A rig-mode `Start` is refused while the rig
+//! is not armed ([`CommandError::NotArmed`]); `Stop`, `Fault`, a latched fault, a self-test
+//! start, `Disarm` and every reset disarm it. A self-test run (the button, `selftest-autostart`,
+//! a self-test `Start`) never drives these outputs: its speeds are in the telemetry and the
+//! status frame only.
 
 use embedded_can::Frame;
 use hils_brake_unit::BrakeDemand;
@@ -49,6 +59,7 @@ use hils_sil::scenario::at_standstill;
 use hils_sil::{ClosedLoop, LoopError};
 
 use crate::Code;
+use crate::arming::{ArmRefused, ArmingGate, Disarm};
 use crate::can::{
     BrakeCommand, Calibration, Command, CommandFrame, CommandResult, ConfigItem, DecodeError,
     DiagFrame, RigMode, RigState, StartCommand, StatusFrame, TrackCommand, WHEEL_SPEED_MAX_KMH,
@@ -209,6 +220,10 @@ pub enum CommandError {
         /// The digest of the board's setup.
         kept: u16,
     },
+    /// A rig-mode `Start` while the rig is not armed for a controller (send `Arm` first).
+    NotArmed,
+    /// The `Arm` command was refused.
+    Arm(ArmRefused),
 }
 
 /// The simulation of a run.
@@ -423,6 +438,8 @@ pub struct Rig<S: SimStore = Simulation> {
     stale_builds: u32,
     /// The track and vehicle kept for the following runs.
     setup: KeptSetup,
+    /// Whether the outputs a controller reads are live ([`crate::arming`]).
+    arming: ArmingGate,
 }
 
 /// What the board keeps for the following runs from `TrackZone`, `Track` and `Vehicle`
@@ -577,6 +594,7 @@ impl<S: SimStore> Rig<S> {
             start_seq: 0,
             stale_builds: 0,
             setup: KeptSetup::default(),
+            arming: ArmingGate::new(),
         }
     }
 
@@ -616,6 +634,23 @@ impl<S: SimStore> Rig<S> {
     /// State of the rig.
     pub fn state(&self) -> RigState {
         self.state
+    }
+
+    /// The arming gate of the outputs a controller reads.
+    pub fn arming(&self) -> &ArmingGate {
+        &self.arming
+    }
+
+    /// Whether the outputs a controller reads are live now (armed, in a rig-mode run:
+    /// [`ArmingGate::outputs_live`]). Every controller-facing output follows this answer
+    /// and holds its safe value otherwise.
+    pub fn controller_outputs_live(&self) -> bool {
+        self.arming.outputs_live(self.state, self.mode)
+    }
+
+    /// Whether a sensor channel has a latched fault.
+    fn sensor_fault_latched(&self) -> bool {
+        self.sensors.iter().any(|s| s.fault().is_some())
     }
 
     /// The simulation, unless the store is lent to the builder.
@@ -778,22 +813,31 @@ impl<S: SimStore> Rig<S> {
             initial_speed_kmh,
             ..
         } = start;
-        if track && self.setup.track().is_none() {
-            return Err(CommandError::NoTrack);
-        }
+        // In this order (the host names a rejection by the same order): busy, speed,
+        // sensor faults, arming, track, setup digest.
         if self.busy() {
             return Err(CommandError::NotNow(self.state));
         }
         if !(0.0..=WHEEL_SPEED_MAX_KMH).contains(&initial_speed_kmh) {
             return Err(CommandError::SpeedOutOfRange);
         }
-        if mode == RigMode::Rig && self.sensors.iter().any(|s| s.fault().is_some()) {
+        if mode == RigMode::Rig && self.sensor_fault_latched() {
             return Err(CommandError::SensorFaults);
+        }
+        if mode == RigMode::Rig && !self.arming.is_armed() {
+            return Err(CommandError::NotArmed);
+        }
+        if track && self.setup.track().is_none() {
+            return Err(CommandError::NoTrack);
         }
         // After the busy check: the CRC runs only on an idle board's step.
         let kept = self.kept_setup_digest(track);
         if start.setup_digest != kept {
             return Err(CommandError::SetupMismatch { kept });
+        }
+        if mode == RigMode::SelfTest {
+            // The board's own brake unit closes this loop: the controller is not in it.
+            self.arming.disarm(Disarm::SelfTest);
         }
         // The old run's simulation is no longer shown (plain data: nothing to drop).
         if let Some(sim) = self.sim_mut() {
@@ -910,6 +954,7 @@ impl<S: SimStore> Rig<S> {
                     self.start_request = None;
                     self.start_request_new = false;
                     self.state = RigState::Stopped;
+                    self.arming.disarm(Disarm::Stop);
                     Ok(())
                 }
                 s => Err(CommandError::NotNow(s)),
@@ -981,12 +1026,26 @@ impl<S: SimStore> Rig<S> {
             }
             Command::TrackZone { .. } | Command::Track(_) => self.setup.apply(&command),
             Command::Vehicle { .. } => self.vehicle_command(&command),
+            Command::Arm => self
+                .arming
+                .arm(self.state, self.sensor_fault_latched())
+                .map_err(CommandError::Arm),
+            Command::Disarm => {
+                self.arming.disarm(Disarm::Command);
+                Ok(())
+            }
         }
     }
 
+    /// Ends the run in `state`; `Fault` and `Stopped` disarm (safe state).
     fn end_run(&mut self, state: RigState) {
         self.state = state;
         self.end_event = true;
+        match state {
+            RigState::Fault => self.arming.disarm(Disarm::Fault),
+            RigState::Stopped => self.arming.disarm(Disarm::Stop),
+            _ => {}
+        }
     }
 
     /// One tick of the real-time loop.
@@ -1210,17 +1269,25 @@ impl<S: SimStore> Rig<S> {
     }
 
     fn update_outputs<IO: RigIo>(&mut self, io: &mut IO) {
+        // Every fault disarms (a latched sensor fault also outside a run).
+        if self.sensor_fault_latched() {
+            self.arming.disarm(Disarm::Fault);
+        }
+        // The run's plant (status frame), and the plant the controller-facing outputs show:
+        // only while the arming gate says they are live.
         let live = matches!(self.state, RigState::Running | RigState::Finished);
-        // Wheel circumferential speeds r omega (m/s) for CAN, spin speeds omega (rad/s)
-        // for the pulse trains.
-        let (speeds, o) = match (sim_in(&self.sim, self.sim_lent), live) {
-            (Some(Sim::Rig(p)), true) => (p.wheel_speeds(), Some(p)),
-            (Some(Sim::SelfTest(c)), true) => (c.plant.wheel_speeds(), Some(&c.plant)),
-            _ => ([0.0; WHEELSETS], None),
+        let plant = match (sim_in(&self.sim, self.sim_lent), live) {
+            (Some(Sim::Rig(p)), true) => Some(p),
+            (Some(Sim::SelfTest(c)), true) => Some(&c.plant),
+            _ => None,
         };
-        let (v, a) = o
+        let (v, a) = plant
             .map(|p| (p.vehicle_speed(), p.carbody_accel()))
             .unwrap_or((0.0, 0.0));
+        let o = plant.filter(|_| self.arming.outputs_live(self.state, self.mode));
+        // Wheel circumferential speeds r omega (m/s) for CAN, spin speeds omega (rad/s)
+        // for the pulse trains.
+        let speeds = o.map(|p| p.wheel_speeds()).unwrap_or([0.0; WHEELSETS]);
         // At rest after the run (`Finished`): trains silent, speeds 0.00 km/h (the plant's
         // residual creep and carbody swing-back are not wheel rotation to report).
         let at_rest = self.state == RigState::Finished;

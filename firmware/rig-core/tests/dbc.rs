@@ -291,7 +291,7 @@ proptest! {
     }
 
     #[test]
-    fn command_frame(pick in 0usize..12, a in 0u32..=16382, b in 0u32..=10000, ch in 0u8..4, k in 0u8..5,
+    fn command_frame(pick in 0usize..14, a in 0u32..=16382, b in 0u32..=10000, ch in 0u8..4, k in 0u8..5,
                      flags in 0u8..32, gain in 0.001f32..1.0e6, counter in 0u8..16,
                      zone in (0u32..(1 << 20), 0u32..(1 << 20), 0u8..32, 0u8..4, 1u8..=255),
                      digest in 0u16..=u16::MAX) {
@@ -320,6 +320,8 @@ proptest! {
             5 => Command::Calibrate { channel: ch, action: if k % 2 == 0 { Calibration::SetGain(gain) } else { Calibration::SetOffset(gain.min(4095.0)) } },
             6 => Command::Calibrate { channel: ch, action: Calibration::SetKind(if k % 2 == 0 { SensorKind::LoadCell } else { SensorKind::PressureTransducer }) },
             7 => Command::ClearFaults,
+            12 => Command::Arm,
+            13 => Command::Disarm,
             9 => Command::TrackZone { index: zone.2, zone: ZoneFrame {
                 start_dm: zone.0, end_dm: zone.1, surface: surface(zone.3) } },
             10 => Command::Track(if flags & 1 == 0 { TrackCommand::Clear } else {
@@ -406,7 +408,7 @@ proptest! {
                     m.insert("VehicleKey", code);
                     m.insert("VehicleValue", value as f64);
                 }
-                Command::Stop | Command::ClearFaults => {}
+                Command::Stop | Command::ClearFaults | Command::Arm | Command::Disarm => {}
             }
             m
         };

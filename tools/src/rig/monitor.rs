@@ -182,6 +182,11 @@ pub struct BoardView {
 }
 
 impl BoardView {
+    /// Whether the board last reported itself armed for a controller (`None`: not seen).
+    pub fn armed(&self) -> Option<bool> {
+        None
+    }
+
     /// Takes a received frame: what it is and, for the second frame of a wheel-speed
     /// cycle, the whole cycle; an alarm when an alive counter is stuck.
     pub fn feed(&mut self, r: &Received) -> Result<(Seen, Option<WheelSpeeds>), Alarm> {
