@@ -75,6 +75,9 @@ fn start_status_stop_agree_with_the_board() {
     assert_eq!(s.status().unwrap().state, RigState::Idle);
     let o = start_armed(&mut s, 80.0);
     assert!(o.accepted, "{o}");
+    s.run_for(0.15, |_, _| hils::rig::commands::Flow::Continue)
+        .unwrap();
+    assert_eq!(s.board.armed(), Some(true));
     assert_eq!(o.status.state, RigState::Running);
     assert_eq!(s.link.rig().state(), RigState::Running);
     // The status frame's speed is the board's plant speed (0.01 km/h resolution).
@@ -96,11 +99,17 @@ fn start_status_stop_agree_with_the_board() {
     assert!(o.accepted, "{o}");
     assert_eq!(o.status.state, RigState::Stopped);
     assert_eq!(s.link.rig().state(), RigState::Stopped);
-    // Safe state: the speeds are "not available" in the next wheel-speed frames.
-    s.run_for(0.01, |_, _| hils::rig::commands::Flow::Continue)
+    // Safe state: the speeds are "not available" in the next wheel-speed frames, and
+    // RIG_HEALTH says the stop disarmed the board.
+    s.run_for(0.15, |_, _| hils::rig::commands::Flow::Continue)
         .unwrap();
     let (_, w) = s.board.wheel_speed.unwrap();
     assert_eq!(w.speeds_kmh, [None; 4]);
+    assert_eq!(s.board.armed(), Some(false));
+    assert_eq!(
+        s.board.health.unwrap().1.disarmed,
+        Some(hils::decode::rig_core::arming::Disarm::Stop)
+    );
     assert_eq!(s.board.counts.bad, 0);
     assert_eq!(
         (s.board.wheel_alive.lost, s.board.status_alive.lost),

@@ -62,8 +62,8 @@ use crate::Code;
 use crate::arming::{ArmRefused, ArmingGate, Disarm};
 use crate::can::{
     BrakeCommand, Calibration, Command, CommandFrame, CommandResult, ConfigItem, DecodeError,
-    DiagFrame, RigMode, RigState, StartCommand, StatusFrame, TrackCommand, WHEEL_SPEED_MAX_KMH,
-    WheelSpeedFrame, ZoneFrame, friction_code, rail_code, surface_code,
+    DiagFrame, HealthFrame, RigMode, RigState, StartCommand, StatusFrame, TrackCommand,
+    WHEEL_SPEED_MAX_KMH, WheelSpeedFrame, ZoneFrame, friction_code, rail_code, surface_code,
 };
 use crate::digest::setup_digest;
 use crate::hw::{RigIo, TelemetryEvent};
@@ -104,6 +104,11 @@ pub const STATUS_SCHEDULE: Schedule = Schedule {
 pub const DIAG_SCHEDULE: Schedule = Schedule {
     period: 1000,
     phase: 50,
+};
+/// `RIG_HEALTH` every 1000 ticks (100 ms), half a period after `RIG_DIAG`.
+pub const HEALTH_SCHEDULE: Schedule = Schedule {
+    period: 1000,
+    phase: 550,
 };
 /// Ticks without a fresh ADC sequence after which a rig-mode run faults (1 ms).
 pub const ADC_STALE_TICKS: u32 = 10;
@@ -151,6 +156,22 @@ bitflags::bitflags! {
         /// Bits 16-19 (telemetry only): sensor channel 1-4 has a pending (not yet latched) condition.
         const SENSOR_PENDING = 0x000F_0000;
     }
+}
+
+/// The board's own health as its tasks measured it, for `RIG_HEALTH`
+/// ([`Rig::set_board_health`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BoardHealth {
+    /// Stack high-water mark since power-up, bytes.
+    pub stack_peak_bytes: u32,
+    /// The stack's size, bytes.
+    pub stack_size_bytes: u32,
+    /// Command frames lost in the receive FIFO since power-up.
+    pub rx_lost: u32,
+    /// ADC ring restarts since power-up.
+    pub adc_restarts: u32,
+    /// Consecutive fault resets before this start.
+    pub fault_resets: u32,
 }
 
 /// Configuration of the rig.
@@ -412,7 +433,8 @@ pub struct Rig<S: SimStore = Simulation> {
     stale_ticks: u32,
     /// `ClearFaults` asked the bus supervision to clear its sticky bus-off (board).
     bus_clear_requested: bool,
-    counters: [u8; 2],
+    /// Alive counters: wheel speeds, status, health.
+    counters: [u8; 3],
     diag_window: DiagWindow,
     wheel_speed_kmh: [Option<f32>; WHEELSETS],
     pulses: [PulseRegisters; WHEELSETS],
@@ -440,6 +462,8 @@ pub struct Rig<S: SimStore = Simulation> {
     setup: KeptSetup,
     /// Whether the outputs a controller reads are live ([`crate::arming`]).
     arming: ArmingGate,
+    /// The board's own health (`RIG_HEALTH`).
+    health: BoardHealth,
 }
 
 /// What the board keeps for the following runs from `TrackZone`, `Track` and `Vehicle`
@@ -579,7 +603,7 @@ impl<S: SimStore> Rig<S> {
             last_result: CommandResult::None,
             stale_ticks: 0,
             bus_clear_requested: false,
-            counters: [0; 2],
+            counters: [0; 3],
             diag_window: DiagWindow::default(),
             wheel_speed_kmh: [None; WHEELSETS],
             pulses: [silent; WHEELSETS],
@@ -595,6 +619,7 @@ impl<S: SimStore> Rig<S> {
             stale_builds: 0,
             setup: KeptSetup::default(),
             arming: ArmingGate::new(),
+            health: BoardHealth::default(),
         }
     }
 
@@ -730,6 +755,12 @@ impl<S: SimStore> Rig<S> {
         self.bus_flags.set(Faults::CAN_ERROR_PASSIVE, error_passive);
         self.bus_flags.set(Faults::CAN_BUS_OFF, bus_off);
         self.bus_off_count = bus_off_count.min(255) as u8;
+    }
+
+    /// The board's own health as its tasks measured it (stack, receive losses, ADC
+    /// restarts, fault resets), sent in `RIG_HEALTH`.
+    pub fn set_board_health(&mut self, health: BoardHealth) {
+        self.health = health;
     }
 
     /// Whether `ClearFaults` asked since the last call that the bus supervision clear its
@@ -1352,6 +1383,20 @@ impl<S: SimStore> Rig<S> {
                 sensor_faults: core::array::from_fn(|j| self.sensors[j].fault()),
                 bus_off_count: self.bus_off_count.min(15),
             };
+            self.send(io, frame.encode());
+        }
+        if HEALTH_SCHEDULE.due(self.tick) {
+            let h = self.health;
+            let frame = HealthFrame {
+                stack_peak_bytes: h.stack_peak_bytes,
+                stack_size_bytes: h.stack_size_bytes,
+                rx_lost: h.rx_lost.min(255) as u8,
+                adc_restarts: h.adc_restarts.min(255) as u8,
+                disarmed: self.arming.disarmed_by(),
+                fault_resets: h.fault_resets.min(15) as u8,
+                counter: self.counters[2],
+            };
+            self.counters[2] = (self.counters[2] + 1) & 0x0F;
             self.send(io, frame.encode());
         }
     }

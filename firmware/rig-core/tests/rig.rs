@@ -7,8 +7,8 @@ use hils_plant::{BrakeInput, FrictionModel, Params, Plant, Rail};
 use hils_rig_core::Code;
 use hils_rig_core::can::{
     BrakeCommand, Calibration, ClassicFrame, Command, CommandFrame, CommandResult, ConfigItem,
-    DiagFrame, ID_DIAG, ID_STATUS, ID_WHEEL_SPEED_12, ID_WHEEL_SPEED_34, InjectedFault, RigMode,
-    RigState, StartCommand, StatusFrame, WheelSpeedFrame,
+    DiagFrame, HealthFrame, ID_DIAG, ID_HEALTH, ID_STATUS, ID_WHEEL_SPEED_12, ID_WHEEL_SPEED_34,
+    InjectedFault, RigMode, RigState, StartCommand, StatusFrame, WheelSpeedFrame,
 };
 use hils_rig_core::hw::{RigIo, TelemetryEvent};
 use hils_rig_core::pulse::PulseRegisters;
@@ -334,6 +334,52 @@ fn wheel_speed_outputs_follow_the_plant_in_an_armed_rig_run() {
             assert!((sent[j].unwrap() - v).abs() <= 0.0051, "{j}");
         }
     }
+}
+
+/// `RIG_HEALTH` every 100 ms: the board's measurements as set, the arming and why not.
+#[test]
+fn health_frame_carries_the_board_health_and_the_arming() {
+    use hils_rig_core::arming::Disarm;
+    use hils_rig_core::rig::BoardHealth;
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut io = MockBoard::new();
+    let last = |io: &MockBoard| {
+        let (_, f) = io.frames_with(ID_HEALTH).last().copied().unwrap().clone();
+        HealthFrame::decode(&f).unwrap()
+    };
+    rig.set_board_health(BoardHealth {
+        stack_peak_bytes: 9_000,
+        stack_size_bytes: 32_768,
+        rx_lost: 300,
+        adc_restarts: 2,
+        fault_resets: 1,
+    });
+    for _ in 0..1000 {
+        rig.step(&mut io);
+    }
+    assert_eq!(io.frames_with(ID_HEALTH).len(), 1);
+    let h = last(&io);
+    assert_eq!(
+        (
+            h.stack_peak_bytes,
+            h.stack_size_bytes,
+            h.rx_lost,
+            h.adc_restarts
+        ),
+        (9_000, 32_768, 255, 2)
+    );
+    assert_eq!((h.disarmed, h.fault_resets), (Some(Disarm::Reset), 1));
+    arm(&mut rig, 1);
+    for _ in 0..1000 {
+        rig.step(&mut io);
+    }
+    assert_eq!(last(&io).disarmed, None);
+    command(&mut rig, 2, Command::Disarm).unwrap();
+    for _ in 0..1000 {
+        rig.step(&mut io);
+    }
+    let h = last(&io);
+    assert_eq!((h.disarmed, h.counter), (Some(Disarm::Command), 2));
 }
 
 /// The arming gate on the rig (issue 22 item 1): a rig-mode start needs `Arm`; `Stop`, a
