@@ -114,6 +114,15 @@ pub fn join_bus(r: &mut impl FdcanRegisters, expected_nbtp: u32) -> Result<(), F
     Ok(())
 }
 
+/// Byte offset of Rx FIFO 0 in an FDCAN instance's message RAM (RM0440 "FDCAN message
+/// RAM": the G4's fixed layout, 28 standard filters of 1 word and 8 extended of 2 words
+/// before it; embassy-stm32 0.6 `message_ram::RegisterBlock` agrees).
+pub const RX_FIFO0_OFFSET_BYTES: usize = 28 * 4 + 8 * 8;
+/// Bytes of one Rx FIFO element: two header words and 64 data bytes.
+pub const RX_ELEMENT_BYTES: usize = 2 * 4 + 64;
+/// Elements in an Rx FIFO.
+pub const RX_FIFO_ELEMENTS: usize = 3;
+
 /// A classic data frame with a standard identifier, from an Rx FIFO element.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct RxElement {
