@@ -77,6 +77,13 @@ if [ -n "$objdump_tool" ] && [ -n "$nm_tool" ]; then
     fi
 fi
 
+# defmt::flush would busy-wait while the host has set the RTT channel blocking, even with
+# `disable-blocking-mode` (defmt-rtt 1.3.1 channel.rs; review C9): never linked.
+if [ -n "$nm_tool" ] && "$nm_tool" "$elf" | grep -q '_defmt_flush'; then
+    echo "  defmt::flush is linked: it can block the logging task (review C9)"
+    exit 1
+fi
+
 # Stack frames of the step's own functions (prologue: pushes and `sub sp`), against a
 # budget: a value of the size of the simulation (~6 KiB) moved through the step would
 # show here as a frame of that size (review of issue 11).

@@ -272,6 +272,10 @@ pub async fn can_tx_task(mut tx: CanTx<'static>) {
             // Nothing is written while bus-off: it would wait there and go out late.
             if !regs.psr().read().bo() && !regs.txfqs().read().tfqf() {
                 let slot = regs.txfqs().read().tfqpi() as usize;
+                // The put slot is free: a frame that was in it has ended, for good. Retire
+                // it now (review C10: one that ended after the service above would
+                // otherwise be overwritten by `on_write` and its outcome lost).
+                service_buffers(&mut slots);
                 // FIFO mode: returns at once with a buffer free, and never aborts another.
                 let _ = tx.write(&frame).await;
                 slots.on_write(slot, id, tick);

@@ -24,12 +24,19 @@ unsafe extern "C" {
 // may itself live in CCM), runs before the copy. Word copy; the section is 8-byte aligned
 // and padded (ccm.x), so every word of it is written before it is fetched (CCM SRAM
 // parity, when enabled by the SRAM_PE option bit, is computed on write).
+// A core-only reset (a debugger's VECTRESET) keeps SYSCFG_SWPR, which only a system reset
+// clears: the pages are write-protected and hold the image already, so the copy is skipped
+// (it would fault on them before RAM is initialised). After a system reset SYSCFG is not
+// clocked and SWPR reads 0.
 core::arch::global_asm!(
     ".section .text.__pre_init, \"ax\"",
     ".global __pre_init",
     ".type __pre_init, %function",
     ".thumb_func",
     "__pre_init:",
+    "    ldr r0, =0x40010020", // SYSCFG_SWPR (RM0440: SYSCFG base 0x4001_0000 + 0x20)
+    "    ldr r0, [r0]",
+    "    cbnz r0, 1f",
     "    ldr r0, =__sccm_text",
     "    ldr r1, =__eccm_text",
     "    ldr r2, =__siccm_text",

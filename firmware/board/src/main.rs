@@ -63,6 +63,11 @@ async fn main(spawner: Spawner) {
     if let Some(f) = last_fault {
         warn!("the previous run ended in a fault: {}", f);
     }
+    if !embassy_stm32::pac::FLASH.optr().read().dbank() {
+        warn!(
+            "FLASH_OPTR.DBANK = 0 (single bank): the image is built for the factory dual-bank layout (embassy-stm32 feature dual-bank)"
+        );
+    }
     let boot = fault::note_boot(reset.for_reset_loop(last_fault.is_some()));
     if let Boot::Hold { fault_resets } = boot {
         fault::hold(fault_resets);
