@@ -229,7 +229,8 @@ impl AdcRing for BoardAdcRing<'_> {
     fn rewind_dma(&mut self) {
         let ch = pac::DMA1.ch(0);
         ch.cr().modify(|w| w.set_en(false));
-        while ch.cr().read().en() {}
+        // EN reads 0 at once on this DMA (RM0440 DMA); bounded all the same.
+        let _ = (0..ADC_STOP_READS).any(|_| !ch.cr().read().en());
         ch.ndtr().write(|w| w.set_ndt(ADC_RING as u16));
         pac::DMA1.ifcr().write(|w| {
             w.set_gif(0, true);

@@ -32,17 +32,30 @@ use crate::shared::{
     THREAD_HEARTBEAT,
 };
 
-/// FDCAN1's interrupt line 0, before embassy's handler (P3, below the step):
-///
-/// * counts bus-off entries as they happen (RM0440 FDCAN `IR.BO`, routed to IT0 by embassy
-///   with `IE.BOE`): an episode shorter than the bus task's 10 ms poll is counted too, and
-///   embassy's handler acknowledges `IR.BO` after this one;
-/// * drains RX FIFO 0 (3 elements) into the step's command queue at once, instead of a
-///   thread-mode task that a busy executor (a run's build, a telemetry record) delays past
-///   three frames of a setup burst; counts every frame lost, in the FIFO (`IR.RF0L`,
-///   enabled by `start`) or because the step's queue was full (`RIG_HEALTH` `RxLost`).
-///   The step's queue is a `StepChannel`: a P3 user is within its ceiling's invariant.
+/// FDCAN1's interrupt line 0 (P3, below the step), bound before embassy's handler: counts
+/// bus-off entries as they happen (RM0440 FDCAN `IR.BO`, routed to IT0 by embassy with
+/// `IE.BOE`: an episode shorter than the bus task's 10 ms poll is counted too; embassy's
+/// handler acknowledges `IR.BO` after this one) and frames lost in RX FIFO 0 (`IR.RF0L`,
+/// enabled by `start`).
 pub struct It0;
+
+/// FDCAN1's interrupt line 0, bound after embassy's handler: drains RX FIFO 0 (3 elements)
+/// into the step's command queue at once, instead of a thread-mode task that a busy
+/// executor (a run's build, a telemetry record) delays past three frames of a setup burst;
+/// a frame the queue cannot take is counted lost (`RIG_HEALTH` `RxLost`). After embassy's
+/// handler, because that one clears `IR.RF0N`: a frame that arrives before that clear is
+/// drained here, one that arrives after this drain sets `RF0N` again, which nobody clears,
+/// and the interrupt comes back for it. The step's queue is a `StepChannel`: a P3 user is
+/// within its ceiling's invariant.
+pub struct It0Drain;
+
+impl Handler<FDCAN1_IT0> for It0Drain {
+    unsafe fn on_interrupt() {
+        if RX_DRAIN.load(Ordering::Relaxed) {
+            drain_rx_fifo0();
+        }
+    }
+}
 
 /// The application's receive path is on (`start`): the bring-up's loopback check reads
 /// through embassy's driver instead, so the drain must leave its frames alone.
@@ -58,9 +71,6 @@ impl Handler<FDCAN1_IT0> for It0 {
         if ir.rfl(0) {
             regs.ir().write(|w| w.set_rfl(0, true));
             RX_LOST.fetch_add(1, Ordering::Relaxed);
-        }
-        if RX_DRAIN.load(Ordering::Relaxed) {
-            drain_rx_fifo0();
         }
     }
 }
@@ -190,8 +200,8 @@ pub enum Join {
 /// Starts FDCAN1: checks the kernel clock, starts it in internal loopback (TX held
 /// recessive, off the bus), and joins the bus (`join`) only once NBTP holds the computed
 /// timing; a mismatch panics (safe state, reset, counted by the reset loop) before the node
-/// has sent or acknowledged anything. RX FIFO 0 is drained by [`It0`], which counts lost
-/// frames (`IE.RF0LE`); the receive half of embassy's driver is not used.
+/// has sent or acknowledged anything. RX FIFO 0 is drained by [`It0Drain`]; [`It0`]
+/// counts lost frames (`IE.RF0LE`); the receive half of embassy's driver is not used.
 pub fn start(cfg: CanConfigurator<'static>, join: Join) -> (CanTx<'static>, Properties) {
     check_kernel_clock();
     let can = configure(cfg).start(OperatingMode::InternalLoopbackMode);

@@ -45,9 +45,9 @@ use embassy_stm32::{bind_interrupts, can, dma, peripherals};
 use hils_rig_core::reset_loop::Boot;
 
 bind_interrupts!(pub struct Irqs {
-    // Ours first: it must see IR.BO before embassy's handler acknowledges it, and drains
-    // RX FIFO 0 before embassy's handler wakes its (unused) reader.
-    FDCAN1_IT0 => can_io::It0, can::IT0InterruptHandler<peripherals::FDCAN1>;
+    // Called in this order: ours first (it must see IR.BO before embassy's handler
+    // acknowledges it), the RX FIFO 0 drain last (after embassy's handler clears RF0N).
+    FDCAN1_IT0 => can_io::It0, can::IT0InterruptHandler<peripherals::FDCAN1>, can_io::It0Drain;
     FDCAN1_IT1 => can::IT1InterruptHandler<peripherals::FDCAN1>;
     DMA1_CHANNEL1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
 });
