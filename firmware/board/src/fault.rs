@@ -21,9 +21,11 @@
 //! the step) is the backstop for everything that does not reach these handlers: a stuck
 //! step, a lockup, interrupts masked too long.
 //!
-//! **At every start** ([`safe_pins_at_start`], the first thing `main` does, before the
-//! crystal's up to 100 ms start): the same pin states, so the lines are driven safe within
-//! microseconds of the reset instead of floating until the application configures them.
+//! **At every start**: the reset handler's first instructions (`__pre_init`, `ccm.rs`,
+//! before the CCM copy and RAM initialisation) drive the pulse pins and the output enable
+//! low and PA12 high, within a microsecond of the reset instead of floating until the
+//! application configures them; `main` does the same again ([`safe_pins_at_start`]) before
+//! the crystal's up to 100 ms start.
 //! Before that (the reset itself and the boot ROM) only the external pull resistors decide
 //! (docs/rig.md, "Lines in reset").
 //!
@@ -53,7 +55,7 @@ use embassy_stm32::pac::gpio::vals::Moder;
 use embassy_stm32::pac::timer::vals::Ocm;
 use hils_rig_core::reset_loop::{Boot, ResetCause, ResetLoopRecord};
 
-use crate::pulse::{OUTPUT_ENABLE_PIN, PULSE_PINS, PULSE_TIMERS};
+use crate::pulse::{CAN_TX_PIN_ID, OUTPUT_ENABLE_PIN, PULSE_PINS, PULSE_TIMERS};
 
 /// What ended the last run (an unknown stored code reads as `UnexpectedInterrupt`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, defmt::Format, num_enum::FromPrimitive)]
@@ -144,7 +146,7 @@ pub fn enter_safe_state() {
 }
 
 /// PA12, FDCAN1_TX (app.rs).
-const CAN_TX_PIN: usize = 12;
+const CAN_TX_PIN: usize = CAN_TX_PIN_ID.1;
 
 /// The first thing at every start: GPIOA-C clocked and the controller-facing pins driven
 /// safe (pulse pins and output enable low, PA12 high = CAN recessive), before the crystal

@@ -54,8 +54,8 @@ bind_interrupts!(pub struct Irqs {
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
-    // Lines safe within microseconds of the reset, before the crystal's start (up to
-    // 100 ms); the stack guarded before anything deep runs.
+    // The safe pins again (`__pre_init` drove them first, ccm.rs), before the crystal's
+    // start (up to 100 ms); the stack guarded before anything deep runs.
     fault::safe_pins_at_start();
     fault::guard_stack();
     let reset = clock::take_reset_cause();

@@ -19,17 +19,67 @@ use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::timer::{Ch1, GeneralInstance4Channel};
 use hils_rig_core::pulse::{PulseRegisters, PulseTimerRegs, apply, update};
 
-/// The pulse pins (port, pin) of wheelsets 1..4, for the safe state.
-pub const PULSE_PINS: [(pac::gpio::Gpio, usize); 4] = [
-    (pac::GPIOA, 8),
-    (pac::GPIOB, 14),
-    (pac::GPIOC, 6),
-    (pac::GPIOB, 2),
-];
+/// A pin: GPIO port (0 = A, 1 = B, 2 = C) and number.
+pub type PinId = (usize, usize);
 
+/// The pulse pins of wheelsets 1..4: PA8, PB14, PC6, PB2.
+pub const PULSE_PIN_IDS: [PinId; 4] = [(0, 8), (1, 14), (2, 6), (1, 2)];
 /// The output enable of the interface stage (PC8, active high, pull-down on the board side:
 /// off in reset): on, the sensor loops are closed; off, they are open ("sensor lost").
-pub const OUTPUT_ENABLE_PIN: (pac::gpio::Gpio, usize) = (pac::GPIOC, 8);
+pub const OUTPUT_ENABLE_PIN_ID: PinId = (2, 8);
+/// FDCAN1_TX (PA12): driven high (recessive) in every safe state.
+pub const CAN_TX_PIN_ID: PinId = (0, 12);
+
+/// The GPIO port of a [`PinId`].
+pub const fn port(p: PinId) -> pac::gpio::Gpio {
+    match p.0 {
+        0 => pac::GPIOA,
+        1 => pac::GPIOB,
+        _ => pac::GPIOC,
+    }
+}
+
+/// The pulse pins (port, pin) of wheelsets 1..4, for the safe state.
+pub const PULSE_PINS: [(pac::gpio::Gpio, usize); 4] = [
+    (port(PULSE_PIN_IDS[0]), PULSE_PIN_IDS[0].1),
+    (port(PULSE_PIN_IDS[1]), PULSE_PIN_IDS[1].1),
+    (port(PULSE_PIN_IDS[2]), PULSE_PIN_IDS[2].1),
+    (port(PULSE_PIN_IDS[3]), PULSE_PIN_IDS[3].1),
+];
+/// The output enable (port, pin).
+pub const OUTPUT_ENABLE_PIN: (pac::gpio::Gpio, usize) =
+    (port(OUTPUT_ENABLE_PIN_ID), OUTPUT_ENABLE_PIN_ID.1);
+
+/// What the reset handler writes to each port (A, B, C) before anything else
+/// (`ccm.rs` `__pre_init`): the MODER bits of the safe pins (mask, value: general-purpose
+/// output) and the BSRR word (pulse pins and output enable low, PA12 high).
+pub const SAFE_PIN_WRITES: [(u32, u32, u32); 3] = [safe_writes(0), safe_writes(1), safe_writes(2)];
+
+const fn safe_writes(port: usize) -> (u32, u32, u32) {
+    let low = [
+        PULSE_PIN_IDS[0],
+        PULSE_PIN_IDS[1],
+        PULSE_PIN_IDS[2],
+        PULSE_PIN_IDS[3],
+        OUTPUT_ENABLE_PIN_ID,
+    ];
+    let (mut mask, mut value, mut bsrr) = (0u32, 0u32, 0u32);
+    let mut k = 0;
+    while k < low.len() + 1 {
+        let (p, pin) = if k < low.len() { low[k] } else { CAN_TX_PIN_ID };
+        if p == port {
+            mask |= 3 << (2 * pin);
+            value |= 1 << (2 * pin);
+            bsrr |= if k < low.len() {
+                1 << (16 + pin)
+            } else {
+                1 << pin
+            };
+        }
+        k += 1;
+    }
+    (mask, value, bsrr)
+}
 
 /// The pulse timers of wheelsets 1..4, as their common register layout (TIM15's CR1,
 /// CCMR1, CCER, PSC, ARR, CCR1, BDTR, AF1 sit where TIM1's do).
