@@ -56,12 +56,13 @@ pub async fn run(spawner: Spawner, p: Peripherals, image: Image) {
     let silent = rig_config.pulse_timer.silent();
 
     // Wheelsets 1-4: a timer and its channel-1 pin each (push-pull), silent until the
-    // first step (each timer and pin is its own type, hence a macro).
+    // first step; the pin goes to the timer only once the timer drives it low (`PulseOut::new`).
+    // Each timer and pin is its own type, hence a macro.
     macro_rules! pulse_out {
         ($timer:expr, $pin:expr) => {
             PulseOut::new(
                 Timer::new($timer),
-                PwmPin::new($pin, OutputType::PushPull),
+                || PwmPin::new($pin, OutputType::PushPull),
                 &silent,
             )
         };

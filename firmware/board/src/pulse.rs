@@ -116,10 +116,16 @@ pub struct PulseOut<T: GeneralInstance4Channel> {
 
 impl<T: GeneralInstance4Channel> PulseOut<T> {
     /// Configures the timer (PWM mode 1 with preload, break on lockup and clock failure,
-    /// outputs idle low without MOE), loads the silent registers and starts it.
+    /// channel enabled with MOE = 0, OSSI = 1, OIS1 = 0: the timer drives the output low),
+    /// loads the silent registers, only then switches the pin to the timer's alternate
+    /// function (`pin`, embassy's `PwmPin::new`), and starts the timer. The pin goes from
+    /// the safe GPIO low of the start (`__pre_init`) straight to the timer's driven low: it
+    /// never floats. (With MOE = 0 and OSSI = 0, the reset state, the timer leaves the output
+    /// undriven, RM0440 "Output control bits for complementary OCx and OCxN channels with
+    /// break feature": a pin switched to AF before OSSI is set floats until it is.)
     pub fn new(
         timer: Timer<'static, T>,
-        pin: PwmPin<'static, T, Ch1>,
+        pin: impl FnOnce() -> PwmPin<'static, T, Ch1>,
         silent: &PulseRegisters,
     ) -> Self {
         // SAFETY: the timer's own register block; only TIM1-layout registers it has are used.
@@ -129,14 +135,11 @@ impl<T: GeneralInstance4Channel> PulseOut<T> {
             w.set_arpe(true);
             w.set_udis(false);
         });
+        regs.bdtr().modify(|w| w.set_moe(false));
         regs.cr2().modify(|w| w.set_ois(0, false));
         regs.ccmr_output(0).modify(|w| {
             w.set_ocm(0, Ocm::PWM_MODE1);
             w.set_ocpe(0, true);
-        });
-        regs.ccer().modify(|w| {
-            w.set_ccp(0, false);
-            w.set_cce(0, true);
         });
         regs.af1().modify(|w| w.set_bkine(false));
         regs.bdtr().modify(|w| {
@@ -146,9 +149,14 @@ impl<T: GeneralInstance4Channel> PulseOut<T> {
             w.set_bke(0, true);
             w.set_aoe(false);
         });
+        // OSSI is set: enabling the channel now drives OC1 at its idle level (OIS1 = 0).
+        regs.ccer().modify(|w| {
+            w.set_ccp(0, false);
+            w.set_cce(0, true);
+        });
         let mut out = Self {
             _timer: timer,
-            _pin: pin,
+            _pin: pin(),
             regs,
             last: *silent,
         };

@@ -52,7 +52,7 @@ pub async fn pulse_through_jumper(
     let timer: PulseTimer = config.pulse_timer;
     let mut out = PulseOut::new(
         Timer::new(tim1),
-        PwmPin::new(pa8, OutputType::PushPull),
+        || PwmPin::new(pa8, OutputType::PushPull),
         &timer.silent(),
     );
     let radius = Params::default().vehicle.wheel_radius as f32;
