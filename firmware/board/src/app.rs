@@ -19,7 +19,7 @@ use embassy_stm32::{Peri, Peripherals};
 use embassy_time::{Duration, Instant, Ticker, Timer as Delay};
 use hils_plant::FrictionModel;
 use hils_rig_core::Code;
-use hils_rig_core::adc_watch::{self, AdcAction, AdcRing, AdcWatch};
+use hils_rig_core::adc_watch::{self, AdcAction, AdcConverter, AdcRing, AdcWatch};
 use hils_rig_core::can::{Command, RigState};
 use hils_rig_core::reset_loop::HEALTHY_RUN_TICKS;
 use hils_rig_core::rig::{Rig, RigConfig};
@@ -207,14 +207,15 @@ async fn sim_builder_task() {
     }
 }
 
-/// ADC1 and its DMA ring as `adc_watch::restart` drives them (RM0440 ADC: ADSTP, ADSTART,
-/// ISR.OVR; DMA: CCR.EN, CNDTR, IFCR), under the step's ceiling.
-struct BoardAdcRing<'a>(&'a mut RingBufferedAdc<'static, ADC1>);
+/// ADC1 as `adc_watch::stop` drives it (RM0440 ADC: ADSTP, ADSTART, DR, ISR), in thread
+/// mode with the step running.
+struct BoardAdc;
 
-/// Reads of ADSTART before a stop counts as failed (ADSTP ends within a conversion, < 1 us).
+/// Reads of ADSTART before a stop counts as failed (ADSTP ends within a conversion, < 1 us;
+/// thread mode, the step is not masked).
 const ADC_STOP_READS: u32 = 10_000;
 
-impl AdcRing for BoardAdcRing<'_> {
+impl AdcConverter for BoardAdc {
     fn stop_conversions(&mut self) -> bool {
         let adc = pac::ADC1;
         if adc.cr().read().adstart() {
@@ -223,15 +224,31 @@ impl AdcRing for BoardAdcRing<'_> {
         }
         (0..ADC_STOP_READS).any(|_| !adc.cr().read().adstart())
     }
+    fn discard_pending_conversion(&mut self) {
+        let adc = pac::ADC1;
+        // Reading DR clears EOC and with it the DMA request of that conversion.
+        let _ = adc.dr().read();
+        // rc_w1: only the bits written 1 clear.
+        adc.isr().write(|w| {
+            w.set_eoc(true);
+            w.set_eos(true);
+        });
+    }
     fn clear_overrun(&mut self) {
-        // rc_w1: writing 1 to OVR alone clears it and nothing else.
         pac::ADC1.isr().write(|w| w.set_ovr(true));
     }
+}
+
+/// The DMA ring as `adc_watch::realign` drives it (RM0440 DMA: CCR.EN, CNDTR, IFCR; ADC
+/// ADSTART), under the step's ceiling: register writes only, no wait. The channel is idle
+/// when EN is cleared (the ADC is stopped and its DR consumed by `adc_watch::stop`: no
+/// request, no transfer in progress), so CNDTR takes the new count.
+struct BoardAdcRing<'a>(&'a mut RingBufferedAdc<'static, ADC1>);
+
+impl AdcRing for BoardAdcRing<'_> {
     fn rewind_dma(&mut self) {
         let ch = pac::DMA1.ch(0);
         ch.cr().modify(|w| w.set_en(false));
-        // EN reads 0 at once on this DMA (RM0440 DMA); bounded all the same.
-        let _ = (0..ADC_STOP_READS).any(|_| !ch.cr().read().en());
         ch.ndtr().write(|w| w.set_ndt(ADC_RING as u16));
         pac::DMA1.ifcr().write(|w| {
             w.set_gif(0, true);
@@ -251,7 +268,8 @@ impl AdcRing for BoardAdcRing<'_> {
 
 /// Watches the ADC ring's progress every ms and restarts it, aligned, when it stalls
 /// (`hils_rig_core::adc_watch`: no fresh sequence for 2 ms while the step runs, or an ADC
-/// overrun); the restart is a few register writes under the step's ceiling.
+/// overrun); the stop runs in thread mode, the realignment is a few register writes under
+/// the step's ceiling.
 #[embassy_executor::task]
 async fn adc_watch_task() {
     use core::sync::atomic::Ordering::Relaxed;
@@ -268,11 +286,17 @@ async fn adc_watch_task() {
             now_ms,
         );
         if action == AdcAction::Restart {
-            // SAFETY: thread mode; the restart is a few register writes.
-            let done = unsafe {
-                REAL_TIME
-                    .with_step_masked(|rt| adc_watch::restart(&mut BoardAdcRing(&mut rt.io.adc)))
-            };
+            // The stop and its bounded wait run with the step unmasked; only the realignment
+            // (a few register writes, no wait) masks it.
+            let done = adc_watch::stop(&mut BoardAdc);
+            if done.is_ok() {
+                // SAFETY: thread mode; register writes only.
+                unsafe {
+                    REAL_TIME.with_step_masked(|rt| {
+                        adc_watch::realign(&mut BoardAdcRing(&mut rt.io.adc))
+                    })
+                };
+            }
             ADC_RESTARTS.store(watch.restarts, Relaxed);
             defmt::warn!(
                 "ADC ring stalled (overrun {=bool}): restart {}, {=u32} so far",
