@@ -36,7 +36,9 @@ use crate::shared::{
 /// bus-off entries as they happen (RM0440 FDCAN `IR.BO`, routed to IT0 by embassy with
 /// `IE.BOE`: an episode shorter than the bus task's 10 ms poll is counted too; embassy's
 /// handler acknowledges `IR.BO` after this one) and frames lost in RX FIFO 0 (`IR.RF0L`,
-/// enabled by `start`).
+/// enabled by `start`). RF0L is a flag, not a count: losses between its setting and this
+/// handler's clear count once, so `RxLost` is a lower bound (exact for a single loss and
+/// for frames the step's queue could not take).
 pub struct It0;
 
 /// FDCAN1's interrupt line 0, bound after embassy's handler: drains RX FIFO 0 (3 elements)
@@ -206,13 +208,16 @@ pub fn start(cfg: CanConfigurator<'static>, join: Join) -> (CanTx<'static>, Prop
     check_kernel_clock();
     let can = configure(cfg).start(OperatingMode::InternalLoopbackMode);
     let t = bit_timing();
+    // The receive path is on before the node joins: the first frame from the bus is drained
+    // and a loss is counted (with the drain off, a frame arriving right after the join
+    // would wait in the FIFO for the next one's interrupt).
+    RX_DRAIN.store(true, Ordering::Relaxed);
+    pac::FDCAN1.ie().modify(|w| w.set_rfle(0, true));
     if join == Join::Bus
         && let Err(e) = join_bus(&mut Fdcan1, t.nbtp())
     {
         defmt::panic!("FDCAN1 not started on the bus: {}", e);
     }
-    RX_DRAIN.store(true, Ordering::Relaxed);
-    pac::FDCAN1.ie().modify(|w| w.set_rfle(0, true));
     let tol = t.tolerance();
     info!(
         "CAN {=u32} bit/s: kernel {=u32} Hz, prescaler {=u16}, {=u32} tq, sample point {=u32} permille, SJW {=u8}, tolerance {=u32} ppm, NBTP {=u32:#010x}",
