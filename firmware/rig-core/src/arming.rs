@@ -11,7 +11,11 @@
 //! sent: a controller must not use them as a speed source.
 //!
 //! **The rule.** Outputs are live only while the gate is armed *and* a rig-mode run is
-//! `Running` or `Finished` (at rest after the run: speeds 0.00 km/h). A self-test run (the
+//! `Running` or `Finished` (at rest after the run: speeds 0.00 km/h) *and* that run was
+//! started armed with the gate armed ever since ([`ArmingGate::run_started`]). So arming
+//! makes nothing live by itself: an `Arm` in `Finished` (after a `Disarm`), or a start
+//! whose build failed and left the rig in the `Finished` of the run before, keeps every
+//! output safe until a new rig-mode run starts. A self-test run (the
 //! board's own simulated brake unit closes the loop, started by a `Start` in self-test
 //! mode, the user button or `selftest-autostart`) never drives them, armed or not.
 //!
@@ -66,6 +70,8 @@ pub enum ArmRefused {
 pub struct ArmingGate {
     /// `None` while armed; else why not.
     disarmed: Option<Disarm>,
+    /// The current run is a rig-mode run started armed, and the gate stayed armed since.
+    run_armed: bool,
 }
 
 impl Default for ArmingGate {
@@ -79,6 +85,7 @@ impl ArmingGate {
     pub const fn new() -> Self {
         Self {
             disarmed: Some(Disarm::Reset),
+            run_armed: false,
         }
     }
 
@@ -102,6 +109,19 @@ impl ArmingGate {
         if self.disarmed.is_none() {
             self.disarmed = Some(why);
         }
+        self.run_armed = false;
+    }
+
+    /// A run begins (installed, `Running`): its outputs may go live only if it is a
+    /// rig-mode run and the gate is armed now.
+    pub fn run_started(&mut self, mode: RigMode) {
+        self.run_armed = self.is_armed() && mode == RigMode::Rig;
+    }
+
+    /// A new start was requested: the run before no longer drives anything, whatever
+    /// becomes of the request (a failed build goes back to the state before).
+    pub fn run_left(&mut self) {
+        self.run_armed = false;
     }
 
     /// Whether the gate is armed.
@@ -114,10 +134,12 @@ impl ArmingGate {
         self.disarmed
     }
 
-    /// Whether the controller-facing outputs are live now: armed, and a rig-mode run
-    /// `Running` or `Finished`. Everything a controller reads follows this one answer.
+    /// Whether the controller-facing outputs are live now: armed, and a rig-mode run started
+    /// armed is `Running` or `Finished`. Everything a controller reads follows this one
+    /// answer.
     pub fn outputs_live(&self, state: RigState, mode: RigMode) -> bool {
         self.is_armed()
+            && self.run_armed
             && mode == RigMode::Rig
             && matches!(state, RigState::Running | RigState::Finished)
     }
@@ -152,6 +174,11 @@ mod tests {
     fn live_only_armed_in_a_rig_mode_run() {
         let mut g = ArmingGate::new();
         assert_eq!(g.arm(RigState::Idle, false), Ok(()));
+        // Armed, but no run started armed: nothing is live, in any state.
+        for s in STATES {
+            assert!(!g.outputs_live(s, RigMode::Rig), "{s:?}");
+        }
+        g.run_started(RigMode::Rig);
         for s in STATES {
             let want = matches!(s, RigState::Running | RigState::Finished);
             assert_eq!(g.outputs_live(s, RigMode::Rig), want, "{s:?}");
@@ -194,8 +221,31 @@ mod tests {
             g.disarm(Disarm::Command);
             assert_eq!(g.disarmed_by(), Some(why));
             g.arm(RigState::Stopped, false).unwrap();
+            // Arming again makes nothing live until a run starts armed.
+            assert!(!g.outputs_live(RigState::Finished, RigMode::Rig));
+            g.run_started(RigMode::Rig);
             assert!(g.outputs_live(RigState::Running, RigMode::Rig));
         }
+    }
+
+    #[test]
+    fn arming_after_a_run_or_a_new_request_makes_nothing_live() {
+        let mut g = ArmingGate::new();
+        g.arm(RigState::Idle, false).unwrap();
+        g.run_started(RigMode::Rig);
+        assert!(g.outputs_live(RigState::Finished, RigMode::Rig));
+        // Disarmed and armed again at rest after the run: safe.
+        g.disarm(Disarm::Command);
+        g.arm(RigState::Finished, false).unwrap();
+        assert!(!g.outputs_live(RigState::Finished, RigMode::Rig));
+        // A new request leaves the run before, even if its build fails.
+        g.run_started(RigMode::Rig);
+        g.run_left();
+        assert!(!g.outputs_live(RigState::Finished, RigMode::Rig));
+        // A self-test run started armed never drives them.
+        g.run_started(RigMode::SelfTest);
+        assert!(!g.outputs_live(RigState::Running, RigMode::SelfTest));
+        assert!(!g.outputs_live(RigState::Running, RigMode::Rig));
     }
 
     #[test]

@@ -42,7 +42,8 @@
 //!
 //! The outputs a real controller reads (pulse trains, wheel speeds, the controller I/O) are
 //! live only when the arming gate says so ([`crate::arming`], [`Rig::controller_outputs_live`]):
-//! armed by the `Arm` command, in a rig-mode run. A rig-mode `Start` is refused while the rig
+//! armed by the `Arm` command, in a rig-mode run started armed (arming alone makes nothing
+//! live). A rig-mode `Start` is refused while the rig
 //! is not armed ([`CommandError::NotArmed`]); `Stop`, `Fault`, a latched fault, a self-test
 //! start, `Disarm` and every reset disarm it. A self-test run (the button, `selftest-autostart`,
 //! a self-test `Start`) never drives these outputs: its speeds are in the telemetry and the
@@ -871,6 +872,8 @@ impl<S: SimStore> Rig<S> {
             // The board's own brake unit closes this loop: the controller is not in it.
             self.arming.disarm(Disarm::SelfTest);
         }
+        // The run before drives nothing from here, whatever becomes of this request.
+        self.arming.run_left();
         // The old run's simulation is no longer shown (plain data: nothing to drop).
         if let Some(sim) = self.sim_mut() {
             *sim = Sim::None;
@@ -962,6 +965,7 @@ impl<S: SimStore> Rig<S> {
             (RigMode::Rig, _) => None,
         };
         self.state = RigState::Running;
+        self.arming.run_started(req.mode);
         self.run_steps = 0;
         self.timing.reset();
         self.diag_window = DiagWindow::default();

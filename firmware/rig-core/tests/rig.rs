@@ -496,6 +496,64 @@ fn outputs_a_controller_reads_move_only_while_armed() {
 }
 
 #[test]
+fn arming_at_rest_or_after_a_failed_rebuild_makes_no_output_live() {
+    // What a controller reads: the output enable (`controller_outputs_live`), the speeds
+    // (0xFFFF = not available) and the pulse trains.
+    let safe = |rig: &Rig, io: &MockBoard| {
+        !rig.controller_outputs_live()
+            && last_wheel_speeds(io).iter().all(Option::is_none)
+            && io.pulses.iter().all(|p| p.unwrap().is_silent())
+    };
+    let mut rig = Rig::new(RigConfig::nucleo_g474re());
+    let mut io = MockBoard::new();
+    io.adc_counts = Some([load_cell_counts(2000.0); 4]);
+    // An armed rig-mode run from standstill: `Finished` at once, at rest and live
+    // (speeds 0.00 km/h), as documented.
+    arm(&mut rig, 1);
+    command(&mut rig, 2, rig_start(0.0)).unwrap();
+    for _ in 0..20 {
+        rig.step(&mut io);
+    }
+    assert_eq!(rig.state(), RigState::Finished);
+    assert!(rig.controller_outputs_live());
+    assert_eq!(last_wheel_speeds(&io), [Some(0.0); 4]);
+    // Disarmed, then armed again at rest: nothing goes live (no run was set up armed).
+    command(&mut rig, 3, Command::Disarm).unwrap();
+    for _ in 0..20 {
+        rig.step(&mut io);
+    }
+    assert!(safe(&rig, &io));
+    arm(&mut rig, 4);
+    for _ in 0..20 {
+        rig.step(&mut io);
+        assert!(safe(&rig, &io));
+    }
+    assert_eq!(rig.state(), RigState::Finished);
+    // A new armed start whose build fails goes back to `Finished`: still safe.
+    rig.command(rig_start(0.0)).unwrap();
+    let req = rig.take_start_request().unwrap();
+    assert_eq!(
+        rig.install(Built {
+            seq: req.seq,
+            result: Err(CommandError::SpeedOutOfRange)
+        }),
+        Err(CommandError::SpeedOutOfRange)
+    );
+    assert_eq!(rig.state(), RigState::Finished);
+    for _ in 0..20 {
+        rig.step(&mut io);
+        assert!(safe(&rig, &io));
+    }
+    // Only a run started armed drives them again.
+    command(&mut rig, 5, rig_start(0.0)).unwrap();
+    for _ in 0..20 {
+        rig.step(&mut io);
+    }
+    assert!(rig.controller_outputs_live());
+    assert_eq!(last_wheel_speeds(&io), [Some(0.0); 4]);
+}
+
+#[test]
 fn rig_mode_steps_the_plant_with_the_measured_clamp_forces() {
     let mut rig = Rig::new(RigConfig::nucleo_g474re());
     let mut io = MockBoard::new();
