@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
-# Prints the flash and static RAM of a board image and checks the budgets: half the chip,
-# <= 256 KiB flash and <= 64 KiB static RAM (issue 22), for the rig image (`cargo board`) and
-# the bring-up image (`cargo board --features bringup`) alike; the CCM SRAM code fits its
-# 32 KiB; the stack is its own 32 KiB at the bottom of SRAM (stack.x). Needs llvm-size
-# (Debian package llvm).
+# Prints the flash and RAM of a board image and checks the budgets: half the chip,
+# <= 256 KiB flash and <= 64 KiB RAM (issue 22) counting the stack with the statics, for the
+# rig image (`cargo board`) and the bring-up image (`cargo board --features bringup`) alike;
+# the CCM SRAM code fits its 32 KiB; the stack (its size set once, `_stack_size` in stack.x)
+# is at the bottom of SRAM. Needs llvm-size (Debian package llvm).
 #   bash firmware/board/size.sh [ELF]     (default: the image last built by `cargo board ...`)
 set -euo pipefail
 elf="${1:-${CARGO_TARGET_DIR:-target}/thumbv7em-none-eabihf/release/board}"
@@ -15,7 +15,7 @@ fi
 "$size_tool" -A "$elf"
 # Flash: everything loaded from flash (vector table, code, read-only data, the load images
 # of .data and of the step code that runs from CCM SRAM).
-# Static RAM: .data + .bss + .uninit (the stack, .stack, is the 32 KiB below them).
+# RAM: .data + .bss + .uninit (the statics) + .stack (below them): the budget is for all.
 # CCM SRAM: the step code copied there at reset (ccm.x; 32 KiB).
 "$size_tool" -A "$elf" | awk -v elf="$elf" '
     $1 == ".vector_table" || $1 == ".text" || $1 == ".text.rig_core_cold" || $1 == ".rodata" || $1 == ".gnu.sgstubs" { flash += $2 }
@@ -26,11 +26,11 @@ fi
     END {
         printf "board image %s\n", elf
         printf "  flash      %6d B = %5.1f KiB (budget 256 KiB)\n", flash, flash / 1024
-        printf "  static RAM %6d B = %5.1f KiB (budget 64 KiB)\n", ram, ram / 1024
+        printf "  RAM        %6d B = %5.1f KiB (budget 64 KiB): statics %d B + stack %d B\n", ram + stack, (ram + stack) / 1024, ram, stack
         printf "  CCM code   %6d B = %5.1f KiB (CCM SRAM 32 KiB; in flash too, as its load image)\n", ccm, ccm / 1024
         printf "  stack      %6d B = %5.1f KiB at %#x (stack.x: bottom of SRAM, guard below)\n", stack, stack / 1024, stack_at
-        if (flash > 256 * 1024 || ram > 64 * 1024 || ccm > 32 * 1024) { print "  OVER BUDGET"; exit 1 }
-        if (stack != 32 * 1024 || stack_at != 536870912) { print "  STACK NOT AT THE BOTTOM OF SRAM (stack.x)"; exit 1 }
+        if (flash > 256 * 1024 || ram + stack > 64 * 1024 || ccm > 32 * 1024) { print "  OVER BUDGET"; exit 1 }
+        if (stack == 0 || stack_at != 536870912) { print "  STACK NOT AT THE BOTTOM OF SRAM (stack.x)"; exit 1 }
         print "  within budget"
     }'
 

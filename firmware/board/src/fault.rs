@@ -287,13 +287,20 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 /// The HardFault handler's own stack: a stack overflow leaves MSP below SRAM, where no push
 /// can go (the MPU guard), so the handler moves here before any Rust code runs.
 const FAULT_STACK_BYTES: usize = 2048;
+/// FPCCR, the floating-point context control register (bit 0: LSPACT).
+const FPCCR_ADDR: u32 = 0xE000_EF34;
 #[repr(C, align(8))]
 struct FaultStack([u8; FAULT_STACK_BYTES]);
 static mut FAULT_STACK: FaultStack = FaultStack([0; FAULT_STACK_BYTES]);
 
 // HardFault, in place of cortex-m-rt's trampoline (which would run the handler on the
 // faulting stack): r0 = MSP as the fault left it (the exception frame, if it could be
-// pushed), MSP = the top of FAULT_STACK, then the handler.
+// pushed), FPCCR.LSPACT cleared, MSP = the top of FAULT_STACK, then the handler.
+// LSPACT: a fault taken with an active FP context and lazy stacking (FPCCR.LSPEN, the
+// reset value) leaves the FP registers' slot reserved in the faulting frame, at FPCAR, and
+// the first FP instruction of the handler would push them there: below the stack after an
+// overflow, a MemManage fault inside HardFault, i.e. a lockup. Clearing LSPACT drops that
+// pending push (ARMv7-M ARM B3.2.21, FPCCR; the faulting context never resumes).
 core::arch::global_asm!(
     ".section .HardFaultTrampoline, \"ax\"",
     ".global HardFault",
@@ -301,11 +308,18 @@ core::arch::global_asm!(
     ".thumb_func",
     "HardFault:",
     "    mrs r0, MSP",
+    "    ldr r1, ={fpccr}",
+    "    ldr r2, [r1]",
+    "    bic r2, r2, #1",
+    "    str r2, [r1]",
+    "    dsb",
+    "    isb",
     "    ldr r1, ={stack}",
     "    add.w r1, r1, #{size}",
     "    msr MSP, r1",
     "    b {handler}",
     ".ltorg",
+    fpccr = const FPCCR_ADDR,
     stack = sym FAULT_STACK,
     size = const FAULT_STACK_BYTES,
     handler = sym hard_fault_on_own_stack,
@@ -316,7 +330,15 @@ unsafe extern "C" {
     static _stack_start: u32;
 }
 
+/// The stack's size, bytes: `stack.x`'s `_stack_size`, the one place it is set.
+#[inline(always)]
+pub fn stack_bytes() -> u32 {
+    let (bottom, top) = stack_span();
+    top - bottom
+}
+
 /// The stack's bottom (lowest address) and top, from `stack.x`.
+#[inline(always)]
 pub fn stack_span() -> (u32, u32) {
     // Linker symbols: only their addresses are used.
     (

@@ -36,8 +36,6 @@ pub const CPU_HZ: u32 = crate::clock::SYSCLK_HZ;
 pub const STEP_COUNTS: u16 = (CPU_HZ / hils_rig_core::STEP_RATE_HZ) as u16;
 /// Watchdog timeout, us: 100 steps. LSI 32 kHz nominal, /4, reload 79 (embassy wdg).
 pub const WATCHDOG_TIMEOUT_US: u32 = 10_000;
-/// The stack's size, bytes (`stack.x`).
-pub const STACK_BYTES: u32 = 32 * 1024;
 
 /// The peripherals the step uses.
 pub struct BoardIo {
@@ -186,7 +184,7 @@ fn step_tick() {
     rt.seen_drops = drops;
     rt.rig.set_board_health(BoardHealth {
         stack_peak_bytes: STACK_PEAK.load(Ordering::Relaxed),
-        stack_size_bytes: STACK_BYTES,
+        stack_size_bytes: crate::fault::stack_bytes(),
         rx_lost: RX_LOST.load(Ordering::Relaxed),
         adc_restarts: ADC_RESTARTS.load(Ordering::Relaxed),
         fault_resets: crate::fault::FAULT_RESETS.load(Ordering::Relaxed),
