@@ -401,6 +401,7 @@ fn programme_args(
         max_run_s: 120.0,
         settle_s: 3.0,
         only: None,
+        arm: true,
     };
     let rig = hils::rig::RigArgs {
         interface: "sim".into(),
@@ -417,6 +418,19 @@ fn programme_args(
 /// `hils wsp-test`'s metrics (its JSON keys), the service brake reaches its demanded
 /// deceleration, a run the frames cannot carry is listed with the reason; the report puts
 /// each rig run beside its SIL run.
+/// Without `--arm` a programme is refused before anything is sent or written: running it
+/// would drive the controller under test.
+#[test]
+fn programme_without_arm_is_refused_and_writes_nothing() {
+    let dir = out_dir("programme-unarmed");
+    let (mut rig, mut run) = programme_args(&dir, &[]);
+    run.arm = false;
+    rig.command = hils::rig::RigCommand::Run(run.clone());
+    let e = hils::rig::programme::main(&rig, &run).unwrap_err();
+    assert!(format!("{e:#}").contains("--arm"), "{e:#}");
+    assert!(!dir.join("out.json").exists() && !dir.join("report").exists());
+}
+
 #[test]
 fn programme_runs_each_run_on_the_board_and_reports() {
     let dir = out_dir("programme");

@@ -22,8 +22,9 @@
 //!
 //! `brake release`, `--settle-s` (3 s: the controller vents the last run's brake), the
 //! vehicle and track frames, `arm` (the board's outputs to the controller go live for the
-//! run: running a programme on the rig is the operator's explicit arming, announced on the
-//! terminal; the board disarms at every stop, fault and reset, so each run arms again),
+//! run; only with `--arm`, the operator's explicit arming, announced on the terminal:
+//! without it nothing is sent or written; the board disarms at every stop, fault and
+//! reset, so each run arms again),
 //! `start` (rig mode, on the track), the run's brake demand, then frames until the board
 //! leaves `running` (or `--max-run-s`, then `stop`).
 //!
@@ -98,6 +99,11 @@ pub struct RunArgs {
     /// Only the runs whose name contains this.
     #[arg(long)]
     pub only: Option<String>,
+    /// Arm the board before each run's start (required): the runs drive the controller
+    /// under test (pulse trains, wheel speeds); the board disarms at every stop, fault and
+    /// reset, so each run is armed again.
+    #[arg(long)]
+    pub arm: bool,
 }
 
 /// What the board is sent for a run: the vehicle and track frames, then the brake command
@@ -270,7 +276,9 @@ fn run_one<T: Transport>(
         for c in &plan.setup {
             send(s, *c)?;
         }
-        send(s, Command::Arm)?;
+        if args.arm {
+            send(s, Command::Arm)?;
+        }
         send(s, super::track::with_setup_digest(&plan.setup, start)?)?;
         send(s, Command::Brake(demand))?;
         let mut running = true;
@@ -434,6 +442,11 @@ fn tagged(mut o: Outcome, suffix: &str) -> Outcome {
 
 /// `hils rig run`.
 pub fn main(rig: &RigArgs, args: &RunArgs) -> Result<()> {
+    if !args.arm {
+        return Err(anyhow!(
+            "hils rig run --programme drives the controller under test from each run's start: add --arm to arm the board before each run (docs/rig.md, Arming)"
+        ));
+    }
     let (criteria, mut runs) = load(&args.programme, args.friction)?;
     if let Some(only) = &args.only {
         runs.retain(|r| r.run.name.contains(only.as_str()));
