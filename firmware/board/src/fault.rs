@@ -134,8 +134,7 @@ pub fn enter_safe_state() {
         tim.bdtr().modify(|w| w.set_moe(false));
     }
     for (port, pin) in PULSE_PINS.into_iter().chain([OUTPUT_ENABLE_PIN]) {
-        port.bsrr().write(|w| w.set_br(pin, true));
-        port.moder().modify(|w| w.set_moder(pin, Moder::OUTPUT));
+        crate::pulse::drive_low(port, pin);
     }
     pac::FDCAN1.cccr().modify(|w| w.set_init(true));
     // PA12 = FDCAN1_TX: high first, then output, so the pin never drives dominant.

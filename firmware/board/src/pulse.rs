@@ -91,6 +91,14 @@ pub const PULSE_TIMERS: [TimAdv; 4] = [
     pac::TIM20,
 ];
 
+/// Switches a pin to a GPIO output driven low: BSRR first, then MODER, so that it goes from
+/// whatever drove it (the timer's low, a weak pull) straight to the GPIO's low.
+pub fn drive_low(port: pac::gpio::Gpio, pin: usize) {
+    port.bsrr().write(|w| w.set_br(pin, true));
+    port.moder()
+        .modify(|w| w.set_moder(pin, pac::gpio::vals::Moder::OUTPUT));
+}
+
 /// Sets the output enable (the step, each tick: live or not).
 #[inline(always)]
 pub fn set_output_enable(on: bool) {

@@ -180,6 +180,21 @@ pub fn die_temperature_c(cal: &AdcFactoryCal, ts_data: u16, vdda_mv: u32) -> f32
     (at_cal_vref - cal.ts_cal1 as f32) * (TS_CAL2_DEGC - TS_CAL1_DEGC) / span + TS_CAL1_DEGC
 }
 
+/// Probes of the pulse check's jumper: D7 (PA8) left undriven with the chip's weak pull-up,
+/// then pull-down, alternately; D12 (PA6) read each time.
+pub const JUMPER_PROBES: usize = 6;
+
+/// Whether the jumper D7-D12 is fitted and nothing else is on D7, from the probes
+/// `(d7_pulled_up, d12_high)`: D12 followed every weak pull of D7, up and down. A rig's
+/// pull-down on the pulse line (docs/rig.md, "Lines in reset") or an interface stage
+/// overrides the weak pull-up, and an open D12 does not follow both ways: then PA8, wheelset
+/// 1's output to a controller, is never driven by the bring-up image.
+pub fn jumper_found(probes: &[(bool, bool)]) -> bool {
+    probes.iter().any(|p| p.0)
+        && probes.iter().any(|p| !p.0)
+        && probes.iter().all(|&(up, high)| up == high)
+}
+
 /// Speed the pulse check sets on wheelset 1's output, km/h.
 pub const PULSE_TEST_SPEED_KMH: f32 = 150.0;
 /// The capture timer's clock: 170 MHz / 4, so one period of the test frequency fits its
@@ -323,6 +338,24 @@ pub fn sysclk_matches(capture: &PulseCapture, reference: ReferenceClock) -> bool
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_jumper_is_found_only_when_d12_follows_both_pulls() {
+        let probes = |d12: &dyn Fn(bool, usize) -> bool| -> [(bool, bool); JUMPER_PROBES] {
+            core::array::from_fn(|k| (k % 2 == 0, d12(k % 2 == 0, k)))
+        };
+        // Fitted, nothing else on the line.
+        assert!(jumper_found(&probes(&|up, _| up)));
+        // A rig's pull-down (or a stage input) holds D7 low: never high.
+        assert!(!jumper_found(&probes(&|_, _| false)));
+        // A pull-up elsewhere, or D12 open and reading high: never low.
+        assert!(!jumper_found(&probes(&|_, _| true)));
+        // An open D12 that happens to follow once, then not.
+        assert!(!jumper_found(&probes(&|up, k| if k < 2 { up } else { k % 3 == 0 })));
+        // Only one direction probed decides nothing.
+        assert!(!jumper_found(&[(true, true)]));
+        assert!(!jumper_found(&[]));
+    }
 
     #[test]
     fn wait_states_follow_the_rm0440_table() {
