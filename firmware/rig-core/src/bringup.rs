@@ -351,7 +351,11 @@ mod tests {
         // A pull-up elsewhere, or D12 open and reading high: never low.
         assert!(!jumper_found(&probes(&|_, _| true)));
         // An open D12 that happens to follow once, then not.
-        assert!(!jumper_found(&probes(&|up, k| if k < 2 { up } else { k % 3 == 0 })));
+        assert!(!jumper_found(&probes(&|up, k| if k < 2 {
+            up
+        } else {
+            k % 3 == 0
+        })));
         // Only one direction probed decides nothing.
         assert!(!jumper_found(&[(true, true)]));
         assert!(!jumper_found(&[]));
