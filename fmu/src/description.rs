@@ -175,18 +175,40 @@ fn unit_definitions(w: &mut Writer<Vec<u8>>) -> io::Result<()> {
     Ok(())
 }
 
+/// The declared type of a Float64 variable with a unit: one type per unit, named as the
+/// unit (as the FMI Reference FMUs declare units through types); temperatures are rises
+/// above ambient (`relativeQuantity`).
+pub fn declared_type(v: &Variable) -> Option<&'static str> {
+    (v.kind == Kind::Float64 && !v.unit.is_empty()).then_some(v.unit)
+}
+
 fn type_definitions(w: &mut Writer<Vec<u8>>) -> io::Result<()> {
-    let mut types: Vec<EnumType> = Vec::new();
+    let mut enums: Vec<EnumType> = Vec::new();
+    let mut floats: Vec<&str> = Vec::new();
     for v in VARIABLES.iter() {
         if let Kind::Enumeration(t) = v.kind
-            && !types.iter().any(|u| u.name == t.name)
+            && !enums.iter().any(|u| u.name == t.name)
         {
-            types.push(t);
+            enums.push(t);
+        }
+        if let Some(t) = declared_type(v)
+            && !floats.contains(&t)
+        {
+            floats.push(t);
         }
     }
     w.create_element("TypeDefinitions")
         .write_inner_content(|w| {
-            for t in &types {
+            for unit in &floats {
+                let mut t = w
+                    .create_element("Float64Type")
+                    .with_attributes([("name", *unit), ("unit", *unit)]);
+                if *unit == "degC" {
+                    t = t.with_attribute(("relativeQuantity", "true"));
+                }
+                t.write_empty()?;
+            }
+            for t in &enums {
                 w.create_element("EnumerationType")
                     .with_attribute(("name", t.name))
                     .write_inner_content(|w| {
@@ -269,11 +291,8 @@ fn variable(w: &mut Writer<Vec<u8>>, v: &Variable, key_starts: &[String]) -> io:
     if let Kind::Enumeration(t) = v.kind {
         attrs.push(("declaredType", t.name.into()));
     }
-    if !v.unit.is_empty() {
-        attrs.push(("unit", v.unit.into()));
-    }
-    if v.relative_quantity() {
-        attrs.push(("relativeQuantity", "true".into()));
+    if let Some(t) = declared_type(v) {
+        attrs.push(("declaredType", t.into()));
     }
     if let Some((min, max)) = v.range {
         let (min, max) = match v.kind {

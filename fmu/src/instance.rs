@@ -652,9 +652,12 @@ fn steps_of(h_s: f64, dt: f64) -> Result<u64, Fault> {
         ));
     }
     if n < 1.0 || (ratio - n).abs() > 1e-6 {
+        // Shown to the nanosecond (no binary noise such as 0.00030000000000000003).
+        let ns = |k: f64| (k * dt * 1e9).round() / 1e9;
         return fault(format!(
-            "communicationStepSize = {h_s} s refused: not a multiple of the plant's fixed step {dt} s (scenario.paper_eb.step); use k x {dt} s, e.g. {} s",
-            n.max(1.0) * dt
+            "communicationStepSize = {h_s} s refused: not a multiple of the plant's fixed step {dt} s (scenario.paper_eb.step); the nearest multiples are {} s and {} s",
+            ns(ratio.floor().max(1.0)),
+            ns(ratio.floor().max(1.0) + 1.0)
         ));
     }
     if n > MAX_STEPS_PER_CALL {

@@ -122,12 +122,6 @@ impl Variable {
             _ => "discrete",
         }
     }
-
-    /// Whether the value is a temperature rise (every temperature of the model is the rise
-    /// above ambient: `relativeQuantity`, so an importer converts it without the offset).
-    pub fn relative_quantity(&self) -> bool {
-        self.unit == "degC"
-    }
 }
 
 /// How the brakes are driven: the values of `brake_input`.

@@ -61,7 +61,10 @@ fn expected(s: &RunRecord, name: &str) -> Option<f64> {
 /// `skip` names outputs the mode does not model.
 fn compare(fmu: &Fmu, s: &RunRecord, step: usize, skip: &[&str]) -> usize {
     let mut compared = 0;
-    for v in VARIABLES.iter().filter(|v| v.causality == Causality::Output) {
+    for v in VARIABLES
+        .iter()
+        .filter(|v| v.causality == Causality::Output)
+    {
         if skip.iter().any(|p| v.name.starts_with(p)) {
             continue;
         }
@@ -96,7 +99,10 @@ fn plant_driven_by_the_paper_runs_pressures_gives_its_numbers_bit_for_bit() {
     let mut slowest = f64::INFINITY;
     for (k, s) in run.samples.iter().enumerate().skip(1) {
         for j in 0..4 {
-            assert_eq!(fmu.set_f64(&format!("p_cyl{}_pa", j + 1), s.p_cyl_pa[j]), OK);
+            assert_eq!(
+                fmu.set_f64(&format!("p_cyl{}_pa", j + 1), s.p_cyl_pa[j]),
+                OK
+            );
         }
         assert_eq!(fmu.step(t, dt), OK, "step {k}: {}", fmu.last());
         t += dt;
@@ -106,8 +112,14 @@ fn plant_driven_by_the_paper_runs_pressures_gives_its_numbers_bit_for_bit() {
     // The run braked to a stop with both slides of the paper: the comparison covered them.
     assert!(run.samples.len() > 290_000, "{} steps", run.samples.len());
     assert_eq!(run.summary.slides, vec![2, 4]);
-    assert!(slowest <= 0.01, "the FMU's carbody stopped (slowest {slowest} m/s)");
-    println!("{} steps, {values} values bit-identical", run.samples.len() - 1);
+    assert!(
+        slowest <= 0.01,
+        "the FMU's carbody stopped (slowest {slowest} m/s)"
+    );
+    println!(
+        "{} steps, {values} values bit-identical",
+        run.samples.len() - 1
+    );
 }
 
 #[test]
@@ -133,5 +145,9 @@ fn closed_loop_at_1_ms_gives_the_paper_runs_numbers_bit_for_bit() {
         points += 1;
     }
     assert!(points > 29_000);
-    assert_eq!(vented, [false, true, false, true], "WSP acts on 2 and 4 as in the paper");
+    assert_eq!(
+        vented,
+        [false, true, false, true],
+        "WSP acts on 2 and 4 as in the paper"
+    );
 }

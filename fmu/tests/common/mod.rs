@@ -17,10 +17,17 @@ pub const ERROR: c_int = 3;
 /// Messages logged by one instance: (status, category, message).
 pub type Log = Mutex<Vec<(c_int, String, String)>>;
 
-unsafe extern "C" fn logger(env: *mut c_void, status: c_int, category: *const c_char, message: *const c_char) {
+unsafe extern "C" fn logger(
+    env: *mut c_void,
+    status: c_int,
+    category: *const c_char,
+    message: *const c_char,
+) {
     let log = unsafe { &*(env as *const Log) };
     let text = |p: *const c_char| unsafe { CStr::from_ptr(p) }.to_string_lossy().into_owned();
-    log.lock().unwrap().push((status, text(category), text(message)));
+    log.lock()
+        .unwrap()
+        .push((status, text(category), text(message)));
 }
 
 /// The resources folder of a test: `parameters.toml` of `file`'s values.
@@ -71,7 +78,11 @@ impl Fmu {
     }
 
     pub fn new(resources: &Path) -> Self {
-        let f = Self::with(Some(resources), &hils_fmu::description::instantiation_token(), false);
+        let f = Self::with(
+            Some(resources),
+            &hils_fmu::description::instantiation_token(),
+            false,
+        );
         assert!(!f.ptr.is_null(), "instantiation failed: {:?}", f.messages());
         f
     }
@@ -82,7 +93,12 @@ impl Fmu {
 
     /// The last message logged.
     pub fn last(&self) -> String {
-        self.log.lock().unwrap().last().map(|m| m.2.clone()).unwrap_or_default()
+        self.log
+            .lock()
+            .unwrap()
+            .last()
+            .map(|m| m.2.clone())
+            .unwrap_or_default()
     }
 
     pub fn set_f64(&self, name: &str, x: f64) -> c_int {
@@ -99,7 +115,15 @@ impl Fmu {
     }
 
     pub fn get_many(&self, vrs: &[u32], out: &mut [f64]) {
-        let s = unsafe { fmi3GetFloat64(self.ptr, vrs.as_ptr(), vrs.len(), out.as_mut_ptr(), out.len()) };
+        let s = unsafe {
+            fmi3GetFloat64(
+                self.ptr,
+                vrs.as_ptr(),
+                vrs.len(),
+                out.as_mut_ptr(),
+                out.len(),
+            )
+        };
         assert_eq!(s, OK, "{}", self.last());
     }
 
