@@ -64,7 +64,9 @@ impl Logger {
     }
 }
 
-/// An FMU instance as the C API sees it.
+/// An FMU instance as the C API sees it (`repr(C)`: the magic first, read before the
+/// pointer is taken for an instance).
+#[repr(C)]
 pub struct Instance {
     magic: u64,
     name: String,
@@ -111,10 +113,17 @@ impl Instance {
 /// # Safety
 /// `instance` is null or a pointer `fmi3InstantiateCoSimulation` returned.
 unsafe fn instance_of<'a>(instance: *mut c_void) -> Option<&'a mut Instance> {
-    let p = instance as *mut Instance;
-    // SAFETY: non-null pointers come from Box::into_raw of an Instance (caller's contract);
-    // the magic catches a pointer freed by fmi3FreeInstance as long as its memory is intact.
-    unsafe { p.as_mut() }.filter(|i| i.magic == MAGIC)
+    if instance.is_null() || !instance.cast::<u64>().is_aligned() {
+        return None;
+    }
+    // SAFETY: a non-null pointer the importer passes is readable (FMI contract); only the
+    // first word is read until it proves to be an instance of ours (a pointer freed by
+    // fmi3FreeInstance or a foreign one is refused while its memory holds no magic).
+    if unsafe { instance.cast::<u64>().read() } != MAGIC {
+        return None;
+    }
+    // SAFETY: the magic is only ever written by fmi3InstantiateCoSimulation's Box.
+    unsafe { (instance as *mut Instance).as_mut() }
 }
 
 /// Runs `f` on the instance: checks the pointer, catches a panic, logs a refusal.

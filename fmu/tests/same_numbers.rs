@@ -3,98 +3,65 @@
 //! (a) as the plant alone, with the run's cylinder pressures as inputs at a 0.1 ms
 //! communication step, and (b) as the closed loop (`brake_input = brake_unit`, `cmd = EB`)
 //! at 1 ms; every output at every communication point. `scripts/fmu-check.sh` shows the
-//! same through FMPy with the packed FMU.
+//! same with the packed FMU through FMPy, a direct import and rust-fmi's importer.
 
 mod common;
 
 use common::{Fmu, OK, resources};
-use hils::scenario::{EbOptions, Run, run_eb};
 use hils_fmu::variables::{Causality, Kind, VARIABLES};
+use hils_fmu_check::{UNIT_OUTPUTS, columns, first_difference, paper_run};
 use hils_sil::{ParamFile, RunRecord};
 
-/// The paper run of `hils simulate` (f32), every step recorded.
-fn paper_run(file: &ParamFile) -> Run {
-    let mut opts = EbOptions::paper(file);
-    opts.record_every = 1;
-    run_eb::<f32>(file, &opts).expect("paper run")
+/// The FMU's Float64 and Boolean outputs, and their columns in the record's values.
+fn outputs() -> (Vec<String>, Vec<usize>) {
+    let names: Vec<String> = VARIABLES
+        .iter()
+        .filter(|v| {
+            v.causality == Causality::Output && matches!(v.kind, Kind::Float64 | Kind::Boolean)
+        })
+        .map(|v| v.name.clone())
+        .collect();
+    let cols = columns(&names).expect("every output has a value in the record");
+    (names, cols)
 }
 
-/// What a record says an output is, by the output's name (written out here, not through
-/// the record's own channel lookup).
-fn expected(s: &RunRecord, name: &str) -> Option<f64> {
-    let wheelset = |stem: &str, unit: &str| -> Option<usize> {
-        let rest = name.strip_prefix(stem)?.strip_suffix(unit)?;
-        match rest {
-            "1" | "2" | "3" | "4" => Some(rest.parse::<usize>().ok()? - 1),
-            _ => None,
-        }
-    };
-    let scalars = [
-        ("v_ref_mps", s.v_ref_mps),
-        ("x_m", s.x_m),
-        ("a_x_mps2", s.a_x_mps2),
-        ("v_ref_est_mps", s.v_ref_est_mps),
-    ];
-    if let Some((_, x)) = scalars.iter().find(|(n, _)| *n == name) {
-        return Some(*x);
-    }
-    let per_wheelset: [(&str, &str, &[f64; 4]); 11] = [
-        ("omega", "_radps", &s.omega_radps),
-        ("q", "_n", &s.q_n),
-        ("mu_d", "", &s.mu_d),
-        ("f_brake", "_n", &s.f_brake_n),
-        ("t_disc", "_c", &s.t_disc_c),
-        ("creepage", "", &s.creepage),
-        ("adhesion", "", &s.adhesion),
-        ("f_clamp_act", "_n", &s.f_clamp_n),
-        ("p_cyl_unit", "_pa", &s.p_cyl_pa),
-        ("wsp", "", &s.wsp.map(|w| w as u8 as f64)),
-        ("", "", &[0.0; 4]),
-    ];
-    per_wheelset
+/// Every output compared with the record, bit for bit; the number of values compared.
+fn compare(
+    fmu: &Fmu,
+    names: &[String],
+    cols: &[usize],
+    s: &RunRecord,
+    k: usize,
+    skip: &[&str],
+) -> usize {
+    let got: Vec<f64> = names
         .iter()
-        .filter(|(stem, _, _)| !stem.is_empty())
-        .find_map(|(stem, unit, values)| wheelset(stem, unit).map(|j| values[j]))
-}
-
-/// Compares every Float64 and Boolean output of the FMU with the record, bit for bit;
-/// `skip` names outputs the mode does not model.
-fn compare(fmu: &Fmu, s: &RunRecord, step: usize, skip: &[&str]) -> usize {
-    let mut compared = 0;
-    for v in VARIABLES
-        .iter()
-        .filter(|v| v.causality == Causality::Output)
-    {
-        if skip.iter().any(|p| v.name.starts_with(p)) {
-            continue;
-        }
-        let got = match v.kind {
-            Kind::Float64 => fmu.get_f64(&v.name),
-            Kind::Boolean => fmu.get_bool(&v.name) as u8 as f64,
-            _ => continue,
-        };
-        let want = expected(s, &v.name).unwrap_or_else(|| panic!("no expectation for {}", v.name));
-        assert_eq!(
-            got.to_bits(),
-            want.to_bits(),
-            "{} at step {step} (t = {} s): FMU {got}, hils simulate {want}",
-            v.name,
-            s.t_s
-        );
-        compared += 1;
+        .map(|n| {
+            if n.starts_with("wsp") {
+                fmu.get_bool(n) as u8 as f64
+            } else {
+                fmu.get_f64(n)
+            }
+        })
+        .collect();
+    if let Some(d) = first_difference(s, names, cols, &got, skip, k) {
+        panic!("{d}");
     }
-    compared
+    names
+        .iter()
+        .filter(|n| !skip.iter().any(|p| n.starts_with(p)))
+        .count()
 }
 
 #[test]
 fn plant_driven_by_the_paper_runs_pressures_gives_its_numbers_bit_for_bit() {
     let file = ParamFile::default();
-    let run = paper_run(&file);
+    let run = paper_run(&file).unwrap();
+    let (names, cols) = outputs();
     let fmu = Fmu::new(&resources("plant", &file));
     fmu.init();
     let dt = file.scenario.paper_eb.step_s;
-    let skip = ["p_cyl_unit", "wsp", "v_ref_est"];
-    let mut values = compare(&fmu, &run.samples[0], 0, &skip);
+    let mut values = compare(&fmu, &names, &cols, &run.samples[0], 0, &UNIT_OUTPUTS);
     let mut t = 0.0;
     let mut slowest = f64::INFINITY;
     for (k, s) in run.samples.iter().enumerate().skip(1) {
@@ -106,7 +73,7 @@ fn plant_driven_by_the_paper_runs_pressures_gives_its_numbers_bit_for_bit() {
         }
         assert_eq!(fmu.step(t, dt), OK, "step {k}: {}", fmu.last());
         t += dt;
-        values += compare(&fmu, s, k, &skip);
+        values += compare(&fmu, &names, &cols, s, k, &UNIT_OUTPUTS);
         slowest = slowest.min(fmu.get_f64("v_ref_mps"));
     }
     // The run braked to a stop with both slides of the paper: the comparison covered them.
@@ -125,20 +92,20 @@ fn plant_driven_by_the_paper_runs_pressures_gives_its_numbers_bit_for_bit() {
 #[test]
 fn closed_loop_at_1_ms_gives_the_paper_runs_numbers_bit_for_bit() {
     let file = ParamFile::default();
-    let run = paper_run(&file);
+    let run = paper_run(&file).unwrap();
+    let (names, cols) = outputs();
     let fmu = Fmu::new(&resources("loop", &file));
     assert_eq!(fmu.set_i64("brake_input", 2), OK);
     assert_eq!(fmu.set_i64("cmd", 1), OK);
     fmu.init();
     let h = 1e-3;
-    let every = 10;
     let mut t = 0.0;
     let mut points = 0;
     let mut vented = [false; 4];
-    for (k, s) in run.samples.iter().enumerate().step_by(every).skip(1) {
+    for (k, s) in run.samples.iter().enumerate().step_by(10).skip(1) {
         assert_eq!(fmu.step(t, h), OK, "{}", fmu.last());
         t += h;
-        compare(&fmu, s, k, &[]);
+        compare(&fmu, &names, &cols, s, k, &[]);
         for (j, v) in vented.iter_mut().enumerate() {
             *v |= fmu.get_bool(&format!("wsp{}", j + 1));
         }
