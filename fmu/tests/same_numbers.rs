@@ -118,3 +118,29 @@ fn closed_loop_at_1_ms_gives_the_paper_runs_numbers_bit_for_bit() {
         "WSP acts on 2 and 4 as in the paper"
     );
 }
+
+#[test]
+fn plant_driven_by_the_paper_runs_clamp_forces_gives_its_numbers_bit_for_bit() {
+    // The pad force the closed loop's pressures made through Eq (1), given directly as a
+    // load cell's: the plant takes it as it is (no lag in the reference vehicle), so the
+    // run is the same.
+    let file = ParamFile::default();
+    let run = paper_run(&file).unwrap();
+    let (names, cols) = outputs();
+    let fmu = Fmu::new(&resources("clamp-force", &file));
+    assert_eq!(fmu.set_i64("brake_input", 1), OK);
+    fmu.init();
+    let dt = file.scenario.paper_eb.step_s;
+    let mut t = 0.0;
+    for (k, s) in run.samples.iter().enumerate().skip(1) {
+        for j in 0..4 {
+            assert_eq!(
+                fmu.set_f64(&format!("f_clamp{}_n", j + 1), s.f_clamp_n[j]),
+                OK
+            );
+        }
+        assert_eq!(fmu.step(t, dt), OK, "step {k}: {}", fmu.last());
+        t += dt;
+        compare(&fmu, &names, &cols, s, k, &UNIT_OUTPUTS);
+    }
+}
