@@ -110,10 +110,22 @@ pub struct Model {
     flags: u32,
     /// The record of the present state (built on the first read after a step).
     record: Option<RunRecord>,
+    /// Inputs already warned about as not read by `brake_input` ([`Model::unread_inputs`]).
+    unread_warned: u32,
 }
 
 /// The plant's flags a step warns about (the plant handles them safely).
 const WARN_FLAGS: u32 = Flags::INPUT_NOT_FINITE | Flags::INPUT_OUT_OF_RANGE | Flags::NUMERIC_FAULT;
+
+/// How far (in plant steps) an importer's `currentCommunicationPoint` may lie from the
+/// FMU's own time (start + steps x step) and still name it: an importer that sums its time
+/// (`t += h`), or runs at a large start time, drifts from it by rounding (t += 1 ms over an
+/// hour: 0.27 us; one ulp of 1e7 s: 1.9 ns), always far less than half a plant step.
+pub const TIME_TOLERANCE_STEPS: f64 = 0.5;
+
+/// How far (in plant steps) a `communicationStepSize` may lie from a whole number of plant
+/// steps (a step computed as a difference of two large times carries their rounding).
+pub const STEP_TOLERANCE_STEPS: f64 = 1e-4;
 
 /// Most plant steps one `doStep` may take (a day at 10 kHz): a bound on the call's time.
 pub const MAX_STEPS_PER_CALL: f64 = 864e6;
@@ -138,6 +150,7 @@ impl Model {
             steps: 0,
             flags: 0,
             record: None,
+            unread_warned: 0,
         }
     }
 
@@ -253,13 +266,13 @@ impl Model {
         let dt = self.step_s();
         let n = steps_of(h_s, dt)?;
         let now = self.time_s();
-        if !((t_s - now).abs() <= 1e-6 * dt) {
+        if !((t_s - now).abs() < TIME_TOLERANCE_STEPS * dt) {
             return fault(format!(
                 "fmi3DoStep from currentCommunicationPoint = {t_s} s, but the FMU is at {now} s (the end of its last step)"
             ));
         }
         if let Some(stop) = self.stop_time_s
-            && now + h_s > stop + 1e-6 * dt
+            && now + n as f64 * dt > stop + TIME_TOLERANCE_STEPS * dt
         {
             return fault(format!(
                 "fmi3DoStep to {} s goes past stopTime = {stop} s",
@@ -292,10 +305,68 @@ impl Model {
         self.steps += n;
         self.flags = flags;
         self.record = None;
-        if new == 0 {
+        let mut warnings = Vec::new();
+        if new != 0 {
+            warnings.push(flag_message(new, self.time_s()));
+        }
+        let unread = self.unread_inputs() & !self.unread_warned;
+        if unread != 0 {
+            self.unread_warned |= unread;
+            warnings.push(self.unread_message(unread));
+        }
+        if warnings.is_empty() {
             return Ok((Status::Ok, None));
         }
-        Ok((Status::Warning, Some(flag_message(new, self.time_s()))))
+        Ok((Status::Warning, Some(warnings.join("; "))))
+    }
+
+    /// The inputs that hold a value the model does not read with this `brake_input` (an
+    /// importer that drives the clamp forces but left `brake_input` at its default would
+    /// otherwise brake with nothing, silently). Bit `j`: `p_cyl{j+1}_pa`, bit `4 + j`:
+    /// `f_clamp{j+1}_n`, bit 8: `cmd`, bit 9: `service_deceleration_mps2`.
+    fn unread_inputs(&self) -> u32 {
+        let mut bits = 0;
+        for j in 0..WHEELSETS {
+            if self.drive != Drive::CylinderPressure && self.p_cyl_pa[j] != 0.0 {
+                bits |= 1 << j;
+            }
+            if self.drive != Drive::ClampForce && self.f_clamp_n[j] != 0.0 {
+                bits |= 1 << (WHEELSETS + j);
+            }
+        }
+        if self.drive != Drive::BrakeUnit {
+            if self.cmd != Cmd::Release {
+                bits |= 1 << (2 * WHEELSETS);
+            }
+            if self.service_deceleration_mps2 != 0.0 {
+                bits |= 1 << (2 * WHEELSETS + 1);
+            }
+        }
+        bits
+    }
+
+    /// The warning of the inputs of `bits` ([`Model::unread_inputs`]).
+    fn unread_message(&self, bits: u32) -> String {
+        let role = |bit: usize| match bit {
+            b if b < WHEELSETS => Role::CylinderPressure(b),
+            b if b < 2 * WHEELSETS => Role::ClampForce(b - WHEELSETS),
+            b if b == 2 * WHEELSETS => Role::Command,
+            _ => Role::ServiceDeceleration,
+        };
+        let names: Vec<&str> = (0..2 * WHEELSETS + 2)
+            .filter(|&bit| bits & (1 << bit) != 0)
+            .filter_map(|bit| variables::VARIABLES.iter().find(|v| v.role == role(bit)))
+            .map(|v| v.name.as_str())
+            .collect();
+        let drive = Drive::ALL
+            .iter()
+            .position(|d| *d == self.drive)
+            .unwrap_or(0);
+        let (name, reads) = variables::BRAKE_INPUT.items[drive];
+        format!(
+            "{} set but not read: brake_input = {name} ({reads}); to drive the brakes by them, set brake_input before fmi3ExitInitializationMode",
+            names.join(", ")
+        )
     }
 
     fn demand(&self) -> BrakeDemand {
@@ -651,13 +722,21 @@ fn steps_of(h_s: f64, dt: f64) -> Result<u64, Fault> {
             "communicationStepSize = {h_s} s refused: must be positive and finite (a multiple of the plant step {dt} s)"
         ));
     }
-    if n < 1.0 || (ratio - n).abs() > 1e-6 {
+    if n < 1.0 || (ratio - n).abs() > STEP_TOLERANCE_STEPS {
         // Shown to the nanosecond (no binary noise such as 0.00030000000000000003).
         let ns = |k: f64| (k * dt * 1e9).round() / 1e9;
+        let nearest = if ratio < 1.0 {
+            format!("the smallest multiple is {} s", ns(1.0))
+        } else {
+            let below = ratio.floor();
+            format!(
+                "the nearest multiples are {} s and {} s",
+                ns(below),
+                ns(below + 1.0)
+            )
+        };
         return fault(format!(
-            "communicationStepSize = {h_s} s refused: not a multiple of the plant's fixed step {dt} s (scenario.paper_eb.step); the nearest multiples are {} s and {} s",
-            ns(ratio.floor().max(1.0)),
-            ns(ratio.floor().max(1.0) + 1.0)
+            "communicationStepSize = {h_s} s refused: not a multiple of the plant's fixed step {dt} s (scenario.paper_eb.step); {nearest}"
         ));
     }
     if n > MAX_STEPS_PER_CALL {

@@ -151,6 +151,93 @@ fn a_step_size_not_a_multiple_of_the_plant_step_is_refused_with_the_nearest_mult
     assert!((f.get_f64("time") - t).abs() < 1e-12);
 }
 
+/// Importers' clocks carry rounding: one that sums its time (`t += h`) or runs at a large
+/// start time names the FMU's time only to within a few ulps, and its step sizes (differences
+/// of two such times) are multiples of 0.1 ms only to within them. Followed, not refused;
+/// a time or step that is really another is still refused.
+#[test]
+fn an_importers_rounded_clock_is_followed_and_a_wrong_time_still_refused() {
+    let f = fmu("clock");
+    let start = |f: &Fmu, t0: f64| {
+        assert_eq!(
+            unsafe { fmi3EnterInitializationMode(f.ptr, 0, 0.0, t0, 0, 0.0) },
+            OK,
+            "{}",
+            f.last()
+        );
+        assert_eq!(f.exit_init(), OK, "{}", f.last());
+    };
+    // Step sizes as FMPy computes them at a start time of 1e7 s (one ulp: 1.9 ns).
+    let t0 = 1e7;
+    start(&f, t0);
+    for k in 0..100 {
+        let (t, next) = (t0 + k as f64 * 1e-3, t0 + (k + 1) as f64 * 1e-3);
+        assert_eq!(f.step(t, next - t), OK, "step {k}: {}", f.last());
+    }
+    assert_eq!(f.get_f64("time"), t0 + 1000.0 * 1e-4);
+    // A time summed with `t += h` (at 1e4 s it is 0.4 ns off after 2000 steps).
+    assert_eq!(unsafe { fmi3Reset(f.ptr) }, OK);
+    let t0 = 1e4;
+    start(&f, t0);
+    let mut t = t0;
+    for k in 0..2000 {
+        assert_eq!(f.step(t, 1e-3), OK, "step {k} at {t} s: {}", f.last());
+        t += 1e-3;
+    }
+    assert!((t - f.get_f64("time")).abs() > 1e-10, "the sum drifted");
+    // Half a plant step off is another time; 20 ns off a multiple is another step.
+    let now = f.get_f64("time");
+    refused(&f, f.step(now + 0.6e-4, 1e-3), &["the FMU is at"]);
+    refused(&f, f.step(now - 0.6e-4, 1e-3), &["the FMU is at"]);
+    refused(&f, f.step(now, 1e-3 + 2e-8), &["not a multiple"]);
+    refused(
+        &f,
+        f.step(now, 0.5e-4),
+        &["the smallest multiple is 0.0001 s"],
+    );
+    assert_eq!(f.step(now, 1e-3), OK, "{}", f.last());
+}
+
+/// An input the chosen `brake_input` does not read (clamp forces with the default
+/// `cylinder_pressure`, a brake command without the brake unit) would brake with nothing,
+/// silently: the step warns, once per input, naming it and what is read.
+#[test]
+fn an_input_that_brake_input_does_not_read_is_warned_once() {
+    let f = fmu("unread");
+    // Every input at its start value (0, REL): nothing to warn about.
+    f.init();
+    assert_eq!(f.step(0.0, 1e-3), OK, "{}", f.last());
+    assert_eq!(f.set_f64("f_clamp2_n", 5000.0), OK);
+    assert_eq!(f.step(1e-3, 1e-3), WARNING);
+    let last = f.last();
+    for needle in ["f_clamp2_n", "not read", "brake_input = cylinder_pressure"] {
+        assert!(last.contains(needle), "`{last}` lacks `{needle}`");
+    }
+    assert_eq!(f.step(2e-3, 1e-3), OK, "warned once: {}", f.last());
+    assert_eq!(
+        f.get_f64("f_clamp_act2_n"),
+        0.0,
+        "the plant read no clamp force"
+    );
+    assert_eq!(f.set_i64("cmd", 1), OK);
+    assert_eq!(f.step(3e-3, 1e-3), WARNING);
+    assert!(f.last().contains("cmd set but not read"), "{}", f.last());
+    // In the closed loop the pressures are the unit's: a pressure set is not read.
+    let g = fmu("unread-loop");
+    assert_eq!(g.set_i64("brake_input", 2), OK);
+    assert_eq!(g.set_i64("cmd", 1), OK);
+    g.init();
+    assert_eq!(g.step(0.0, 1e-3), OK, "{}", g.last());
+    assert_eq!(g.set_f64("p_cyl1_pa", 3e5), OK);
+    assert_eq!(g.step(1e-3, 1e-3), WARNING);
+    assert!(
+        g.last()
+            .contains("p_cyl1_pa set but not read: brake_input = brake_unit"),
+        "{}",
+        g.last()
+    );
+}
+
 #[test]
 fn calls_out_of_the_state_machines_order_are_refused() {
     let f = fmu("order");
