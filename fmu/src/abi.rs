@@ -10,6 +10,7 @@
 use std::ffi::{CStr, CString, c_char, c_int, c_void};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::PathBuf;
+use std::sync::Mutex;
 
 use crate::description::LOG_CATEGORIES;
 use crate::instance::{Fault, Model, Outcome, Status, fault, variable};
@@ -27,6 +28,23 @@ const ERROR: c_int = Status::Error as c_int;
 /// Marks a live instance (a freed or foreign pointer is refused when it no longer holds it).
 const MAGIC: u64 = 0x6869_6c73_666d_7533; // "hilsfmu3"
 const STATE_MAGIC: u64 = 0x6869_6c73_7374_6174; // "hilsstat"
+
+/// The addresses of the instances alive: `fmi3FreeInstance` frees only one of these, so a
+/// pointer freed already (an importer freeing twice) or a foreign one is left alone without
+/// reading its memory (the magic word of the other calls is read from the pointer).
+static LIVE: Mutex<Vec<usize>> = Mutex::new(Vec::new());
+
+/// Takes `instance` out of [`LIVE`]; false if it was not there.
+fn take_live(instance: *mut c_void) -> bool {
+    let mut live = LIVE.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    match live.iter().position(|&p| p == instance as usize) {
+        Some(i) => {
+            live.swap_remove(i);
+            true
+        }
+        None => false,
+    }
+}
 
 /// The importer's logger and the debug-logging settings.
 struct Logger {
@@ -564,7 +582,11 @@ pub unsafe extern "C" fn fmi3InstantiateCoSimulation(
         if n_required_intermediate_variables > 0 {
             instance.warning("requiredIntermediateVariables given, but this FMU provides no intermediate update: ignored");
         }
-        Ok(Box::into_raw(Box::new(instance)) as *mut c_void)
+        let pointer = Box::into_raw(Box::new(instance)) as *mut c_void;
+        LIVE.lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner())
+            .push(pointer as usize);
+        Ok(pointer)
     }));
     match result {
         Ok(Ok(p)) => p,
@@ -572,10 +594,13 @@ pub unsafe extern "C" fn fmi3InstantiateCoSimulation(
     }
 }
 
-/// `fmi3FreeInstance` (NULL: nothing).
+/// `fmi3FreeInstance` (NULL, a pointer freed already or a foreign one: nothing).
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn fmi3FreeInstance(instance: *mut c_void) {
-    // SAFETY: the FMI contract on `instance`.
+    if !take_live(instance) {
+        return;
+    }
+    // SAFETY: a live instance of ours (it was in LIVE).
     if let Some(inst) = unsafe { instance_of(instance) } {
         inst.magic = 0;
         // SAFETY: allocated by Box::into_raw in fmi3InstantiateCoSimulation, freed once

@@ -343,6 +343,25 @@ fn wrong_types_counts_and_pointers_are_refused_not_crashed() {
     unsafe { fmi3FreeInstance(std::ptr::null_mut()) };
 }
 
+/// `fmi3FreeInstance` frees only an instance alive: a second free of the same pointer, NULL,
+/// or a foreign pointer (even one whose first word is an instance's magic) is nothing; the
+/// other instances go on.
+#[test]
+fn free_instance_twice_null_or_foreign_frees_nothing() {
+    let a = fmu("free-a");
+    let b = fmu("free-b");
+    b.init();
+    unsafe { fmi3FreeInstance(a.ptr) };
+    unsafe { fmi3FreeInstance(a.ptr) };
+    unsafe { fmi3FreeInstance(std::ptr::null_mut()) };
+    let mut foreign = vec![0u64; 4096];
+    foreign[0] = u64::from_be_bytes(*b"hilsfmu3");
+    unsafe { fmi3FreeInstance(foreign.as_mut_ptr() as *mut c_void) };
+    assert_eq!(b.step(0.0, 1e-3), OK, "{}", b.last());
+    assert!(b.get_f64("v_ref_mps") > 41.0);
+    // `a`'s Drop frees it a third time: nothing.
+}
+
 #[test]
 fn instantiation_refuses_a_wrong_token_and_a_bad_parameter_resource_with_a_message() {
     let f = Fmu::with(
