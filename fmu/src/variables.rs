@@ -227,13 +227,22 @@ const VR_KEYS: u32 = 1000;
 /// Every variable, in model-description order (built once per process).
 pub static VARIABLES: LazyLock<Vec<Variable>> = LazyLock::new(build);
 
+/// The index in [`VARIABLES`] of each value reference (`u16::MAX`: none): one load per
+/// lookup on the per-step path (`fmi3SetFloat64` of the inputs), where a binary search of
+/// the table touched a cache line per probe.
+static INDEX_OF_VR: LazyLock<Vec<u16>> = LazyLock::new(|| {
+    let top = VARIABLES.iter().map(|v| v.vr).max().unwrap_or(0) as usize;
+    let mut index = vec![u16::MAX; top + 1];
+    for (i, v) in VARIABLES.iter().enumerate() {
+        index[v.vr as usize] = u16::try_from(i).unwrap_or(u16::MAX);
+    }
+    index
+});
+
 /// The variable of value reference `vr`.
 pub fn by_vr(vr: u32) -> Option<&'static Variable> {
-    // The table is ordered by value reference.
-    VARIABLES
-        .binary_search_by_key(&vr, |v| v.vr)
-        .ok()
-        .map(|i| &VARIABLES[i])
+    let i = *INDEX_OF_VR.get(usize::try_from(vr).ok()?)?;
+    VARIABLES.get(usize::from(i))
 }
 
 /// The variable named `name`.

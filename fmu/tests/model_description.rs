@@ -5,7 +5,7 @@
 
 use hils_fmu::description::{model_description, parameter_file};
 use hils_fmu::units;
-use hils_fmu::variables::{Causality, Kind, VARIABLES, by_name};
+use hils_fmu::variables::{Causality, Kind, VARIABLES, by_name, by_vr};
 use hils_plant::keys::{KeyInfo, KeyValue, KeyVisitor, Keys};
 use hils_sil::ParamFile;
 
@@ -139,4 +139,15 @@ fn start_values_and_the_resource_are_the_given_files_values() {
     let defaults =
         hils_fmu::parse_params(&parameter_file(&ParamFile::default(), "t"), "t").unwrap();
     assert_eq!(defaults, ParamFile::default());
+}
+
+/// Every value reference finds its variable; the gaps between the blocks and past the
+/// last find none.
+#[test]
+fn every_value_reference_finds_its_variable_and_no_other_finds_one() {
+    let top = VARIABLES.iter().map(|v| v.vr).max().unwrap();
+    for vr in (0..=top + 2).chain([u32::MAX]) {
+        let want = VARIABLES.iter().find(|v| v.vr == vr);
+        assert_eq!(by_vr(vr).map(|v| &v.name), want.map(|v| &v.name), "vr {vr}");
+    }
 }
