@@ -96,7 +96,7 @@ pub fn model_description(defaults: &ParamFile) -> io::Result<String> {
             ("variableNamingConvention", "structured"),
         ])
         .write_inner_content(|w| {
-            co_simulation(w)?;
+            co_simulation(w, defaults)?;
             unit_definitions(w)?;
             type_definitions(w)?;
             log_categories(w)?;
@@ -112,8 +112,10 @@ pub fn model_description(defaults: &ParamFile) -> io::Result<String> {
     String::from_utf8(w.into_inner()).map_err(io::Error::other)
 }
 
-fn co_simulation(w: &mut Writer<Vec<u8>>) -> io::Result<()> {
-    let step = number(hils_plant::STEP_S);
+/// The Co-Simulation capabilities; the internal step is the defaults' plant step (a file
+/// given to `cargo fmu --params` may set another than 0.1 ms).
+fn co_simulation(w: &mut Writer<Vec<u8>>, defaults: &ParamFile) -> io::Result<()> {
+    let step = number(defaults.scenario.paper_eb.step_s);
     w.create_element("CoSimulation")
         .with_attributes([
             ("modelIdentifier", MODEL_IDENTIFIER),

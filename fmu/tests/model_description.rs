@@ -133,6 +133,11 @@ fn start_values_and_the_resource_are_the_given_files_values() {
     file.plant.friction.mu_d0 = 0.35;
     let xml = model_description(&file).unwrap();
     assert!(xml.contains("name=\"vehicle.carbody_mass\"") && xml.contains("start=\"41000.0\""));
+    // The internal step and the default experiment's step follow the file's plant step.
+    file.scenario.paper_eb.step_s = 5e-5;
+    let xml = model_description(&file).unwrap();
+    assert!(xml.contains("fixedInternalStepSize=\"5e-5\""));
+    file.scenario.paper_eb.step_s = 1e-4;
     let text = parameter_file(&file, "a test");
     let back = hils_fmu::parse_params(&text, "resource").expect("the resource reads back");
     assert_eq!(back, file);
