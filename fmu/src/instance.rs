@@ -268,7 +268,8 @@ impl Model {
         let now = self.time_s();
         if !((t_s - now).abs() < TIME_TOLERANCE_STEPS * dt) {
             return fault(format!(
-                "fmi3DoStep from currentCommunicationPoint = {t_s} s, but the FMU is at {now} s (the end of its last step)"
+                "fmi3DoStep from currentCommunicationPoint = {t_s} s, but the FMU is at {} s (the end of its last step)",
+                to_ns(now)
             ));
         }
         if let Some(stop) = self.stop_time_s
@@ -276,7 +277,7 @@ impl Model {
         {
             return fault(format!(
                 "fmi3DoStep to {} s goes past stopTime = {stop} s",
-                now + h_s
+                to_ns(now + n as f64 * dt)
             ));
         }
         let drive = self.drive;
@@ -287,10 +288,10 @@ impl Model {
             Drive::CylinderPressure => step_plant(
                 sim,
                 n,
-                &p_cyl.map(|p| BrakeInput::CylinderPressure(p as f32)),
+                &p_cyl.map(|p| BrakeInput::CylinderPressure(to_f32(p))),
             ),
             Drive::ClampForce => {
-                step_plant(sim, n, &f_clamp.map(|f| BrakeInput::ClampForce(f as f32)))
+                step_plant(sim, n, &f_clamp.map(|f| BrakeInput::ClampForce(to_f32(f))))
             }
             Drive::BrakeUnit => {
                 sim.set_demand(demand);
@@ -713,6 +714,11 @@ impl Model {
     }
 }
 
+/// A time shown to the nanosecond (no binary noise such as 0.00030000000000000003), s.
+fn to_ns(t_s: f64) -> f64 {
+    (t_s * 1e9).round() / 1e9
+}
+
 /// The number of plant steps of a communication step `h_s` (a whole multiple of `dt`).
 fn steps_of(h_s: f64, dt: f64) -> Result<u64, Fault> {
     let ratio = h_s / dt;
@@ -723,8 +729,7 @@ fn steps_of(h_s: f64, dt: f64) -> Result<u64, Fault> {
         ));
     }
     if n < 1.0 || (ratio - n).abs() > STEP_TOLERANCE_STEPS {
-        // Shown to the nanosecond (no binary noise such as 0.00030000000000000003).
-        let ns = |k: f64| (k * dt * 1e9).round() / 1e9;
+        let ns = |k: f64| to_ns(k * dt);
         let nearest = if ratio < 1.0 {
             format!("the smallest multiple is {} s", ns(1.0))
         } else {
@@ -745,6 +750,13 @@ fn steps_of(h_s: f64, dt: f64) -> Result<u64, Fault> {
         ));
     }
     Ok(n as u64)
+}
+
+/// A finite input in the plant's f32: saturated at f32's largest magnitude (a plain `as`
+/// turns 1e300 into an infinity, which the plant would hold as a non-finite input instead
+/// of clamping it to its physical range as any other too large value).
+fn to_f32(x: f64) -> f32 {
+    x.clamp(-f64::from(f32::MAX), f64::from(f32::MAX)) as f32
 }
 
 /// `n` plant steps with the brake inputs held; the flags or-ed.
@@ -782,7 +794,8 @@ fn flag_message(flags: u32, t_s: f64) -> String {
         parts.push("numeric fault: the plant was put at rest (safe state)".to_string());
     }
     format!(
-        "step to t = {t_s} s: {} (plant_flags 0x{flags:04x})",
+        "step to t = {} s: {} (plant_flags 0x{flags:04x})",
+        to_ns(t_s),
         parts.join("; ")
     )
 }

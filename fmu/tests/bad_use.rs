@@ -122,6 +122,40 @@ fn an_input_beyond_the_physical_range_is_clamped_by_the_plant_with_a_warning() {
     assert_eq!(f.get_f64("f_clamp_act2_n") as f32, limit);
     // Told once, not at every step while it lasts.
     assert_eq!(f.step(1e-3, 1e-3), OK);
+    // A finite value beyond f32's range (the plant's type) is clamped the same way, not
+    // turned into an infinity the plant would hold as "not finite"; a clamp force too.
+    let g = fmu("clamp-huge");
+    assert_eq!(g.set_i64("brake_input", 1), OK);
+    g.init();
+    assert_eq!(g.step(0.0, 1e-2), OK);
+    for (k, x) in [1e300, -1e300, 3.5e38].into_iter().enumerate() {
+        assert_eq!(g.set_f64("f_clamp3_n", x), OK);
+        let status = g.step(1e-2 + k as f64 * 1e-3, 1e-3);
+        let flags = g.get_u32("plant_flags");
+        assert_eq!(
+            flags & hils_plant::Flags::INPUT_NOT_FINITE,
+            0,
+            "{x:e}: {}",
+            g.last()
+        );
+        assert_ne!(flags & hils_plant::Flags::INPUT_OUT_OF_RANGE, 0, "{x:e}");
+        if k == 0 {
+            assert_eq!(status, WARNING);
+            // The time as people read it (110 steps of 0.1 ms, not 0.011000000000000001).
+            assert!(
+                g.last().contains("clamped") && g.last().contains("step to t = 0.011 s"),
+                "{}",
+                g.last()
+            );
+        }
+    }
+    assert_eq!(g.set_f64("f_clamp3_n", 1e9), OK);
+    let t = 1.3e-2;
+    assert_eq!(g.step(t, 1e-3), OK);
+    let clamped_1e9 = g.get_f64("f_clamp_act3_n");
+    assert_eq!(g.set_f64("f_clamp3_n", 1e300), OK);
+    assert_eq!(g.step(t + 1e-3, 1e-3), OK);
+    assert_eq!(g.get_f64("f_clamp_act3_n"), clamped_1e9);
 }
 
 #[test]
