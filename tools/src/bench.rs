@@ -68,7 +68,7 @@ pub struct BenchFigures {
 }
 
 /// Cylinder pressures of the paper's EB, one per step (closed loop, f32).
-fn recorded_inputs(params: &ParamFile, steps: usize) -> Result<Vec<[f32; 4]>> {
+pub fn recorded_inputs(params: &ParamFile, steps: usize) -> Result<Vec<[f32; 4]>> {
     let rail = params.scenario.paper_eb.rail;
     let mut sim = ClosedLoop::<f32>::from_file(params, rail, PAPER_SPEED_MPS as f32)
         .map_err(|e| anyhow!("{e}"))?;
@@ -81,7 +81,8 @@ fn recorded_inputs(params: &ParamFile, steps: usize) -> Result<Vec<[f32; 4]>> {
         .collect())
 }
 
-fn time_plant<F: Real>(params: &ParamFile, inputs: &[[f32; 4]], repeat: usize) -> Result<f64> {
+/// Plant steps per second on `inputs` (one per step), the best of `repeat` runs.
+pub fn time_plant<F: Real>(params: &ParamFile, inputs: &[[f32; 4]], repeat: usize) -> Result<f64> {
     let inputs: Vec<[BrakeInput<F>; 4]> = inputs
         .iter()
         .map(|p| p.map(|x| BrakeInput::CylinderPressure(F::of(x as f64))))
