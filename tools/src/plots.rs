@@ -54,6 +54,8 @@ pub struct Chart {
     pub legend_lower_right: bool,
     /// Shaded x intervals (from, to, palette index), drawn under the series.
     pub shades: Vec<(f64, f64, usize)>,
+    /// Legend entries of the shading (palette index, name), drawn as filled boxes.
+    pub shade_key: Vec<(usize, String)>,
 }
 
 pub const PALETTE: [RGBColor; 8] = [
@@ -161,6 +163,15 @@ impl Chart {
                 [(from.max(x.0), y.0), (to.min(x.1), y.1)],
                 color.filled(),
             )))?;
+        }
+        for (c, name) in &self.shade_key {
+            let color = PALETTE[c % PALETTE.len()].mix(0.3);
+            chart
+                .draw_series(std::iter::empty::<Rectangle<(f64, f64)>>())?
+                .label(name.as_str())
+                .legend(move |(x, y)| {
+                    Rectangle::new([(x, y - 5), (x + 18, y + 5)], color.filled())
+                });
         }
         for s in &self.series {
             let color = PALETTE[s.color % PALETTE.len()];

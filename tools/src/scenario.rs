@@ -10,6 +10,8 @@ use hils_sil::scenario::{AFTER_STOP_S, MAX_TIME_S};
 use hils_sil::{ClosedLoop, Cmd, EbScenario, KMH_PER_MPS, ParamFile, RunRecord, StopRule};
 use serde::Serialize;
 
+use crate::figures::round_dp;
+
 /// One recorded sample of a run: the run record of `hils_sil` (column names and units of
 /// the run log).
 pub type Sample = RunRecord;
@@ -264,10 +266,11 @@ fn summarise<F: Real>(
         mu_at.insert(format!("{}", t as u32), mean_mu_at(t));
     }
     Summary {
-        stop_time_s: stop_time,
-        stopping_distance_m: tracker.stop.map(|s| s.1),
+        // Figures people read: ms and mm (issue 25).
+        stop_time_s: stop_time.map(|t| round_dp(t, 3)),
+        stopping_distance_m: tracker.stop.map(|s| round_dp(s.1, 3)),
         slides,
-        slide_onset_s: onsets,
+        slide_onset_s: onsets.map(|o| o.map(|t| round_dp(t, 3))),
         axle_loads_static_n: static_loads,
         axle_loads_3s_n: tracker.at_3s.unwrap_or([f64::NAN; WHEELSETS]),
         mu_d_at_s: mu_at,

@@ -183,12 +183,7 @@ pub fn main(args: SimulateArgs) -> Result<()> {
         (Some(t), Some(d)) => println!("  stop after {t:.2} s and {d:.1} m"),
         _ => println!("  no stop within {} s", opts.max_time_s),
     }
-    println!(
-        "  WSP acted on wheelsets {:?}; first vents {:?} s",
-        s.slides,
-        s.slide_onset_s
-            .map(|o| o.map(|t| (t * 1000.0).round() / 1000.0))
-    );
+    println!("  {}", wsp_summary(&s.slide_onset_s));
     println!(
         "  mu_d: {:.4} at 0 s, min {:.4}, {:.4} at the stop; EB pressure {:.0} Pa",
         s.mu_d_at_s["0"], s.mu_d_min, s.mu_d_end, s.eb_pressure_pa
@@ -416,4 +411,19 @@ fn fig11(path: &Path, params: &Params, rail: Rail, var: &Run, con: &Run) -> Resu
     chart.x_range = Some((0.0, 0.25));
     chart.legend_lower_right = true;
     chart.save_svg(path)
+}
+
+/// The WSP's line of the summary: the first vent of each wheelset that vented, in seconds
+/// to the millisecond ("WSP acted on none" when none did).
+fn wsp_summary(onsets: &[Option<f64>; 4]) -> String {
+    let vents: Vec<String> = onsets
+        .iter()
+        .enumerate()
+        .filter_map(|(j, o)| o.map(|t| format!("wheelset {} at {t:.3} s", j + 1)))
+        .collect();
+    if vents.is_empty() {
+        "WSP acted on no wheelset".into()
+    } else {
+        format!("WSP first vented: {}", vents.join(", "))
+    }
 }
