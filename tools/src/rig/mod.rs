@@ -20,6 +20,7 @@
 //! (exit code 1) and what was recorded is written.
 
 pub mod commands;
+pub mod io_config;
 pub mod monitor;
 pub mod programme;
 pub mod record;
@@ -110,7 +111,8 @@ pub enum Line {
     },
     /// Clear latched faults whose cause is gone.
     ClearFaults,
-    /// Set the telemetry divider or the sensor-wheel teeth (no run active).
+    /// Set the telemetry divider, the sensor-wheel teeth or the controller I/O (no run
+    /// active).
     #[command(subcommand)]
     Configure(ConfigKind),
     /// Print the board's status.
@@ -222,7 +224,7 @@ pub enum SensorKindArg {
     Pressure,
 }
 /// `configure ...`: an item and its value.
-#[derive(Subcommand, Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Subcommand, Debug, Clone, PartialEq, Eq)]
 pub enum ConfigKind {
     /// Telemetry every STEPS plant steps: 1-10000.
     Divider {
@@ -234,6 +236,9 @@ pub enum ConfigKind {
         #[arg(value_parser = crate::flags::rig_teeth)]
         teeth: u16,
     },
+    /// The controller I/O from a file (valve inputs wired, demand PWM, air-spring signals;
+    /// format: docs/rig.md, "Controller I/O"): every value checked, then one frame each.
+    Io { file: PathBuf },
 }
 
 impl RailArg {
@@ -269,6 +274,9 @@ fn channel(c: u8) -> Result<u8> {
 /// is the digest of that setup ([`track::with_setup_digest`]).
 pub fn commands_of(line: &Line) -> Result<Vec<Command>> {
     let mut out = Vec::new();
+    if let Line::Configure(ConfigKind::Io { file }) = line {
+        return Ok(io_config::commands(&io_config::load(file)?));
+    }
     if let Line::Start(a) = line {
         out.push(Command::Vehicle {
             key: VehicleKey::Default,
@@ -347,9 +355,11 @@ fn command_of(line: &Line) -> Result<Option<Command>> {
             },
         },
         Line::ClearFaults => Command::ClearFaults,
-        Line::Configure(item) => Command::Configure(match *item {
-            ConfigKind::Divider { steps } => ConfigItem::TelemetryDivider(steps),
-            ConfigKind::Teeth { teeth } => ConfigItem::Teeth(teeth),
+        Line::Configure(item) => Command::Configure(match item {
+            ConfigKind::Divider { steps } => ConfigItem::TelemetryDivider(*steps),
+            ConfigKind::Teeth { teeth } => ConfigItem::Teeth(*teeth),
+            // Sent by `commands_of` (several frames).
+            ConfigKind::Io { .. } => return Ok(None),
         }),
         Line::Status | Line::Watch { .. } | Line::Record { .. } | Line::Wait { .. } => {
             return Ok(None);

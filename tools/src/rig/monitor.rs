@@ -8,8 +8,10 @@
 //! `WheelSpeedFrame`, `StatusFrame`, `DiagFrame`): no bit position is known here.
 
 use hils_rig_core::can::{
-    ClassicFrame, CommandFrame, DecodeError, DiagFrame, RigState, StatusFrame, WheelSpeedFrame,
+    BrakeDemandFrame, ClassicFrame, CommandFrame, DecodeError, DiagFrame, RigState, StatusFrame,
+    WheelSpeedFrame,
 };
+use hils_rig_core::valves::ValveStates;
 
 use super::transport::{Received, TransportError};
 
@@ -19,6 +21,8 @@ pub enum Seen {
     WheelSpeed(WheelSpeedFrame),
     Status(StatusFrame),
     Diag(DiagFrame),
+    /// `RIG_BRAKE_DEMAND` (the board's demand as a frame, when configured).
+    BrakeDemand(BrakeDemandFrame),
     /// A `RIG_COMMAND` on the bus (another host's, or our own echoed by the interface).
     Command(CommandFrame),
     /// A frame of another identifier (not in `hils.dbc`; ignored, counted).
@@ -39,15 +43,18 @@ pub fn decode(frame: &ClassicFrame) -> Seen {
     pick(WheelSpeedFrame::decode(frame), Seen::WheelSpeed)
         .or_else(|| pick(StatusFrame::decode(frame), Seen::Status))
         .or_else(|| pick(DiagFrame::decode(frame), Seen::Diag))
+        .or_else(|| pick(BrakeDemandFrame::decode(frame), Seen::BrakeDemand))
         .or_else(|| pick(CommandFrame::decode(frame), Seen::Command))
         .unwrap_or(Seen::Other)
 }
 
-/// The four wheelsets' speeds of one cycle: the `RIG_WHEEL_SPEED_12` and `_34` frames that
-/// carry the same alive counter.
+/// The four wheelsets' speeds and valve inputs of one cycle: the `RIG_WHEEL_SPEED_12` and
+/// `_34` frames that carry the same alive counter.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct WheelSpeeds {
     pub speeds_kmh: [Option<f32>; 4],
+    /// The valve inputs as the board sampled them in the frames' tick (not wired: not known).
+    pub valves: ValveStates,
     pub counter: u8,
 }
 
@@ -74,6 +81,12 @@ impl Pairing {
                     w.speeds_kmh[0],
                     w.speeds_kmh[1],
                 ],
+                valves: ValveStates {
+                    dump: f.valves.dump | w.valves.dump,
+                    hold: f.valves.hold | w.valves.hold,
+                    dump_known: f.valves.dump_known | w.valves.dump_known,
+                    hold_known: f.valves.hold_known | w.valves.hold_known,
+                },
                 counter: w.counter,
             }),
             other => {
@@ -206,7 +219,7 @@ impl BoardView {
                 self.counts.diag += 1;
                 self.diag = Some((r.t_s, d));
             }
-            Seen::Command(_) | Seen::Other => self.counts.other += 1,
+            Seen::Command(_) | Seen::BrakeDemand(_) | Seen::Other => self.counts.other += 1,
             Seen::Bad(e) => {
                 self.counts.bad += 1;
                 self.last_bad = Some(e);

@@ -26,18 +26,17 @@
 //!
 //! # Air consumption and WSP timer actions on the rig
 //!
-//! The board does not see the controller's dump valves (no frame of `hils.dbc` carries
-//! them), but it measures the cylinder pressures (its transducer channels; in the log from
-//! the probe's telemetry). Under a constant brake demand (every programme run) the
-//! controller only lowers a cylinder pressure to relieve a sliding wheelset, so a sample is
-//! counted as venting while its cylinder pressure falls faster than
-//! [`VENT_FALL_PA_PER_S`] (2 bar/s: above the transducer noise of +-2 ADC counts over a
-//! 10 ms telemetry interval, below a dump valve's fall). The vent flags feed the same
-//! formulas as SIL (`crate::wsp::metrics`): free air = sum over vent samples of
-//! V_cyl (p[k-1] - p[k]) / p_atm. WSP timer actions need the valves' hold states too (a
-//! cylinder held low does not fall), which no pressure shows: they are `not_measured` on the
-//! rig, as is the air without measured pressures. A criterion on a metric not measured is
-//! not judged: it is listed as `... (not measured: not judged)` and fails, so a run with one
+//! The board reads the controller's dump and hold valve coils on its valve inputs
+//! (`hils_rig_core::valves`); the wheel-speed frames carry them every 1 ms and the run log
+//! has them as `wsp1..4` (dump) and `hold1..4` ([`super::record`]). The log is judged from
+//! them exactly as a SIL run from the simulated unit's valves (`crate::wsp::trace_of_log`):
+//! air = sum over the samples the dump valve acts (one pneumatic dead time after its coil)
+//! of V_cyl (p[k-1] - p[k]) / p_atm, WSP timer actions = continuous vent or hold of the
+//! unit's timer or longer. An input the rig's configuration says is not wired gives empty
+//! cells: its metrics are not measured (`crate::wsp::not_measured`: air without every
+//! dump input and pressure, the timer without every dump and hold input). A criterion on a
+//! metric not measured is not judged: it is listed as `... (not measured: not judged)` and
+//! fails, so a run with one
 //! never passes (nothing is passed that was not measured). The run's log (`NAME.csv`, spec run-log schema) is judged
 //! from its brake command exactly as `hils wsp-test --programme FILE --log NAME.csv` judges
 //! it ([`crate::wsp::trace_of_log`], [`crate::wsp::judge_trace`]); every run of the programme
@@ -95,6 +94,11 @@ pub struct RunArgs {
     /// Only the runs whose name contains this.
     #[arg(long)]
     pub only: Option<String>,
+    /// The rig's controller I/O configuration, sent before the first run (`hils rig
+    /// configure io FILE`; format: docs/rig.md, "Controller I/O"). Without it the board
+    /// keeps what it has (the simulated board: every valve input wired).
+    #[arg(long)]
+    pub io: Option<PathBuf>,
 }
 
 /// What the board is sent for a run: the vehicle and track frames, then the brake command
@@ -145,27 +149,6 @@ fn board_plan(vehicle: Option<&str>, run: &Run) -> Result<Plan, String> {
     Ok(Plan { setup, demand })
 }
 
-/// Falls of a cylinder pressure faster than this count as venting (module doc), Pa/s.
-pub const VENT_FALL_PA_PER_S: f64 = 2.0e5;
-
-/// Vent flags from the measured cylinder pressures (module doc): sample k vents while
-/// (p[k-1] - p[k]) / dt > [`VENT_FALL_PA_PER_S`]. False when no pressure was measured.
-pub fn vents_from_pressure(trace: &mut crate::wsp::metrics::Trace) -> bool {
-    if trace.p_cyl_pa.iter().any(Vec::is_empty) {
-        return false;
-    }
-    for j in 0..hils_plant::WHEELSETS {
-        let p = &trace.p_cyl_pa[j];
-        let mut vent = vec![false; p.len()];
-        for k in 1..p.len() {
-            let dt = trace.t_s[k] - trace.t_s[k - 1];
-            vent[k] = dt > 0.0 && (p[k - 1] - p[k]) / dt > VENT_FALL_PA_PER_S;
-        }
-        trace.venting[j] = vent;
-    }
-    true
-}
-
 /// Reads a programme with `hils wsp-test`'s parser: its criteria and runs (on the default
 /// parameters with the friction model `friction`), each with the board's plan or why not.
 pub fn load(path: &Path, friction: FrictionArg) -> Result<(Criteria, Vec<BoardRun>)> {
@@ -194,18 +177,9 @@ pub struct RigRun {
     /// `finished`, `stopped`, `fault`, or why the run did not run or ended early.
     pub end: String,
     pub outcome: Option<Outcome>,
-    /// Metrics the log cannot give (their values are 0, not measured).
+    /// Metrics the log cannot give (an input not wired; their values are 0, not measured).
     pub not_measured: Vec<&'static str>,
-    /// Metrics estimated from the measured cylinder pressures (module doc).
-    pub estimated: Vec<&'static str>,
 }
-
-/// The metrics that need the dump valves' states.
-const VENT_METRICS: [&str; 2] = ["air_consumption_l", "wsp_timer_actions"];
-/// Of those, what the measured cylinder pressure falls estimate (module doc).
-const PRESSURE_METRICS: [&str; 1] = ["air_consumption_l"];
-/// Of those, what needs the hold states (module doc).
-const HOLD_METRICS: [&str; 1] = ["wsp_timer_actions"];
 
 impl RigRun {
     /// The JSON entry (module doc).
@@ -219,12 +193,6 @@ impl RigRun {
             m.insert("end".into(), self.end.clone().into());
             if !self.not_measured.is_empty() {
                 m.insert("not_measured".into(), self.not_measured.clone().into());
-            }
-            if !self.estimated.is_empty() {
-                m.insert(
-                    "estimated_from_cylinder_pressure".into(),
-                    self.estimated.clone().into(),
-                );
             }
         }
         v
@@ -329,7 +297,6 @@ pub fn run_programme<T: Transport>(
             end: String::new(),
             outcome: None,
             not_measured: Vec::new(),
-            estimated: Vec::new(),
         };
         match (&stopped, plan) {
             (Some(e), _) => rig.end = format!("not run: the programme ended ({e})"),
@@ -345,17 +312,8 @@ pub fn run_programme<T: Transport>(
                         // RIG_STATUS carries the vehicle speed at 0.01 km/h.
                         trace.speed_resolution_mps =
                             (WHEEL_SPEED_RESOLUTION_KMH / hils_sil::KMH_PER_MPS as f32) as f64;
-                        if trace.venting.iter().any(Vec::is_empty) {
-                            if vents_from_pressure(&mut trace) {
-                                rig.estimated = PRESSURE_METRICS.to_vec();
-                                rig.not_measured = HOLD_METRICS.to_vec();
-                            } else {
-                                rig.not_measured = VENT_METRICS.to_vec();
-                            }
-                        }
-                        let mut outcome = judge_trace(run.clone(), trace, criteria);
-                        outcome.verdict.not_judged(&rig.not_measured);
-                        rig.outcome = Some(outcome);
+                        rig.not_measured = crate::wsp::not_measured(&trace);
+                        rig.outcome = Some(judge_trace(run.clone(), trace, criteria));
                     }
                     Err(e) => rig.end = format!("{}; not judged: {e:#}", rig.end),
                 }
@@ -378,19 +336,10 @@ pub fn summary_table(rig: &[RigRun], sil: &[Outcome]) -> String {
                     name: format!("{} (rig)", r.name),
                     ..o.verdict.clone()
                 });
-                if !r.estimated.is_empty() {
-                    let _ = writeln!(
-                        not_judged,
-                        "- {} (rig): estimated from the measured cylinder pressure falls (> {} bar/s counts as venting): {}",
-                        r.name,
-                        VENT_FALL_PA_PER_S / 1e5,
-                        r.estimated.join(", ")
-                    );
-                }
                 if !r.not_measured.is_empty() {
                     let _ = writeln!(
                         not_judged,
-                        "- {} (rig): not measured, not judged (the log has no WSP valve states; a hold shows in no pressure): {}",
+                        "- {} (rig): not measured, not judged (a valve input or a cylinder pressure the log lacks: not wired, or no probe capture): {}",
                         r.name,
                         r.not_measured.join(", ")
                     );
@@ -410,7 +359,7 @@ pub fn summary_table(rig: &[RigRun], sil: &[Outcome]) -> String {
     if !not_judged.is_empty() {
         let _ = write!(
             t,
-            "\nNot judged, not measured or estimated on the rig:\n\n{not_judged}"
+            "\nNot judged or not measured on the rig:\n\n{not_judged}"
         );
     }
     t
@@ -435,7 +384,16 @@ pub fn main(rig: &RigArgs, args: &RunArgs) -> Result<()> {
         .unwrap_or_else(|| PathBuf::from("."));
     std::fs::create_dir_all(&log_dir)
         .with_context(|| format!("cannot create {}", log_dir.display()))?;
+    let io = args.io.as_deref().map(super::io_config::load).transpose()?;
     let mut s = Session::new(open(rig)?, rig.lost_after_s);
+    if let Some(io) = &io {
+        for c in super::io_config::commands(io) {
+            let o = s.command(c).map_err(anyhow::Error::from)?;
+            if !o.accepted {
+                return Err(anyhow!("--io: the board refused the configuration: {o}"));
+            }
+        }
+    }
     let (rig_runs, stopped) = run_programme(&mut s, &runs, &criteria, args, &log_dir);
     let sil: Vec<Outcome> = runs
         .par_iter()

@@ -204,11 +204,14 @@ pub fn trace_of_log(path: &std::path::Path, file: &ParamFile) -> Result<(Trace, 
         if let Some(p) = &log.p_cyl_pa[j] {
             trace.p_cyl_pa[j] = column(&format!("p_cyl{}", j + 1), p)?;
         }
-        if let Some(w) = &log.wsp[j] {
-            trace.venting[j] = w[k0..].iter().map(|&b| b > 0.5).collect();
-        }
     }
     trace.filled_samples = filled.iter().filter(|&&f| f).count();
+    fn flags(c: &Option<Vec<f64>>, k0: usize) -> Option<&[f64]> {
+        c.as_ref().map(|c| &c[k0..])
+    }
+    let dump: [Option<&[f64]>; WHEELSETS] = core::array::from_fn(|j| flags(&log.wsp[j], k0));
+    let hold: [Option<&[f64]>; WHEELSETS] = core::array::from_fn(|j| flags(&log.hold[j], k0));
+    set_valves(&mut trace, &t_s, dump, hold, file.brake_unit.dead_time_s);
     trace.t_s = t_s;
     let mut x = 0.0;
     trace.x_m.push(0.0);
@@ -218,6 +221,59 @@ pub fn trace_of_log(path: &std::path::Path, file: &ParamFile) -> Result<(Trace, 
     }
     let run = log.metadata.get("run").map(|s| s.to_string());
     Ok((trace, run))
+}
+
+/// The valve states of a log as the judge takes them, the same as SIL's
+/// ([`simulate`]: the unit's valves): venting while the dump coil is energised (`wsp`),
+/// holding while the hold coil is without it (`hold`); the dump valve acts on the cylinder
+/// one pneumatic dead time (`[brake_unit] dead_time`) after its coil, as the unit's acting
+/// valves do, so `acting_vent` is `venting` delayed by it. A wheelset whose column is
+/// absent or has an empty cell (an input not wired, `hils rig record`) is left empty: not
+/// measured ([`not_measured`]).
+fn set_valves(
+    trace: &mut Trace,
+    t_s: &[f64],
+    dump: [Option<&[f64]>; WHEELSETS],
+    hold: [Option<&[f64]>; WHEELSETS],
+    dead_time_s: f64,
+) {
+    let on = |c: Option<&[f64]>| -> Option<Vec<bool>> {
+        let c = c?;
+        c.iter()
+            .all(|x| x.is_finite())
+            .then(|| c.iter().map(|&x| x > 0.5).collect())
+    };
+    for j in 0..WHEELSETS {
+        let Some(vent) = on(dump[j]) else { continue };
+        trace.acting_vent[j] = (0..t_s.len())
+            .map(|k| {
+                let t = t_s[k] - dead_time_s + 1e-9;
+                let i = t_s.partition_point(|&ti| ti <= t);
+                i.checked_sub(1).is_some_and(|i| vent[i])
+            })
+            .collect();
+        if let Some(h) = on(hold[j]) {
+            trace.holding[j] = h.iter().zip(&vent).map(|(&h, &v)| h && !v).collect();
+        }
+        trace.venting[j] = vent;
+    }
+}
+
+/// The metrics of a trace that it cannot give (JSON keys, which the criteria are named
+/// after): air needs every wheelset's vent states and cylinder pressures, the WSP timer
+/// every wheelset's vent and hold states. Empty for a SIL trace.
+pub fn not_measured(trace: &Trace) -> Vec<&'static str> {
+    let n = trace.t_s.len();
+    let all = |v: &[Vec<bool>; WHEELSETS]| v.iter().all(|x| x.len() == n);
+    let pressures = trace.p_cyl_pa.iter().all(|p| p.len() == n);
+    let mut out = Vec::new();
+    if !(all(&trace.venting) && pressures) {
+        out.push("air_consumption_l");
+    }
+    if !(all(&trace.venting) && all(&trace.holding)) {
+        out.push("wsp_timer_actions");
+    }
+    out
 }
 
 /// Longest run of empty or non-finite cells of a log column that is interpolated, s (a
@@ -299,7 +355,8 @@ pub fn response_of_log(trace: &Trace) -> Option<(f64, f64)> {
 }
 
 /// Judges a captured run log as `run` of the programme (`hils wsp-test --log` and
-/// `hils rig run`): the same metrics and criteria as a SIL run; the surfaces under the
+/// `hils rig run`): the same metrics and criteria as a SIL run; a criterion on a metric the
+/// log cannot give ([`not_measured`]) fails as not judged. The surfaces under the
 /// wheelsets are those of the run's track at the logged distance.
 pub fn judge_trace(run: Run, trace: Trace, criteria: &Criteria) -> Outcome {
     let adhesion = AvailableAdhesion::new(&run.file.plant, &run.sets);
@@ -307,7 +364,8 @@ pub fn judge_trace(run: Run, trace: Trace, criteria: &Criteria) -> Outcome {
     if let Some((dead_time_s, build_up_s)) = response_of_log(&trace) {
         (allowed.dead_time_s, allowed.build_up_s) = (dead_time_s, build_up_s);
     }
-    let verdict = judge(&run.name, &trace, &allowed, criteria);
+    let mut verdict = judge(&run.name, &trace, &allowed, criteria);
+    verdict.not_judged(&not_measured(&trace));
     let offsets = wheelset_offsets(&run.file.plant);
     let surfaces = trace
         .x_m
