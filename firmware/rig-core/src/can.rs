@@ -44,6 +44,7 @@ use hils_plant::{FrictionModel, Rail, Surface, Zone};
 use num_enum::{IntoPrimitive, TryFromPrimitive};
 
 use crate::Code;
+use crate::arming::Disarm;
 
 use crate::controller_io::IoItem;
 pub use crate::sensor::InjectedFault;
@@ -62,6 +63,8 @@ pub const ID_BRAKE_DEMAND: u16 = 0x102;
 pub const ID_STATUS: u16 = 0x110;
 /// Identifier of `RIG_DIAG`.
 pub const ID_DIAG: u16 = 0x120;
+/// `RIG_HEALTH` (board -> bus): the board's own health (stack, receive losses, arming), 100 ms.
+pub const ID_HEALTH: u16 = 0x121;
 /// Identifier of `RIG_COMMAND`.
 pub const ID_COMMAND: u16 = 0x200;
 
@@ -527,6 +530,37 @@ pub mod diag {
     ];
 }
 
+/// `RIG_HEALTH` (0x121).
+pub mod health {
+    use super::Signal;
+    /// Stack high-water mark: the most stack ever used since power-up, bytes (4 B per bit).
+    pub const STACK_PEAK: Signal = Signal::scaled("StackPeak", 0, 16, 4.0);
+    /// `RIG_COMMAND` frames lost in the receive FIFO (FDCAN RF0L) since power-up, saturating.
+    pub const RX_LOST: Signal = Signal::raw("RxLost", 16, 8);
+    /// ADC ring restarts after a stall (no progress, overrun) since power-up, saturating.
+    pub const ADC_RESTARTS: Signal = Signal::raw("AdcRestarts", 24, 8);
+    /// 1: armed for a controller ([`crate::arming`]).
+    pub const ARMED: Signal = Signal::raw("Armed", 32, 1);
+    /// Why disarmed ([`crate::arming::Disarm`] code; 0 while armed).
+    pub const DISARM_CAUSE: Signal = Signal::raw("DisarmCause", 33, 3);
+    /// Consecutive fault resets before this start (saturating at 15; 0 after a clean one).
+    pub const FAULT_RESETS: Signal = Signal::raw("FaultResets", 36, 4);
+    /// The stack's size, bytes (4 B per bit): [`STACK_PEAK`] is judged against it.
+    pub const STACK_SIZE: Signal = Signal::scaled("StackSize", 40, 16, 4.0);
+    /// Every signal of the frame.
+    pub const ALL: [Signal; 9] = [
+        STACK_PEAK,
+        RX_LOST,
+        ADC_RESTARTS,
+        ARMED,
+        DISARM_CAUSE,
+        FAULT_RESETS,
+        STACK_SIZE,
+        Signal::raw("HealthAlive", 56, 4),
+        Signal::raw("HealthChecksum", 60, 4),
+    ];
+}
+
 /// `RIG_COMMAND` (0x200): the multiplexor `Opcode` and each opcode's signals.
 pub mod command {
     use super::Signal;
@@ -620,16 +654,17 @@ pub mod command {
 }
 
 /// Every frame's identifier and signal table (what `hils.dbc` must describe).
-pub const FRAMES: [(u16, &[Signal]); 6] = [
+pub const FRAMES: [(u16, &[Signal]); 7] = [
     (ID_WHEEL_SPEED_12, &wheel_speed::ALL_12),
     (ID_WHEEL_SPEED_34, &wheel_speed::ALL_34),
     (ID_BRAKE_DEMAND, &brake_demand::ALL),
     (ID_STATUS, &status::ALL),
     (ID_DIAG, &diag::ALL),
+    (ID_HEALTH, &health::ALL),
     (ID_COMMAND, &command::ALL),
 ];
 
-/// The opcodes of `RIG_COMMAND` (byte 0), in one place: 1-10 in declaration order.
+/// The opcodes of `RIG_COMMAND` (byte 0), in one place: 1-12 in declaration order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, IntoPrimitive, TryFromPrimitive)]
 #[repr(u8)]
 pub enum Opcode {
@@ -653,6 +688,10 @@ pub enum Opcode {
     Track,
     /// [`Command::Vehicle`].
     Vehicle,
+    /// [`Command::Arm`].
+    Arm,
+    /// [`Command::Disarm`].
+    Disarm,
 }
 
 /// The code of a surface in `RIG_COMMAND` and telemetry: 0 dry, 1 wet, 2 low, 3 very low
@@ -1090,6 +1129,61 @@ impl DiagFrame {
 }
 
 // ---------------------------------------------------------------------------------------
+// RIG_HEALTH
+
+/// `RIG_HEALTH` (0x121, every 100 ms): the board's own health, sealed like `RIG_STATUS`.
+/// (`RIG_DIAG` has no bit left.)
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct HealthFrame {
+    /// Stack high-water mark since power-up, bytes (sent to 4 B, at most 262 140).
+    pub stack_peak_bytes: u32,
+    /// The stack's size, bytes (sent to 4 B).
+    pub stack_size_bytes: u32,
+    /// Command frames lost in the receive FIFO since power-up (saturates at 255).
+    pub rx_lost: u8,
+    /// ADC ring restarts since power-up (saturates at 255).
+    pub adc_restarts: u8,
+    /// `None` while armed for a controller; else why not.
+    pub disarmed: Option<Disarm>,
+    /// Consecutive fault resets before this start (saturates at 15).
+    pub fault_resets: u8,
+    /// Alive counter, 0-15.
+    pub counter: u8,
+}
+
+impl HealthFrame {
+    /// The frame's bytes (`None` if the frame type cannot hold them).
+    pub fn encode<F: Frame>(&self) -> Option<F> {
+        let bytes = |b: u32| (b / 4).min(health::STACK_PEAK.max_raw()) as u64;
+        let mut d = [0u8; 8];
+        health::STACK_PEAK.put_raw(&mut d, bytes(self.stack_peak_bytes));
+        health::STACK_SIZE.put_raw(&mut d, bytes(self.stack_size_bytes));
+        health::RX_LOST.put_raw(&mut d, self.rx_lost as u64);
+        health::ADC_RESTARTS.put_raw(&mut d, self.adc_restarts as u64);
+        health::ARMED.put_raw(&mut d, self.disarmed.is_none() as u64);
+        health::DISARM_CAUSE.put_raw(&mut d, self.disarmed.map_or(0, u8::from) as u64);
+        health::FAULT_RESETS.put_raw(&mut d, self.fault_resets.min(15) as u64);
+        seal(ID_HEALTH, d, self.counter)
+    }
+
+    /// Reads a `RIG_HEALTH` frame; refuses a wrong identifier, length, checksum or cause.
+    pub fn decode<F: Frame>(frame: &F) -> Result<Self, DecodeError> {
+        let (d, counter) = open(frame, ID_HEALTH)?;
+        let armed = health::ARMED.get_raw(&d) == 1;
+        let cause: Disarm = decode_enum(&d, health::DISARM_CAUSE)?;
+        Ok(Self {
+            stack_peak_bytes: health::STACK_PEAK.get_raw(&d) as u32 * 4,
+            stack_size_bytes: health::STACK_SIZE.get_raw(&d) as u32 * 4,
+            rx_lost: health::RX_LOST.get_raw(&d) as u8,
+            adc_restarts: health::ADC_RESTARTS.get_raw(&d) as u8,
+            disarmed: (!armed).then_some(cause),
+            fault_resets: health::FAULT_RESETS.get_raw(&d) as u8,
+            counter,
+        })
+    }
+}
+
+// ---------------------------------------------------------------------------------------
 // RIG_COMMAND
 
 /// Brake command of the self-test mode and of `Brake` commands: the simulated brake unit's
@@ -1200,6 +1294,11 @@ pub enum Command {
         /// The value, in the unit of its `[vehicle]` key (kg, kg m^2, m).
         value: f32,
     },
+    /// Opcode 11: arm the rig for a controller: the outputs a controller reads go live in
+    /// the following rig-mode runs ([`crate::arming`]).
+    Arm,
+    /// Opcode 12: disarm: the outputs a controller reads go to their safe values at once.
+    Disarm,
 }
 
 impl Command {
@@ -1221,6 +1320,8 @@ impl Command {
             Command::TrackZone { .. } => Opcode::TrackZone,
             Command::Track(_) => Opcode::Track,
             Command::Vehicle { .. } => Opcode::Vehicle,
+            Command::Arm => Opcode::Arm,
+            Command::Disarm => Opcode::Disarm,
         }
     }
 }
@@ -1266,7 +1367,7 @@ impl CommandFrame {
                 START_EMERGENCY.put_raw(&mut d, start.emergency as u64);
                 START_SPEED.put(&mut d, start.initial_speed_kmh);
             }
-            Command::Stop | Command::ClearFaults => {}
+            Command::Stop | Command::ClearFaults | Command::Arm | Command::Disarm => {}
             Command::Brake(b) => {
                 BRAKE_DEMAND.put_raw(&mut d, brake_signal_code(b) as u64);
                 match b {
@@ -1348,6 +1449,8 @@ impl CommandFrame {
             Opcode::TrackZone => decode_zone(&d)?,
             Opcode::Track => decode_track(&d)?,
             Opcode::Vehicle => decode_vehicle(&d)?,
+            Opcode::Arm => Command::Arm,
+            Opcode::Disarm => Command::Disarm,
         };
         Ok(Self { command, counter })
     }

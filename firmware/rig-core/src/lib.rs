@@ -8,6 +8,8 @@
 //! is a thin HAL shell that moves bytes between these types and the peripherals.
 //!
 //! Modules, one concern each:
+//! * [`adc_watch`]: the ADC ring's stall (no progress, overrun) and its aligned restart.
+//! * [`arming`]: the arming gate: whether the outputs a real controller reads are live.
 //! * [`can`]: the CAN frame codec over [`embedded_can::Frame`] (wheel speeds, status,
 //!   diagnostics out; commands in), described by `hils.dbc` beside this crate.
 //! * [`sensor`]: ADC oversampling, offset/gain calibration, scaling to clamp force or
@@ -16,8 +18,12 @@
 //! * [`timing`]: step accounting from the DWT cycle counter (max, mean, overruns, missed ticks).
 //! * [`bus`]: CAN bus state supervision (error passive, bus-off, recovery).
 //! * [`can_timing`]: nominal CAN bit timing from the kernel clock and its oscillator tolerance.
+//! * [`fdcan`]: FDCAN register sequences: bus-off restart with the TX FIFO flushed, NBTP
+//!   checked before joining the bus, Rx FIFO elements.
 //! * [`can_tx`]: transmit freshness (stale frames dropped and counted, not sent late).
 //! * [`log_gate`]: counting the telemetry the RTT channel could not take.
+//! * [`reset_loop`]: fault resets in a row, kept across resets, and the hold after three.
+//! * [`stack`]: the painted stack's high-water mark and telling an overflow HardFault.
 //! * [`handoff`]: the slot protocol that hands a value built in thread mode to the step.
 //! * [`heartbeat`]: whether thread mode is alive (the watchdog is fed only then).
 //! * [`bringup`]: pass/fail rules of the board's bring-up self-test.
@@ -37,6 +43,8 @@
 #[cfg(test)]
 extern crate std;
 
+pub mod adc_watch;
+pub mod arming;
 pub mod bringup;
 pub mod bus;
 pub mod can;
@@ -45,16 +53,19 @@ pub mod can_tx;
 pub mod controller_io;
 pub mod demand;
 pub mod digest;
+pub mod fdcan;
 pub mod handoff;
 pub mod heartbeat;
 pub mod hw;
 pub mod load;
 pub mod log_gate;
 pub mod pulse;
+pub mod reset_loop;
 pub mod rig;
 pub mod script;
 pub mod sensor;
 pub mod setup;
+pub mod stack;
 pub mod telemetry;
 pub mod timing;
 pub mod valves;

@@ -37,6 +37,16 @@
 //! Overruns, missed ticks, dropped frames or telemetry, CAN error passive and bus-off are
 //! flagged and counted but do not stop a run (the rig operator decides from the flags).
 //! `ClearFaults` clears latched faults whose cause is gone and takes `Fault` to `Stopped`.
+//!
+//! # Arming
+//!
+//! The outputs a real controller reads (pulse trains, wheel speeds, the controller I/O) are
+//! live only when the arming gate says so ([`crate::arming`], [`Rig::controller_outputs_live`]):
+//! armed by the `Arm` command, in a rig-mode run. A rig-mode `Start` is refused while the rig
+//! is not armed ([`CommandError::NotArmed`]); `Stop`, `Fault`, a latched fault, a self-test
+//! start, `Disarm` and every reset disarm it. A self-test run (the button, `selftest-autostart`,
+//! a self-test `Start`) never drives these outputs: its speeds are in the telemetry and the
+//! status frame only.
 
 use embedded_can::Frame;
 use hils_brake_unit::BrakeDemand;
@@ -49,10 +59,12 @@ use hils_sil::scenario::at_standstill;
 use hils_sil::{ClosedLoop, LoopError};
 
 use crate::Code;
+use crate::arming::{ArmRefused, ArmingGate, Disarm};
 use crate::can::{
     BrakeCommand, BrakeDemandFrame, Calibration, Command, CommandFrame, CommandResult, ConfigItem,
-    DecodeError, DiagFrame, RigMode, RigState, StartCommand, StatusFrame, TrackCommand,
-    WHEEL_SPEED_MAX_KMH, WheelSpeedFrame, ZoneFrame, friction_code, rail_code, surface_code,
+    DecodeError, DiagFrame, HealthFrame, RigMode, RigState, StartCommand, StatusFrame,
+    TrackCommand, WHEEL_SPEED_MAX_KMH, WheelSpeedFrame, ZoneFrame, friction_code, rail_code,
+    surface_code,
 };
 use crate::controller_io::{DrivenOutputs, IoConfig, IoConfigError, IoItem};
 use crate::digest::setup_digest;
@@ -95,6 +107,11 @@ pub const STATUS_SCHEDULE: Schedule = Schedule {
 pub const DIAG_SCHEDULE: Schedule = Schedule {
     period: 1000,
     phase: 50,
+};
+/// `RIG_HEALTH` every 1000 ticks (100 ms), half a period after `RIG_DIAG`.
+pub const HEALTH_SCHEDULE: Schedule = Schedule {
+    period: 1000,
+    phase: 550,
 };
 /// `RIG_BRAKE_DEMAND` (when configured) every 100 ticks (10 ms), and in the tick the demand
 /// changes.
@@ -148,6 +165,22 @@ bitflags::bitflags! {
         /// Bits 16-19 (telemetry only): sensor channel 1-4 has a pending (not yet latched) condition.
         const SENSOR_PENDING = 0x000F_0000;
     }
+}
+
+/// The board's own health as its tasks measured it, for `RIG_HEALTH`
+/// ([`Rig::set_board_health`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BoardHealth {
+    /// Stack high-water mark since power-up, bytes.
+    pub stack_peak_bytes: u32,
+    /// The stack's size, bytes.
+    pub stack_size_bytes: u32,
+    /// Command frames lost in the receive FIFO since power-up.
+    pub rx_lost: u32,
+    /// ADC ring restarts since power-up.
+    pub adc_restarts: u32,
+    /// Consecutive fault resets before this start.
+    pub fault_resets: u32,
 }
 
 /// Configuration of the rig.
@@ -224,6 +257,10 @@ pub enum CommandError {
         /// The digest of the board's setup.
         kept: u16,
     },
+    /// A rig-mode `Start` while the rig is not armed for a controller (send `Arm` first).
+    NotArmed,
+    /// The `Arm` command was refused.
+    Arm(ArmRefused),
 }
 
 /// The simulation of a run.
@@ -412,8 +449,8 @@ pub struct Rig<S: SimStore = Simulation> {
     stale_ticks: u32,
     /// `ClearFaults` asked the bus supervision to clear its sticky bus-off (board).
     bus_clear_requested: bool,
-    /// Alive counters: wheel speeds, status, brake demand.
-    counters: [u8; 3],
+    /// Alive counters: wheel speeds, status, health, brake demand.
+    counters: [u8; 4],
     diag_window: DiagWindow,
     /// The valve inputs (debounced each tick).
     valves: ValveInputs,
@@ -443,6 +480,10 @@ pub struct Rig<S: SimStore = Simulation> {
     stale_builds: u32,
     /// The track and vehicle kept for the following runs.
     setup: KeptSetup,
+    /// Whether the outputs a controller reads are live ([`crate::arming`]).
+    arming: ArmingGate,
+    /// The board's own health (`RIG_HEALTH`).
+    health: BoardHealth,
 }
 
 /// What the board keeps for the following runs from `TrackZone`, `Track` and `Vehicle`
@@ -582,7 +623,7 @@ impl<S: SimStore> Rig<S> {
             last_result: CommandResult::None,
             stale_ticks: 0,
             bus_clear_requested: false,
-            counters: [0; 3],
+            counters: [0; 4],
             diag_window: DiagWindow::default(),
             valves: ValveInputs::new(config.io.valves),
             driven: DrivenOutputs::safe(&config.pulse_timer),
@@ -599,6 +640,8 @@ impl<S: SimStore> Rig<S> {
             start_seq: 0,
             stale_builds: 0,
             setup: KeptSetup::default(),
+            arming: ArmingGate::new(),
+            health: BoardHealth::default(),
         }
     }
 
@@ -638,6 +681,23 @@ impl<S: SimStore> Rig<S> {
     /// State of the rig.
     pub fn state(&self) -> RigState {
         self.state
+    }
+
+    /// The arming gate of the outputs a controller reads.
+    pub fn arming(&self) -> &ArmingGate {
+        &self.arming
+    }
+
+    /// Whether the outputs a controller reads are live now (armed, in a rig-mode run:
+    /// [`ArmingGate::outputs_live`]). Every controller-facing output follows this answer
+    /// and holds its safe value otherwise.
+    pub fn controller_outputs_live(&self) -> bool {
+        self.arming.outputs_live(self.state, self.mode)
+    }
+
+    /// Whether a sensor channel has a latched fault.
+    fn sensor_fault_latched(&self) -> bool {
+        self.sensors.iter().any(|s| s.fault().is_some())
     }
 
     /// The simulation, unless the store is lent to the builder.
@@ -717,6 +777,12 @@ impl<S: SimStore> Rig<S> {
         self.bus_flags.set(Faults::CAN_ERROR_PASSIVE, error_passive);
         self.bus_flags.set(Faults::CAN_BUS_OFF, bus_off);
         self.bus_off_count = bus_off_count.min(255) as u8;
+    }
+
+    /// The board's own health as its tasks measured it (stack, receive losses, ADC
+    /// restarts, fault resets), sent in `RIG_HEALTH`.
+    pub fn set_board_health(&mut self, health: BoardHealth) {
+        self.health = health;
     }
 
     /// Whether `ClearFaults` asked since the last call that the bus supervision clear its
@@ -800,22 +866,31 @@ impl<S: SimStore> Rig<S> {
             initial_speed_kmh,
             ..
         } = start;
-        if track && self.setup.track().is_none() {
-            return Err(CommandError::NoTrack);
-        }
+        // In this order (the host names a rejection by the same order): busy, speed,
+        // sensor faults, arming, track, setup digest.
         if self.busy() {
             return Err(CommandError::NotNow(self.state));
         }
         if !(0.0..=WHEEL_SPEED_MAX_KMH).contains(&initial_speed_kmh) {
             return Err(CommandError::SpeedOutOfRange);
         }
-        if mode == RigMode::Rig && self.sensors.iter().any(|s| s.fault().is_some()) {
+        if mode == RigMode::Rig && self.sensor_fault_latched() {
             return Err(CommandError::SensorFaults);
+        }
+        if mode == RigMode::Rig && !self.arming.is_armed() {
+            return Err(CommandError::NotArmed);
+        }
+        if track && self.setup.track().is_none() {
+            return Err(CommandError::NoTrack);
         }
         // After the busy check: the CRC runs only on an idle board's step.
         let kept = self.kept_setup_digest(track);
         if start.setup_digest != kept {
             return Err(CommandError::SetupMismatch { kept });
+        }
+        if mode == RigMode::SelfTest {
+            // The board's own brake unit closes this loop: the controller is not in it.
+            self.arming.disarm(Disarm::SelfTest);
         }
         // The old run's simulation is no longer shown (plain data: nothing to drop).
         if let Some(sim) = self.sim_mut() {
@@ -933,6 +1008,7 @@ impl<S: SimStore> Rig<S> {
                     self.start_request = None;
                     self.start_request_new = false;
                     self.state = RigState::Stopped;
+                    self.arming.disarm(Disarm::Stop);
                     Ok(())
                 }
                 s => Err(CommandError::NotNow(s)),
@@ -1013,12 +1089,26 @@ impl<S: SimStore> Rig<S> {
             }
             Command::TrackZone { .. } | Command::Track(_) => self.setup.apply(&command),
             Command::Vehicle { .. } => self.vehicle_command(&command),
+            Command::Arm => self
+                .arming
+                .arm(self.state, self.sensor_fault_latched())
+                .map_err(CommandError::Arm),
+            Command::Disarm => {
+                self.arming.disarm(Disarm::Command);
+                Ok(())
+            }
         }
     }
 
+    /// Ends the run in `state`; `Fault` and `Stopped` disarm (safe state).
     fn end_run(&mut self, state: RigState) {
         self.state = state;
         self.end_event = true;
+        match state {
+            RigState::Fault => self.arming.disarm(Disarm::Fault),
+            RigState::Stopped => self.arming.disarm(Disarm::Stop),
+            _ => {}
+        }
     }
 
     /// One tick of the real-time loop.
@@ -1243,17 +1333,25 @@ impl<S: SimStore> Rig<S> {
     }
 
     fn update_outputs<IO: RigIo>(&mut self, io: &mut IO) {
+        // Every fault disarms (a latched sensor fault also outside a run).
+        if self.sensor_fault_latched() {
+            self.arming.disarm(Disarm::Fault);
+        }
+        // The run's plant (status frame), and the plant the controller-facing outputs show:
+        // only while the arming gate says they are live.
         let live = matches!(self.state, RigState::Running | RigState::Finished);
-        // Wheel circumferential speeds r omega (m/s) for CAN, spin speeds omega (rad/s)
-        // for the pulse trains.
-        let (speeds, o) = match (sim_in(&self.sim, self.sim_lent), live) {
-            (Some(Sim::Rig(p)), true) => (p.wheel_speeds(), Some(p)),
-            (Some(Sim::SelfTest(c)), true) => (c.plant.wheel_speeds(), Some(&c.plant)),
-            _ => ([0.0; WHEELSETS], None),
+        let plant = match (sim_in(&self.sim, self.sim_lent), live) {
+            (Some(Sim::Rig(p)), true) => Some(p),
+            (Some(Sim::SelfTest(c)), true) => Some(&c.plant),
+            _ => None,
         };
-        let (v, a) = o
+        let (v, a) = plant
             .map(|p| (p.vehicle_speed(), p.carbody_accel()))
             .unwrap_or((0.0, 0.0));
+        let o = plant.filter(|_| self.arming.outputs_live(self.state, self.mode));
+        // Wheel circumferential speeds r omega (m/s) for CAN, spin speeds omega (rad/s)
+        // for the pulse trains.
+        let speeds = o.map(|p| p.wheel_speeds()).unwrap_or([0.0; WHEELSETS]);
         // At rest after the run (`Finished`): trains silent, speeds 0.00 km/h (the plant's
         // residual creep and carbody swing-back are not wheel rotation to report).
         let at_rest = self.state == RigState::Finished;
@@ -1277,7 +1375,7 @@ impl<S: SimStore> Rig<S> {
             });
         }
 
-        self.drive_controller(io, live);
+        self.drive_controller(io);
 
         if WHEEL_SPEED_SCHEDULE.due(self.tick) {
             let mut saturated = false;
@@ -1323,17 +1421,34 @@ impl<S: SimStore> Rig<S> {
             };
             self.send(io, frame.encode());
         }
+        if HEALTH_SCHEDULE.due(self.tick) {
+            let h = self.health;
+            let frame = HealthFrame {
+                stack_peak_bytes: h.stack_peak_bytes,
+                stack_size_bytes: h.stack_size_bytes,
+                rx_lost: h.rx_lost.min(255) as u8,
+                adc_restarts: h.adc_restarts.min(255) as u8,
+                disarmed: self.arming.disarmed_by(),
+                fault_resets: h.fault_resets.min(15) as u8,
+                counter: self.counters[2],
+            };
+            self.counters[2] = (self.counters[2] + 1) & 0x0F;
+            self.send(io, frame.encode());
+        }
     }
 
-    /// The controller's demand and load lines ([`crate::controller_io`]): during a rig-mode
-    /// run (`live`: running or finished) the brake command in force (release when none was
-    /// given) and the plant's air-spring forces; else the safe outputs. The demand frame,
-    /// when configured, on its schedule and in the tick the demand changes.
-    fn drive_controller<IO: RigIo>(&mut self, io: &mut IO, live: bool) {
+    /// The controller's demand and load lines ([`crate::controller_io`]): while the arming
+    /// gate says the controller-facing outputs are live (armed, a rig-mode run running or
+    /// finished: [`Rig::controller_outputs_live`]) the brake command in force (release when
+    /// none was given) and the plant's air-spring forces; else, in the same tick, the safe
+    /// outputs. The demand frame, when configured, on its schedule and in the tick the
+    /// demand changes.
+    fn drive_controller<IO: RigIo>(&mut self, io: &mut IO) {
         let timer = self.config.pulse_timer;
-        let plant = match (self.mode, live) {
-            (RigMode::Rig, true) => self.plant(),
-            _ => None,
+        let plant = if self.controller_outputs_live() {
+            self.plant()
+        } else {
+            None
         };
         let driven = match plant {
             Some(p) => self.config.io.driven(
@@ -1351,9 +1466,9 @@ impl<S: SimStore> Rig<S> {
             let frame = BrakeDemandFrame {
                 eb_loop_closed: driven.eb_loop_closed,
                 service_mps2: driven.service_mps2,
-                counter: self.counters[2],
+                counter: self.counters[3],
             };
-            self.counters[2] = (self.counters[2] + 1) & 0x0F;
+            self.counters[3] = (self.counters[3] + 1) & 0x0F;
             self.send(io, frame.encode());
         }
     }

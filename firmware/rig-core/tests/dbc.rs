@@ -18,8 +18,8 @@ use hils_plant::{FrictionModel, Rail, Surface};
 use hils_rig_core::Code;
 use hils_rig_core::can::{
     self, BrakeCommand, BrakeDemandFrame, Calibration, Command, CommandFrame, CommandResult,
-    ConfigItem, DiagFrame, InjectedFault, RigMode, RigState, StartCommand, StatusFrame,
-    TrackCommand, VehicleKey, WheelSpeedFrame, ZoneFrame,
+    ConfigItem, DiagFrame, HealthFrame, InjectedFault, RigMode, RigState, StartCommand,
+    StatusFrame, TrackCommand, VehicleKey, WheelSpeedFrame, ZoneFrame,
 };
 use hils_rig_core::controller_io::IoItem;
 use hils_rig_core::sensor::{SensorFault, SensorKind};
@@ -323,7 +323,38 @@ proptest! {
     }
 
     #[test]
-    fn command_frame(pick in 0usize..13, a in 0u32..=16382, b in 0u32..=10000, ch in 0u8..4, k in 0u8..5,
+    fn health_frame(peak in 0u32..=65535, size in 0u32..=65535, rx_lost: u8, adc: u8,
+                    cause in proptest::option::of(0u8..5), resets in 0u8..16, counter in 0u8..16) {
+        use hils_rig_core::arming::Disarm;
+        let h = HealthFrame {
+            stack_peak_bytes: peak * 4,
+            stack_size_bytes: size * 4,
+            rx_lost,
+            adc_restarts: adc,
+            disarmed: cause.map(|c| Disarm::try_from(c).unwrap()),
+            fault_resets: resets,
+            counter,
+        };
+        let fields = |h: &HealthFrame, f: Option<&TestFrame>| -> Fields {
+            Fields::from([
+                ("StackPeak", h.stack_peak_bytes as f64),
+                ("StackSize", h.stack_size_bytes as f64),
+                ("RxLost", h.rx_lost as f64),
+                ("AdcRestarts", h.adc_restarts as f64),
+                ("Armed", h.disarmed.is_none() as u8 as f64),
+                ("DisarmCause", h.disarmed.map_or(0, u8::from) as f64),
+                ("FaultResets", h.fault_resets as f64),
+                ("HealthAlive", h.counter as f64),
+                ("HealthChecksum", f.map(checksum_of).unwrap_or(0.0)),
+            ])
+        };
+        let f: TestFrame = h.encode().unwrap();
+        both_ways(can::ID_HEALTH, None, &f, &fields(&h, Some(&f)),
+            |f| HealthFrame::decode(f).unwrap(), |h| fields(h, None), Some("HealthChecksum"));
+    }
+
+    #[test]
+    fn command_frame(pick in 0usize..15, a in 0u32..=16382, b in 0u32..=10000, ch in 0u8..4, k in 0u8..5,
                      flags in 0u8..32, gain in 0.001f32..1.0e6, counter in 0u8..16,
                      zone in (0u32..(1 << 20), 0u32..(1 << 20), 0u8..32, 0u8..4, 1u8..=255),
                      digest in 0u16..=u16::MAX) {
@@ -352,6 +383,8 @@ proptest! {
             5 => Command::Calibrate { channel: ch, action: if k % 2 == 0 { Calibration::SetGain(gain) } else { Calibration::SetOffset(gain.min(4095.0)) } },
             6 => Command::Calibrate { channel: ch, action: Calibration::SetKind(if k % 2 == 0 { SensorKind::LoadCell } else { SensorKind::PressureTransducer }) },
             7 => Command::ClearFaults,
+            12 => Command::Arm,
+            13 => Command::Disarm,
             9 => Command::TrackZone { index: zone.2, zone: ZoneFrame {
                 start_dm: zone.0, end_dm: zone.1, surface: surface(zone.3) } },
             10 => Command::Track(if flags & 1 == 0 { TrackCommand::Clear } else {
@@ -447,7 +480,7 @@ proptest! {
                     m.insert("VehicleKey", code);
                     m.insert("VehicleValue", value as f64);
                 }
-                Command::Stop | Command::ClearFaults => {}
+                Command::Stop | Command::ClearFaults | Command::Arm | Command::Disarm => {}
             }
             m
         };
@@ -461,13 +494,13 @@ proptest! {
 fn dbc_describes_exactly_the_codec_messages_and_no_signals_overlap() {
     let dbc = dbc();
     let ids: Vec<u32> = dbc.messages.iter().map(|m| m.id.raw()).collect();
-    assert_eq!(ids, vec![0x100, 0x101, 0x102, 0x110, 0x120, 0x200]);
+    assert_eq!(ids, vec![0x100, 0x101, 0x102, 0x110, 0x120, 0x121, 0x200]);
     for m in &dbc.messages {
         let MessageId::Standard(id) = m.id else {
             panic!()
         };
         let muxes: Vec<Option<u64>> = if id == can::ID_COMMAND {
-            (1..=7).map(Some).collect()
+            (1..=12).map(Some).collect()
         } else {
             vec![None]
         };
@@ -492,8 +525,14 @@ fn dbc_describes_exactly_the_codec_messages_and_no_signals_overlap() {
         other => panic!("{other:?}"),
     };
     assert_eq!(
-        (cycle(0x100), cycle(0x102), cycle(0x110), cycle(0x120)),
-        (1, 10, 10, 100)
+        (
+            cycle(0x100),
+            cycle(0x102),
+            cycle(0x110),
+            cycle(0x120),
+            cycle(0x121)
+        ),
+        (1, 10, 10, 100, 100)
     );
 }
 

@@ -111,6 +111,12 @@ pub enum Line {
     },
     /// Clear latched faults whose cause is gone.
     ClearFaults,
+    /// Arm the board for the controller on the rig: the pulse trains and wheel-speed frames
+    /// (and every controller output) go live in the following rig-mode runs. The board
+    /// disarms at every stop, fault and reset.
+    Arm,
+    /// Disarm: the outputs the controller reads go to their safe values at once.
+    Disarm,
     /// Set the telemetry divider, the sensor-wheel teeth or the controller I/O (no run
     /// active).
     #[command(subcommand)]
@@ -166,6 +172,10 @@ pub struct StartArgs {
     /// Self-test: emergency brake at t = 0.
     #[arg(long)]
     pub eb: bool,
+    /// Rig mode: arm the board for the controller right before the start (`hils rig arm`):
+    /// the board refuses a rig-mode start while not armed.
+    #[arg(long)]
+    pub arm: bool,
 }
 
 #[derive(ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
@@ -293,6 +303,9 @@ pub fn commands_of(line: &Line) -> Result<Vec<Command>> {
     match command_of(line)? {
         Some(start @ Command::Start { .. }) => {
             let start = track::with_setup_digest(&out, start)?;
+            if matches!(line, Line::Start(a) if a.arm) {
+                out.push(Command::Arm);
+            }
             out.push(start);
         }
         c => out.extend(c),
@@ -355,6 +368,8 @@ fn command_of(line: &Line) -> Result<Option<Command>> {
             },
         },
         Line::ClearFaults => Command::ClearFaults,
+        Line::Arm => Command::Arm,
+        Line::Disarm => Command::Disarm,
         Line::Configure(item) => Command::Configure(match item {
             ConfigKind::Divider { steps } => ConfigItem::TelemetryDivider(*steps),
             ConfigKind::Teeth { teeth } => ConfigItem::Teeth(*teeth),

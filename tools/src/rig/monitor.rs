@@ -8,8 +8,8 @@
 //! `WheelSpeedFrame`, `StatusFrame`, `DiagFrame`): no bit position is known here.
 
 use hils_rig_core::can::{
-    BrakeDemandFrame, ClassicFrame, CommandFrame, DecodeError, DiagFrame, RigState, StatusFrame,
-    WheelSpeedFrame,
+    BrakeDemandFrame, ClassicFrame, CommandFrame, DecodeError, DiagFrame, HealthFrame, RigState,
+    StatusFrame, WheelSpeedFrame,
 };
 use hils_rig_core::valves::ValveStates;
 
@@ -23,6 +23,8 @@ pub enum Seen {
     Diag(DiagFrame),
     /// `RIG_BRAKE_DEMAND` (the board's demand as a frame, when configured).
     BrakeDemand(BrakeDemandFrame),
+    /// `RIG_HEALTH`: the board's own health and its arming.
+    Health(HealthFrame),
     /// A `RIG_COMMAND` on the bus (another host's, or our own echoed by the interface).
     Command(CommandFrame),
     /// A frame of another identifier (not in `hils.dbc`; ignored, counted).
@@ -44,6 +46,7 @@ pub fn decode(frame: &ClassicFrame) -> Seen {
         .or_else(|| pick(StatusFrame::decode(frame), Seen::Status))
         .or_else(|| pick(DiagFrame::decode(frame), Seen::Diag))
         .or_else(|| pick(BrakeDemandFrame::decode(frame), Seen::BrakeDemand))
+        .or_else(|| pick(HealthFrame::decode(frame), Seen::Health))
         .or_else(|| pick(CommandFrame::decode(frame), Seen::Command))
         .unwrap_or(Seen::Other)
 }
@@ -175,6 +178,7 @@ pub struct Counts {
     pub wheel_speed: u64,
     pub status: u64,
     pub diag: u64,
+    pub health: u64,
     pub other: u64,
     /// Frames of `hils.dbc` that did not decode.
     pub bad: u64,
@@ -187,6 +191,7 @@ pub struct BoardView {
     pub wheel_pairing: Pairing,
     pub status: Option<(f64, StatusFrame)>,
     pub diag: Option<(f64, DiagFrame)>,
+    pub health: Option<(f64, HealthFrame)>,
     pub counts: Counts,
     pub wheel_alive: AliveCheck,
     pub status_alive: AliveCheck,
@@ -195,6 +200,12 @@ pub struct BoardView {
 }
 
 impl BoardView {
+    /// Whether the board last reported itself armed for a controller (`RIG_HEALTH`; `None`:
+    /// not seen yet).
+    pub fn armed(&self) -> Option<bool> {
+        self.health.map(|(_, h)| h.disarmed.is_none())
+    }
+
     /// Takes a received frame: what it is and, for the second frame of a wheel-speed
     /// cycle, the whole cycle; an alarm when an alive counter is stuck.
     pub fn feed(&mut self, r: &Received) -> Result<(Seen, Option<WheelSpeeds>), Alarm> {
@@ -218,6 +229,10 @@ impl BoardView {
             Seen::Diag(d) => {
                 self.counts.diag += 1;
                 self.diag = Some((r.t_s, d));
+            }
+            Seen::Health(h) => {
+                self.counts.health += 1;
+                self.health = Some((r.t_s, h));
             }
             Seen::Command(_) | Seen::BrakeDemand(_) | Seen::Other => self.counts.other += 1,
             Seen::Bad(e) => {

@@ -21,8 +21,11 @@
 //! # A run
 //!
 //! `brake release`, `--settle-s` (3 s: the controller vents the last run's brake), the
-//! vehicle and track frames, `start` (rig mode, on the track), the run's brake demand, then
-//! frames until the board leaves `running` (or `--max-run-s`, then `stop`).
+//! vehicle and track frames, `arm` (the board's outputs to the controller go live for the
+//! run: running a programme on the rig is the operator's explicit arming, announced on the
+//! terminal; the board disarms at every stop, fault and reset, so each run arms again),
+//! `start` (rig mode, on the track), the run's brake demand, then frames until the board
+//! leaves `running` (or `--max-run-s`, then `stop`).
 //!
 //! # Air consumption and WSP timer actions on the rig
 //!
@@ -235,6 +238,7 @@ fn run_one<T: Transport>(
         for c in &plan.setup {
             send(s, *c)?;
         }
+        send(s, Command::Arm)?;
         send(s, super::track::with_setup_digest(&plan.setup, start)?)?;
         send(s, Command::Brake(demand))?;
         let mut running = true;

@@ -147,7 +147,7 @@ impl Recorder {
             Seen::Diag(d) => self.diag.push((t_s, d)),
             Seen::Command(c) => self.commands.push((t_s, c.command)),
             Seen::Bad(_) => self.bad_frames += 1,
-            Seen::BrakeDemand(_) | Seen::Other => {}
+            Seen::Health(_) | Seen::BrakeDemand(_) | Seen::Other => {}
         }
     }
 

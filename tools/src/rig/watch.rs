@@ -96,6 +96,17 @@ pub fn render(board: &BoardView, source: &str, t_s: f64) -> String {
         }
         None => s.push_str("bus: no diagnostic frame yet"),
     }
+    if let Some((_, h)) = board.health {
+        let arming = match h.disarmed {
+            None => "armed (outputs to the controller live in rig-mode runs)".to_string(),
+            Some(why) => format!("disarmed ({})", disarm_name(why)),
+        };
+        let _ = write!(
+            s,
+            "\n{arming}  stack peak {} of {} B  rx lost {}  adc restarts {}  fault resets {}",
+            h.stack_peak_bytes, h.stack_size_bytes, h.rx_lost, h.adc_restarts, h.fault_resets
+        );
+    }
     let c = &board.counts;
     let _ = writeln!(
         s,
@@ -179,5 +190,17 @@ mod tests {
         );
         assert_eq!(fault_names(0b10 | 0x0040), ["sensor2", "can-bus-off"]);
         assert!(fault_names(0).is_empty());
+    }
+}
+
+/// Why the board is disarmed, in words.
+pub fn disarm_name(why: hils_rig_core::arming::Disarm) -> &'static str {
+    use hils_rig_core::arming::Disarm;
+    match why {
+        Disarm::Reset => "since reset",
+        Disarm::Command => "by command",
+        Disarm::Fault => "by a fault",
+        Disarm::Stop => "by stop",
+        Disarm::SelfTest => "by a self-test start",
     }
 }
