@@ -59,9 +59,10 @@ use clap::Args;
 use hils_brake_unit::BrakeDemand;
 use hils_plant::Rail;
 use hils_rig_core::can::{
-    BrakeCommand, Command, RigMode, RigState, StartCommand, WHEEL_SPEED_MAX_KMH,
+    BrakeCommand, Command, ConfigItem, RigMode, RigState, StartCommand, WHEEL_SPEED_MAX_KMH,
     WHEEL_SPEED_RESOLUTION_KMH,
 };
+use hils_rig_core::controller_io::IoConfig;
 use rayon::prelude::*;
 
 use super::commands::{Flow, Session};
@@ -375,6 +376,28 @@ fn tagged(mut o: Outcome, suffix: &str) -> Outcome {
     o
 }
 
+/// Telemetry divider of a programme: a record every 10 plant steps (1 kHz), so the
+/// cylinder pressures the air is judged from are logged at the valves' pace (at the
+/// default 100 Hz the pressure falls between records are interpolated and the air comes
+/// out 2-3 % low; docs/rig.md, "Controller I/O").
+pub const PROGRAMME_TELEMETRY_DIVIDER: u16 = 10;
+
+/// Before the runs: the controller I/O of `--io` (if given) and the programme's telemetry
+/// rate, each command accepted or an error.
+fn configure_board<T: Transport>(s: &mut Session<T>, io: Option<&IoConfig>) -> Result<()> {
+    let mut commands = io.map(super::io_config::commands).unwrap_or_default();
+    commands.push(Command::Configure(ConfigItem::TelemetryDivider(
+        PROGRAMME_TELEMETRY_DIVIDER,
+    )));
+    for c in commands {
+        let o = s.command(c).map_err(anyhow::Error::from)?;
+        if !o.accepted {
+            return Err(anyhow!("the board refused the configuration: {o}"));
+        }
+    }
+    Ok(())
+}
+
 /// `hils rig run`.
 pub fn main(rig: &RigArgs, args: &RunArgs) -> Result<()> {
     let (criteria, mut runs) = load(&args.programme, args.friction)?;
@@ -390,14 +413,7 @@ pub fn main(rig: &RigArgs, args: &RunArgs) -> Result<()> {
         .with_context(|| format!("cannot create {}", log_dir.display()))?;
     let io = args.io.as_deref().map(super::io_config::load).transpose()?;
     let mut s = Session::new(open(rig)?, rig.lost_after_s);
-    if let Some(io) = &io {
-        for c in super::io_config::commands(io) {
-            let o = s.command(c).map_err(anyhow::Error::from)?;
-            if !o.accepted {
-                return Err(anyhow!("--io: the board refused the configuration: {o}"));
-            }
-        }
-    }
+    configure_board(&mut s, io.as_ref())?;
     let (rig_runs, stopped) = run_programme(&mut s, &runs, &criteria, args, &log_dir);
     let sil: Vec<Outcome> = runs
         .par_iter()

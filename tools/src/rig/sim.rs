@@ -33,8 +33,10 @@
 //!     stage), which the board samples and debounces.
 //!
 //!   It keeps the same I/O configuration as the board (the `Configure` frames it sees).
-//!   While the speeds are "not available" (board idle or in its safe state) it vents (no
-//!   pressure); when they come back it starts afresh (a new run).
+//!   While the speeds are "not available" (board idle or in its safe state) or the train is
+//!   at standstill (a finished run: every speed 0.00 km/h) it vents (no pressure) and keeps
+//!   no WSP state; when the train moves again (the next run) it starts afresh and weighs
+//!   the car.
 //! * **Step timing**: the host time of each [`Rig::step`] call, in cycles of the board's
 //!   170 MHz clock, so the diagnostic frame shows real (host) figures. Unless paced
 //!   (`--realtime`), board time is not wall time, so a step is capped just below the period
@@ -264,7 +266,10 @@ impl SimController {
             dump: [false; WHEELSETS],
             hold: [false; WHEELSETS],
         };
-        let Some(speeds) = self.speeds_mps else {
+        // Speeds not available (the board idle or in its safe state), or the train at
+        // standstill (a run finished: 0.00 km/h): no WSP state is kept; the unit starts
+        // afresh, weighing the car, when the train moves again (the next run).
+        let Some(speeds) = self.speeds_mps.filter(|s| s.iter().any(|&v| v > 0.0)) else {
             self.unit = None;
             self.pressure_pa = [0.0; WHEELSETS];
             return out;
@@ -361,6 +366,7 @@ impl SimBoard {
         self.io.valve_levels = ValveLevels::of_coils(out.dump, out.hold, &wiring);
         let started = Instant::now();
         self.rig.step(&mut self.io);
+
         let cpu_hz = self.rig.config().cpu_hz as f64;
         let period = (cpu_hz / STEP_RATE_HZ as f64) as u64;
         let mut cycles = (started.elapsed().as_secs_f64() * cpu_hz).min(u32::MAX as f64) as u64;
