@@ -424,6 +424,7 @@ fn tagged(mut o: Outcome, suffix: &str) -> Outcome {
 
 /// `hils rig run`.
 pub fn main(rig: &RigArgs, args: &RunArgs) -> Result<()> {
+    let out = args.out.check()?;
     let (criteria, mut runs) = load(&args.programme, args.friction)?;
     if let Some(only) = &args.only {
         runs.retain(|r| r.run.name.contains(only.as_str()));
@@ -453,8 +454,9 @@ pub fn main(rig: &RigArgs, args: &RunArgs) -> Result<()> {
         rig_runs.len()
     );
     let json: Vec<serde_json::Value> = rig_runs.iter().map(RigRun::json).collect();
-    args.out.write_json(&json)?;
-    args.out.write_report(|dir| {
+    out.write_json(&json)?;
+    out.write_report(|dir| {
+        let dir = dir.path();
         let heading = format!(
             "# Rig runs of {}\n\nInterface: {}. Each run's log is `NAME.csv` here (spec run-log schema, `# run: NAME`), judged from its brake command as `hils wsp-test --programme {} --log NAME.csv` judges it; `(SIL)` rows: the same run simulated with the simulated brake unit.\n\n",
             args.programme.display(),

@@ -24,7 +24,7 @@
 
 use std::path::Path;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use hils_plant::{Params, Surface, WHEELSETS};
 use hils_rig_core::KMH_PER_MPS;
 use hils_rig_core::can::{Command, DiagFrame, RigState, StartCommand, StatusFrame};
@@ -189,11 +189,15 @@ impl Recorder {
             .collect()
     }
 
-    /// Writes the run log to `path`; `end` says why the recording ended.
+    /// Writes the run log to `path` (atomically: complete or not at all); `end` says why
+    /// the recording ended.
     pub fn write(&self, path: &Path, meta: &RunMeta) -> Result<Written> {
-        let file = std::fs::File::create(path)
-            .with_context(|| format!("cannot create {}", path.display()))?;
-        self.write_to(file, meta)
+        let mut written = None;
+        crate::outputs::write_atomic(path, |w| {
+            written = Some(self.write_to(w, meta)?);
+            Ok(())
+        })?;
+        written.ok_or_else(|| anyhow::anyhow!("{}: nothing written", path.display()))
     }
 
     /// Writes the run log.

@@ -323,10 +323,11 @@ pub fn judge_trace(run: Run, trace: Trace, criteria: &Criteria) -> Outcome {
 }
 
 fn print_table(verdicts: &[&Verdict]) {
-    println!("{}", report::table(verdicts));
+    crate::say!("{}", report::table(verdicts));
 }
 
 pub fn main(args: WspTestArgs) -> Result<()> {
+    let out = args.out.check()?;
     let file = params_or_default(args.params.as_deref())?;
     let programme = Programme::load(&args.programme)?;
     let runs = programme.runs(&file)?;
@@ -345,7 +346,7 @@ pub fn main(args: WspTestArgs) -> Result<()> {
             .ok_or_else(|| anyhow!("the programme has no run `{name}`"))?;
         let verdict = judge_trace(run, trace, &criteria).verdict;
         print_table(&[&verdict]);
-        return args.out.write_json(&[&verdict]);
+        return out.write_json(&[&verdict]);
     }
     let started = Instant::now();
     let bar = ProgressBar::new(runs.len() as u64).with_style(
@@ -365,13 +366,14 @@ pub fn main(args: WspTestArgs) -> Result<()> {
     let verdicts: Vec<&Verdict> = outcomes.iter().map(|o| &o.verdict).collect();
     print_table(&verdicts);
     let passed = verdicts.iter().filter(|v| v.passed).count();
-    println!(
+    crate::say!(
         "{passed}/{} runs passed; programme time {elapsed:.1} s on {} threads",
         verdicts.len(),
         rayon::current_num_threads()
     );
-    args.out.write_json(&verdicts)?;
-    args.out.write_report(|dir| {
+    out.write_json(&verdicts)?;
+    out.write_report(|dir| {
+        let dir = dir.path();
         report::write(dir, &outcomes, &criteria)?;
         Ok(vec![dir.join("report.md")])
     })

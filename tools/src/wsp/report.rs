@@ -179,6 +179,5 @@ pub fn write_with(
             let _ = writeln!(md, "![{kind}]({}-{kind}.svg)", o.run.name);
         }
     }
-    std::fs::write(dir.join("report.md"), md)
-        .with_context(|| format!("cannot write {}", dir.join("report.md").display()))
+    crate::outputs::write_file(&dir.join("report.md"), md)
 }
