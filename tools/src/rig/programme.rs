@@ -144,9 +144,7 @@ pub fn load(path: &Path, friction: FrictionArg) -> Result<(Criteria, Vec<BoardRu
     let programme = Programme::load(path)?;
     let mut file = crate::params_file::params_or_default(None)?;
     file.plant.friction.model = friction.model();
-    let runs = programme
-        .runs(&file)
-        .with_context(|| format!("programme {}", path.display()))?;
+    let runs = programme.runs(&file)?;
     let runs = programme
         .run
         .iter()
