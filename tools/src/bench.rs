@@ -293,7 +293,7 @@ fn write_log_to(w: &mut dyn std::io::Write, mb: f64) -> Result<()> {
 }
 
 /// The process's peak resident memory, bytes (Linux `VmHWM`; 0 where unknown).
-fn peak_rss_bytes() -> u64 {
+pub fn peak_rss_bytes() -> u64 {
     std::fs::read_to_string("/proc/self/status")
         .ok()
         .and_then(|s| {

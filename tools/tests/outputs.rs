@@ -129,3 +129,35 @@ fn dash_is_standard_output() {
     assert_eq!(files_in(&dir), ["ft.csv"], "a file was made");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Item 11: `hils rig run` without `--report` wrote its run logs into the current folder
+/// without saying so. Now `--report DIR` is required: without it the command fails before
+/// any run, naming it, and writes nothing.
+#[test]
+fn rig_run_without_a_report_folder_writes_nothing() {
+    let dir = temp_dir("rig-no-report");
+    std::fs::write(
+        dir.join("p.toml"),
+        short_programme(&run_table("dry-eb-40", 40.0, "emergency", "dry")),
+    )
+    .unwrap();
+    let err = hils_err(
+        &dir,
+        args![
+            "rig",
+            "--interface",
+            "sim",
+            "run",
+            "--programme",
+            "p.toml",
+            "--json",
+            "out.json"
+        ],
+    );
+    assert!(
+        err.contains("--report") && err.contains("nothing was run"),
+        "{err}"
+    );
+    assert_eq!(files_in(&dir), ["p.toml"]);
+    std::fs::remove_dir_all(&dir).unwrap();
+}

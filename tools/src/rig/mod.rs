@@ -80,9 +80,9 @@ pub enum RigCommand {
     },
     /// Run a programme of runs on the rig, recording each (see `hils rig run --help`).
     ///
+    /// `--report DIR` (required): report.md, the plots and each run's log (NAME.csv).
     /// `--json FILE`: the per-run results (the `hils wsp-test --json` keys, with `on_rig`
-    /// and `end`). `--report DIR`: report.md, the plots and each run's log (NAME.csv);
-    /// without it the logs go to the current directory and no report is written.
+    /// and `end`).
     Run(programme::RunArgs),
 }
 

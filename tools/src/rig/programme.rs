@@ -45,14 +45,13 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, anyhow};
+use anyhow::{Result, anyhow, bail};
 use clap::Args;
 use hils_brake_unit::BrakeDemand;
 use hils_plant::Rail;
 use hils_rig_core::can::{
     BrakeCommand, Command, RigMode, RigState, StartCommand, WHEEL_SPEED_MAX_KMH,
 };
-use rayon::prelude::*;
 
 use super::commands::{Flow, Session};
 use super::monitor::Seen;
@@ -61,10 +60,11 @@ use super::record::{Recorder, RunMeta};
 use super::track;
 use super::transport::Transport;
 use super::{FrictionArg, RigArgs, Stop, open};
+use crate::outputs::OutDir;
 use crate::wsp::log::VENT_FALL_PA_PER_S;
 use crate::wsp::metrics::Verdict;
 use crate::wsp::programme::{Criteria, Programme, Run, demand_text, track_layout};
-use crate::wsp::{Outcome, judge_log, report};
+use crate::wsp::{judge_log, report};
 
 /// Arguments of `hils rig run`.
 #[derive(Args, Debug, Clone)]
@@ -157,20 +157,20 @@ pub fn load(path: &Path, friction: FrictionArg) -> Result<(Criteria, Vec<BoardRu
     Ok((programme.criteria, runs))
 }
 
-/// The rig's side of one run: its log, how it ended, its judged outcome.
+/// The rig's side of one run: how it ended, its verdict (its log and plots are written).
 pub struct RigRun {
     pub name: String,
     pub on_rig: bool,
     /// `finished`, `stopped`, `fault`, or why the run did not run or ended early.
     pub end: String,
-    pub outcome: Option<Outcome>,
+    pub verdict: Option<Verdict>,
 }
 
 impl RigRun {
     /// The JSON entry (module doc).
     fn json(&self) -> serde_json::Value {
-        let mut v = match &self.outcome {
-            Some(o) => serde_json::to_value(&o.verdict).unwrap_or_default(),
+        let mut v = match &self.verdict {
+            Some(verdict) => serde_json::to_value(verdict).unwrap_or_default(),
             None => serde_json::json!({ "name": self.name, "passed": false }),
         };
         if let Some(m) = v.as_object_mut() {
@@ -264,13 +264,14 @@ fn run_one<T: Transport>(
     (end, stop)
 }
 
-/// Runs a programme in a session and judges each run's log; what ended it early.
+/// Runs a programme in a session, recording each run's log into `dir` and judging it (its
+/// plots written into `dir` as it is judged: only the verdict is kept); what ended it early.
 pub fn run_programme<T: Transport>(
     s: &mut Session<T>,
     runs: &[BoardRun],
     criteria: &Criteria,
     args: &RunArgs,
-    log_dir: &Path,
+    dir: &OutDir,
 ) -> (Vec<RigRun>, Option<Stop>) {
     let mut out = Vec::new();
     let mut stopped: Option<Stop> = None;
@@ -279,41 +280,51 @@ pub fn run_programme<T: Transport>(
             name: run.name.clone(),
             on_rig: false,
             end: String::new(),
-            outcome: None,
+            verdict: None,
         };
         match (&stopped, plan) {
             (Some(e), _) => rig.end = format!("not run: the programme ended ({e})"),
             (None, Err(why)) => rig.end = format!("not run on the rig: {why}"),
             (None, Ok(plan)) => {
-                let log = log_dir.join(format!("{}.csv", run.name));
+                let log = match dir.file(&format!("{}.csv", run.name)) {
+                    Ok(log) => log,
+                    Err(e) => {
+                        rig.end = format!("not run: {e:#}");
+                        out.push(rig);
+                        continue;
+                    }
+                };
                 let (end, stop) = run_one(s, run, plan, args, &log);
                 rig.on_rig = true;
                 rig.end = end;
                 stopped = stop;
-                match judge_log(&log, run, criteria) {
-                    Ok(outcome) => rig.outcome = Some(outcome),
+                let judged = judge_log(&log, run, criteria).and_then(|o| {
+                    report::write_run_plots(dir, &format!("{}-rig", run.name), &o)?;
+                    Ok(o.verdict)
+                });
+                match judged {
+                    Ok(verdict) => rig.verdict = Some(verdict),
                     Err(e) => rig.end = format!("{}; not judged: {e:#}", rig.end),
                 }
             }
         }
-        println!("{}: {}", rig.name, rig.end);
+        crate::say!("{}: {}", rig.name, rig.end);
         out.push(rig);
     }
     (out, stopped)
 }
 
 /// The summary table: each run's rig row beside its SIL row, then the runs not judged.
-pub fn summary_table(rig: &[RigRun], sil: &[Outcome]) -> String {
+pub fn summary_table(rig: &[RigRun], sil: &[Verdict]) -> String {
     let mut rows: Vec<Verdict> = Vec::new();
     let mut not_judged = String::new();
     for (r, s) in rig.iter().zip(sil) {
-        match &r.outcome {
-            Some(o) => {
+        match &r.verdict {
+            Some(v) => {
                 rows.push(Verdict {
                     name: format!("{} (rig)", r.name),
-                    ..o.verdict.clone()
+                    ..v.clone()
                 });
-                let v = &o.verdict;
                 if !v.estimated_from_cylinder_pressure.is_empty() {
                     let _ = writeln!(
                         not_judged,
@@ -337,8 +348,8 @@ pub fn summary_table(rig: &[RigRun], sil: &[Outcome]) -> String {
             }
         }
         rows.push(Verdict {
-            name: format!("{} (SIL)", s.verdict.name),
-            ..s.verdict.clone()
+            name: format!("{} (SIL)", s.name),
+            ..s.clone()
         });
     }
     let refs: Vec<&Verdict> = rows.iter().collect();
@@ -352,60 +363,60 @@ pub fn summary_table(rig: &[RigRun], sil: &[Outcome]) -> String {
     t
 }
 
-/// Renames an outcome's run (its plot files) to `NAME-suffix`.
-fn tagged(mut o: Outcome, suffix: &str) -> Outcome {
-    o.run.name = format!("{}-{suffix}", o.run.name);
-    o
-}
-
-/// `hils rig run`.
+/// `hils rig run`: `--report DIR` is required (each run's log is written there, with the
+/// report: nothing is written into the current folder unasked).
 pub fn main(rig: &RigArgs, args: &RunArgs) -> Result<()> {
     let out = args.out.check()?;
+    let Some(dir) = out.report.clone() else {
+        bail!(
+            "hils rig run records each run's log (NAME.csv) and writes its report into \
+             --report DIR: give one (nothing was run)"
+        );
+    };
     let (criteria, mut runs) = load(&args.programme, args.friction)?;
     if let Some(only) = &args.only {
         runs.retain(|r| r.run.name.contains(only.as_str()));
     }
-    let log_dir = args
-        .out
-        .report
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("."));
-    std::fs::create_dir_all(&log_dir)
-        .with_context(|| format!("cannot create {}", log_dir.display()))?;
+    dir.create()?;
     let mut s = Session::new(open(rig)?, rig.lost_after_s);
-    let (rig_runs, stopped) = run_programme(&mut s, &runs, &criteria, args, &log_dir);
-    let sil: Vec<Outcome> = runs
-        .par_iter()
-        .map(|r| crate::wsp::run_one(r.run.clone(), &criteria))
-        .collect::<Result<_>>()?;
+    let (rig_runs, stopped) = run_programme(&mut s, &runs, &criteria, args, &dir);
+    let sil = crate::wsp::judge_runs(
+        runs.iter().map(|r| r.run.clone()).collect(),
+        &criteria,
+        Some((&dir, "sil")),
+    )?;
     let table = summary_table(&rig_runs, &sil);
-    println!("{table}");
+    crate::say!("{table}");
     let on_rig = rig_runs.iter().filter(|r| r.on_rig).count();
     let passed = rig_runs
         .iter()
-        .filter(|r| r.outcome.as_ref().is_some_and(|o| o.verdict.passed))
+        .filter(|r| r.verdict.as_ref().is_some_and(|v| v.passed))
         .count();
-    println!(
+    crate::say!(
         "{on_rig}/{} runs on the rig, {passed} passed",
         rig_runs.len()
     );
     let json: Vec<serde_json::Value> = rig_runs.iter().map(RigRun::json).collect();
     out.write_json(&json)?;
     out.write_report(|dir| {
-        let dir = dir.path();
         let heading = format!(
             "# Rig runs of {}\n\nInterface: {}. Each run's log is `NAME.csv` here (spec run-log schema, `# run: NAME`), judged from its brake command as `hils wsp-test --programme {} --log NAME.csv` judges it; `(SIL)` rows: the same run simulated with the simulated brake unit.\n\n",
             args.programme.display(),
             s.link.describe(),
             args.programme.display()
         );
-        let mut outcomes = Vec::new();
-        for (r, o) in rig_runs.into_iter().zip(sil) {
-            outcomes.extend(r.outcome.map(|x| tagged(x, "rig")));
-            outcomes.push(tagged(o, "sil"));
-        }
-        report::write_with(dir, &heading, &table, &outcomes, &criteria)?;
-        Ok(vec![dir.join("report.md")])
+        let stems: Vec<(String, &Verdict)> = rig_runs
+            .iter()
+            .zip(&sil)
+            .flat_map(|(r, v)| {
+                let rig = r.verdict.as_ref().map(|x| (format!("{}-rig", r.name), x));
+                rig.into_iter().chain([(format!("{}-sil", v.name), v)])
+            })
+            .collect();
+        let sections: Vec<(&str, &Verdict)> = stems.iter().map(|(s, v)| (s.as_str(), *v)).collect();
+        Ok(vec![report::write_with(
+            dir, &heading, &table, &sections, &criteria,
+        )?])
     })?;
     match stopped {
         Some(e) => Err(anyhow!("programme ended early: {e}")),
