@@ -131,7 +131,8 @@ fn board_plan(vehicle: Option<&str>, run: &Run) -> Result<Plan, String> {
         BrakeDemand::ServiceStep { step } if step > 0 => BrakeCommand::ServiceStep { step },
         other => {
             return Err(format!(
-                "demand {other:?}: the brake frame carries emergency, service 0-10 m/s^2 or a step 1-255"
+                "demand `{}`: the brake frame carries emergency, service 0-10 m/s^2 or a step 1-255",
+                demand_text(other)
             ));
         }
     };
