@@ -258,6 +258,36 @@ fn check_alive(a: &mut AliveCheck, counter: u8, frame: &'static str) -> Result<(
 }
 
 /// Lower-case name of a run state (as `hils decode` writes it).
+/// The name of a run mode (`rig`, `self-test`).
+pub fn mode_name(m: hils_rig_core::can::RigMode) -> &'static str {
+    match m {
+        hils_rig_core::can::RigMode::Rig => "rig",
+        hils_rig_core::can::RigMode::SelfTest => "self-test",
+    }
+}
+
+/// The name of the last command's result (`none`, `accepted`, `rejected`).
+pub fn result_name(r: hils_rig_core::can::CommandResult) -> &'static str {
+    match r {
+        hils_rig_core::can::CommandResult::None => "none",
+        hils_rig_core::can::CommandResult::Accepted => "accepted",
+        hils_rig_core::can::CommandResult::Rejected => "rejected",
+    }
+}
+
+/// The name of a sensor fault (`open`, `short`, `out-of-range`, `stuck`, `adc-invalid`).
+pub fn sensor_fault_name(f: hils_rig_core::sensor::SensorFault) -> &'static str {
+    use hils_rig_core::sensor::SensorFault;
+    match f {
+        SensorFault::Open => "open",
+        SensorFault::Short => "short",
+        SensorFault::OutOfRange => "out-of-range",
+        SensorFault::Stuck => "stuck",
+        SensorFault::AdcInvalid => "adc-invalid",
+    }
+}
+
+/// The name of a run state.
 pub fn state_name(s: RigState) -> &'static str {
     match s {
         RigState::Idle => "idle",
