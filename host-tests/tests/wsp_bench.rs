@@ -5,7 +5,8 @@
 use std::path::Path;
 
 use hils::wsp::metrics::{
-    AllowedStop, AvailableAdhesion, MuFactors, Resistance, Trace, judge, wheelset_offsets,
+    AllowedStop, AvailableAdhesion, BrakeModel, MuFactors, Resistance, Trace, judge,
+    wheelset_offsets,
 };
 use hils::wsp::programme::{Criteria, Programme};
 use hils_plant::contact::Polach;
@@ -21,7 +22,7 @@ fn allowed<'a>(adhesion: &'a AvailableAdhesion, track: &'a Track, demand: f64) -
         offsets: wheelset_offsets(&p),
         g: p.vehicle.g,
         resistance: Resistance::default(),
-        demand_mps2: demand,
+        brake: BrakeModel::Deceleration(demand),
         dead_time_s: 0.05,
         build_up_s: 0.5,
         mu_factor: None,

@@ -283,6 +283,9 @@ pub fn trace_of_log(log: &RunLog, file: &ParamFile, t_brake: f64) -> Result<Trac
         if let Some(p) = &log.p_cyl_pa[j] {
             trace.p_cyl_pa[j] = column(&format!("p_cyl{}", j + 1), p)?;
         }
+        if let Some(t) = &log.t_disc_c[j] {
+            trace.disc_temp_c[j] = column(&format!("t_disc{}", j + 1), t)?;
+        }
     }
     trace.filled_samples = filled.iter().filter(|&&f| f).count();
     let from_brake = |c: &Option<Vec<f64>>| c.as_ref().map(|c| c[k0..].to_vec());

@@ -18,7 +18,7 @@ use std::time::Instant;
 
 use anyhow::{Result, anyhow};
 use clap::Args;
-use hils_brake_unit::{BrakeDemand, Valve};
+use hils_brake_unit::Valve;
 use hils_plant::{Surface, WHEELSETS};
 use hils_sil::ClosedLoop;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -27,7 +27,8 @@ use rayon::prelude::*;
 use crate::outputs::OutDir;
 use crate::params_file::params_or_default;
 use metrics::{
-    AllowedStop, AvailableAdhesion, Resistance, Trace, Verdict, judge, wheelset_offsets,
+    AllowedStop, AvailableAdhesion, BrakeModel, CaliperBrake, DiscTemps, Resistance, Trace,
+    Verdict, judge, wheelset_offsets,
 };
 use programme::{Criteria, Programme, Run};
 
@@ -97,6 +98,7 @@ pub fn simulate(run: &Run) -> Result<(Trace, Vec<[Surface; 4]>)> {
                 trace.holding[j].push(u.valves[j] == Valve::Hold);
                 trace.acting_vent[j].push(acting[j] == Valve::Vent);
                 trace.mu_factor[j].push(sim.plant.track().contact(j).1 as f64);
+                trace.disc_temp_c[j].push(out.wheelsets[j].disc_temp as f64);
             }
             surfaces.push(sim.plant.track().surfaces());
         }
@@ -107,26 +109,18 @@ pub fn simulate(run: &Run) -> Result<(Trace, Vec<[Surface; 4]>)> {
     Ok((trace, surfaces))
 }
 
-/// Deceleration a run demands of the brake, m/s^2.
-pub fn demand_decel(run: &Run) -> f64 {
-    let u = &run.file.brake_unit;
-    match run.demand {
-        BrakeDemand::Emergency => u.eb_deceleration_mps2,
-        BrakeDemand::Service { deceleration_mps2 } => {
-            (deceleration_mps2 as f64).min(u.eb_deceleration_mps2)
-        }
-        BrakeDemand::ServiceStep { step } => {
-            let steps = u.service_steps.max(1);
-            (u.full_service_deceleration_mps2 * step.min(steps) as f64 / steps as f64)
-                .min(u.eb_deceleration_mps2)
-        }
-        BrakeDemand::Release => 0.0,
-    }
+/// The brake a run's demand makes on rolling wheels: the brake unit's cylinder pressure of
+/// the demand (`hils_brake_unit::demand_pressure`, the same mapping as the unit's) through
+/// Eq (1) and Eq (2) with the disc temperatures of `trace`.
+pub fn demand_brake(run: &Run, trace: &Trace) -> BrakeModel {
+    let p = &run.file.plant;
+    let pressure = hils_brake_unit::demand_pressure(p, &run.file.brake_unit, run.demand);
+    BrakeModel::Caliper(CaliperBrake::new(p, pressure, DiscTemps::of(trace)))
 }
 
 /// The perfect-WSP stop of a run on the adhesion `trace` had available (its logged friction
-/// factors when the rail recovers), with the brake response of the parameter file (dead
-/// time, fill time constant).
+/// factors when the rail recovers, its disc temperatures), with the brake response of the
+/// parameter file (dead time, fill time constant).
 pub fn allowed_stop<'a>(
     run: &'a Run,
     adhesion: &'a AvailableAdhesion,
@@ -140,7 +134,7 @@ pub fn allowed_stop<'a>(
         offsets: wheelset_offsets(p),
         g: p.vehicle.g,
         resistance: Resistance::of(p),
-        demand_mps2: demand_decel(run),
+        brake: demand_brake(run, trace),
         dead_time_s: u.dead_time_s,
         build_up_s: u.fill_time_constant_s,
         mu_factor: trace.mu_factors(),
