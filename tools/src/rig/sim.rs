@@ -6,19 +6,37 @@
 //! [`Rig::command_frame`] (and seen by the controller, as on a shared bus), the controller
 //! under test steps, [`Rig::step`] runs with a mock [`RigIo`], and the step is timed.
 //!
-//! * **The rig hardware** ([`SimIo`]): four brake cylinder pressure transducers. The ADC
+//! * **The rig hardware** ([`SimIo`]): four brake cylinder pressure transducers, the eight
+//!   valve inputs (all wired, active low), the EB loop relay, the demand PWM and the two
+//!   air-spring DACs. The ADC
 //!   reads each cylinder pressure of the controller through the transducer's nominal
 //!   characteristic (`SensorKind::PressureTransducer.default_calibration()`, inverted) with
 //!   +-2 counts of deterministic noise (a real ADC never reads the same sum for long; the
 //!   board's stuck-sensor check needs that). The board's channels are set to pressure
 //!   transducers at power-up, as a rig fitted with them would be calibrated.
 //! * **The controller under test** ([`SimController`]): the project's simulated brake unit
-//!   (`hils_brake_unit::BrakeUnit`, the one `hils simulate` runs, WSP on) at the plant step.
-//!   It reads the wheel speeds only from the `RIG_WHEEL_SPEED` frames on the bus (held
-//!   between frames, as an ECU's CAN input), and takes its brake demand from the
-//!   `RIG_COMMAND` brake frames it sees (standing in for the train line). While the speeds
-//!   are "not available" (board idle or in its safe state) it vents (no pressure); when
-//!   they come back it starts afresh (a new run).
+//!   (`hils_brake_unit::BrakeUnit`, the one `hils simulate` runs, WSP on) at the plant step,
+//!   wired to the board as a real controller would be, every signal through the rig-core
+//!   code the board runs:
+//!   - wheel speeds only from the `RIG_WHEEL_SPEED` frames on the bus (held between frames,
+//!     as an ECU's CAN input);
+//!   - its brake demand from the train lines the board drives: the emergency brake loop
+//!     and the service demand PWM's registers, read through
+//!     `hils_rig_core::demand::{DemandConfig::decode_pwm, ControllerDemand}` (open loop or
+//!     no valid PWM = emergency brake);
+//!   - its load (load weighing, at each start) from the two air-spring DAC codes, read
+//!     through `hils_rig_core::load::LoadConfig::read_pa` as a transducer's signal: the
+//!     bogie forces give the carbody mass its EB pressure is set for (the other `[vehicle]`
+//!     values it takes from the `Vehicle` frames, as its configuration);
+//!   - its WSP valve coils (vent: dump and hold coils; hold: the hold coil) on the board's
+//!     valve inputs through `hils_rig_core::valves::ValveLevels::of_coils` (the interface
+//!     stage), which the board samples and debounces.
+//!
+//!   It keeps the same I/O configuration as the board (the `Configure` frames it sees).
+//!   While the speeds are "not available" (board idle or in its safe state) or the train is
+//!   at standstill (a finished run: every speed 0.00 km/h) it vents (no pressure) and keeps
+//!   no WSP state; when the train moves again (the next run) it starts afresh and weighs
+//!   the car.
 //! * **Step timing**: the host time of each [`Rig::step`] call, in cycles of the board's
 //!   170 MHz clock, so the diagnostic frame shows real (host) figures. Unless paced
 //!   (`--realtime`), board time is not wall time, so a step is capped just below the period
@@ -34,16 +52,19 @@
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
-use hils_brake_unit::{BrakeDemand, BrakeUnit, UnitConfig};
+use hils_brake_unit::{BrakeDemand, BrakeUnit, UnitConfig, Valve};
 use hils_plant::params::STEP_S;
 use hils_plant::{Params, WHEELSETS};
 use hils_rig_core::can::{
-    ClassicFrame, Command, CommandFrame, StatusFrame, VehicleKey, WheelSpeedFrame,
+    ClassicFrame, Command, CommandFrame, ConfigItem, StatusFrame, VehicleKey, WheelSpeedFrame,
 };
+use hils_rig_core::controller_io::{DrivenOutputs, IoConfig};
+use hils_rig_core::demand::ControllerDemand;
 use hils_rig_core::hw::{RigIo, TelemetryEvent};
 use hils_rig_core::pulse::PulseRegisters;
 use hils_rig_core::rig::{Rig, RigConfig};
 use hils_rig_core::sensor::{ADC_MAX_COUNTS, ADC_SEQUENCE_LEN, OVERSAMPLING, SensorKind};
+use hils_rig_core::valves::{ValveLevels, ValveWiring};
 use hils_rig_core::{CHANNELS, KMH_PER_MPS, STEP_RATE_HZ};
 
 use super::monitor::Pairing;
@@ -63,10 +84,14 @@ pub struct SimFaults {
     pub status_alive_frozen_at_s: Option<f64>,
 }
 
-/// The rig's measurement hardware as the board's step sees it.
+/// The rig's hardware as the board's step sees it.
 struct SimIo {
     /// Cylinder pressures the transducers see, Pa.
     pressure_pa: [f32; CHANNELS],
+    /// The valve inputs' port (the controller's coils through the interface stage).
+    valve_levels: ValveLevels,
+    /// What the board drives on the controller's lines.
+    driven: DrivenOutputs,
     noise: u32,
     frames: Vec<ClassicFrame>,
     telemetry: Vec<TelemetryEvent>,
@@ -115,11 +140,21 @@ impl RigIo for SimIo {
         self.telemetry.push(*event);
         true
     }
+
+    fn valve_levels(&mut self) -> ValveLevels {
+        self.valve_levels
+    }
+
+    fn set_controller_outputs(&mut self, outputs: &DrivenOutputs) {
+        self.driven = *outputs;
+    }
 }
 
-/// The brake controller under test: the simulated brake unit on the bus.
+/// The brake controller under test: the simulated brake unit on the bus and the train lines.
 pub struct SimController {
     params: Params,
+    /// Its I/O configuration (the board's, from the `Configure` frames it sees).
+    io: IoConfig,
     unit: Option<BrakeUnit<f32>>,
     demand: BrakeDemand,
     /// Wheel circumferential speeds of the last wheel-speed frame, m/s (None: not available).
@@ -127,21 +162,35 @@ pub struct SimController {
     /// Pairs the two wheel-speed frames of a cycle.
     wheel_pairing: Pairing,
     pressure_pa: [f32; WHEELSETS],
+    /// The carbody mass its load weighing found at the last start, kg (None: the air-spring
+    /// signals were not valid; it took the configured vehicle's).
+    weighed_carbody_kg: Option<f64>,
+}
+
+/// What the controller drives: its cylinder pressures and its valve coils.
+struct ControllerOut {
+    pressure_pa: [f32; WHEELSETS],
+    /// Dump and hold coils energised, per wheelset.
+    dump: [bool; WHEELSETS],
+    hold: [bool; WHEELSETS],
 }
 
 impl SimController {
-    fn new() -> Self {
+    fn new(io: IoConfig) -> Self {
         Self {
             params: Params::default(),
+            io,
             unit: None,
-            demand: BrakeDemand::Release,
+            demand: BrakeDemand::Emergency,
             speeds_mps: None,
             wheel_pairing: Pairing::default(),
             pressure_pa: [0.0; WHEELSETS],
+            weighed_carbody_kg: None,
         }
     }
 
-    /// A frame on the bus: wheel speeds are its sensor input, brake commands its demand.
+    /// A frame on the bus: wheel speeds are its sensor input; the board's configuration
+    /// and vehicle frames its own configuration (a real unit is configured for its train).
     fn on_frame(&mut self, frame: &ClassicFrame) {
         if let Ok(half) = WheelSpeedFrame::decode(frame) {
             let Some(w) = self.wheel_pairing.take(half) else {
@@ -155,45 +204,89 @@ impl SimController {
             };
         } else if let Ok(c) = CommandFrame::decode(frame) {
             match c.command {
-                Command::Brake(b) => {
-                    self.demand = b;
-                    if let Some(u) = &mut self.unit {
-                        u.set_demand(self.demand);
-                    }
-                }
-                // Load weighing: the controller takes the vehicle the board is told (a real
-                // unit measures it, e.g. from the air-suspension pressure); used from its
-                // next start (the board refuses the frame during a run).
                 Command::Vehicle { key, value } => match key {
                     VehicleKey::Default => self.params.vehicle = Params::default().vehicle,
                     key => key.apply(&mut self.params.vehicle, value),
                 },
+                // The board refuses an inconsistent value; so does this copy.
+                Command::Configure(ConfigItem::Io(item, v)) => {
+                    let _ = self.io.set(item, v);
+                }
                 _ => {}
             }
         }
     }
 
-    /// One plant step of the controller: its cylinder pressures, Pa.
-    fn step(&mut self) -> [f32; WHEELSETS] {
-        match self.speeds_mps {
-            None => {
-                self.unit = None;
-                self.pressure_pa = [0.0; WHEELSETS];
-            }
-            Some(speeds) => {
-                if self.unit.is_none() {
-                    // The reference configuration cannot fail to build (tested in brake-unit).
-                    self.unit = BrakeUnit::new(&self.params, &UnitConfig::new(STEP_S)).ok();
-                    if let Some(u) = &mut self.unit {
-                        u.set_demand(self.demand);
-                    }
-                }
-                if let Some(u) = &mut self.unit {
-                    self.pressure_pa = u.step(&speeds).cylinder_pressure_pa;
-                }
+    /// The demand on the train lines the board drives (loop and PWM).
+    fn read_demand(&self, lines: &DrivenOutputs) -> BrakeDemand {
+        ControllerDemand {
+            eb_loop_closed: lines.eb_loop_closed,
+            service_mps2: self.io.demand.decode_pwm(&lines.pwm),
+        }
+        .brake(&self.io.demand)
+    }
+
+    /// Load weighing: the carbody mass the two air-spring signals carry (their bogie
+    /// forces over g), kg; None when either signal is not valid.
+    fn weigh(&self, lines: &DrivenOutputs) -> Option<f64> {
+        let load = &self.io.load;
+        let force: Option<f64> = lines
+            .dac
+            .iter()
+            .map(|&code| load.read_pa(code).map(|p| load.force_n(p) as f64))
+            .sum();
+        force.map(|f| f / self.params.vehicle.g)
+    }
+
+    /// A unit for a new run: weighed, then built with the demand on the lines.
+    fn start_unit(&mut self, lines: &DrivenOutputs) {
+        self.weighed_carbody_kg = self.weigh(lines);
+        let mut params = self.params;
+        if let Some(m) = self.weighed_carbody_kg {
+            params.vehicle.carbody_mass = m;
+        }
+        // The reference unit builds for any vehicle the board accepts (tested in brake-unit).
+        self.unit = BrakeUnit::new(&params, &UnitConfig::new(STEP_S)).ok();
+        if let Some(u) = &mut self.unit {
+            u.set_demand(self.demand);
+        }
+    }
+
+    /// One plant step of the controller, reading the lines the board drove last.
+    fn step(&mut self, lines: &DrivenOutputs) -> ControllerOut {
+        let demand = self.read_demand(lines);
+        if demand != self.demand {
+            self.demand = demand;
+            if let Some(u) = &mut self.unit {
+                u.set_demand(demand);
             }
         }
-        self.pressure_pa
+        let mut out = ControllerOut {
+            pressure_pa: [0.0; WHEELSETS],
+            dump: [false; WHEELSETS],
+            hold: [false; WHEELSETS],
+        };
+        // Speeds not available (the board idle or in its safe state), or the train at
+        // standstill (a run finished: 0.00 km/h): no WSP state is kept; the unit starts
+        // afresh, weighing the car, when the train moves again (the next run).
+        let Some(speeds) = self.speeds_mps.filter(|s| s.iter().any(|&v| v > 0.0)) else {
+            self.unit = None;
+            self.pressure_pa = [0.0; WHEELSETS];
+            return out;
+        };
+        if self.unit.is_none() {
+            self.start_unit(lines);
+        }
+        if let Some(u) = &mut self.unit {
+            let o = u.step(&speeds);
+            self.pressure_pa = o.cylinder_pressure_pa;
+            for j in 0..WHEELSETS {
+                out.dump[j] = o.valves[j] == Valve::Vent;
+                out.hold[j] = o.valves[j] != Valve::Apply;
+            }
+        }
+        out.pressure_pa = self.pressure_pa;
+        out
     }
 }
 
@@ -214,7 +307,10 @@ pub struct SimBoard {
 
 impl SimBoard {
     pub fn new(faults: SimFaults, realtime: bool) -> Self {
-        let mut rig = Rig::new(RigConfig::nucleo_g474re());
+        // The simulated rig has every valve input wired (active low).
+        let mut config = RigConfig::nucleo_g474re();
+        config.io.valves = ValveWiring::ALL;
+        let mut rig = Rig::new(config);
         for s in &mut rig.sensors {
             s.set_kind(SensorKind::PressureTransducer);
         }
@@ -222,11 +318,13 @@ impl SimBoard {
             rig,
             io: SimIo {
                 pressure_pa: [0.0; CHANNELS],
+                valve_levels: ValveLevels::of_coils([false; 4], [false; 4], &config.io.valves),
+                driven: DrivenOutputs::safe(&config.pulse_timer),
                 noise: 0x2545_F491,
                 frames: Vec::new(),
                 telemetry: Vec::new(),
             },
-            controller: SimController::new(),
+            controller: SimController::new(config.io),
             tick: 0,
             to_board: VecDeque::new(),
             to_host: VecDeque::new(),
@@ -240,6 +338,11 @@ impl SimBoard {
     /// The board's logic (for tests that compare what the host saw with the board's state).
     pub fn rig(&self) -> &Rig {
         &self.rig
+    }
+
+    /// The carbody mass the controller's load weighing found at its last start, kg.
+    pub fn controller_weighed_carbody_kg(&self) -> Option<f64> {
+        self.controller.weighed_carbody_kg
     }
 
     fn reached(&self, at: Option<f64>) -> bool {
@@ -257,9 +360,13 @@ impl SimBoard {
         // The board's builder task (thread mode): a requested run is built and handed over
         // between two steps; a build error is in the status frame as on the board.
         let _ = self.rig.build_pending();
-        self.io.pressure_pa = self.controller.step();
+        let out = self.controller.step(&self.io.driven);
+        self.io.pressure_pa = out.pressure_pa;
+        let wiring = self.rig.config().io.valves;
+        self.io.valve_levels = ValveLevels::of_coils(out.dump, out.hold, &wiring);
         let started = Instant::now();
         self.rig.step(&mut self.io);
+
         let cpu_hz = self.rig.config().cpu_hz as f64;
         let period = (cpu_hz / STEP_RATE_HZ as f64) as u64;
         let mut cycles = (started.elapsed().as_secs_f64() * cpu_hz).min(u32::MAX as f64) as u64;

@@ -4,15 +4,16 @@
 //! cylinder pressures and valve states (SVG, the project's plotting).
 
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use hils_plant::Surface;
 use hils_sil::KMH_PER_MPS;
 
 use super::Outcome;
 use super::metrics::{Criterion, Verdict};
 use super::programme::Criteria;
+use crate::outputs::OutDir;
 use crate::plots::{Chart, Series, Style};
 
 /// `x` with `decimals` decimals, `-` when absent.
@@ -34,16 +35,28 @@ fn label(c: &Criterion) -> &'static str {
     }
 }
 
-/// The verdict of a run for the table: `pass`, or `FAIL:` and the criteria that failed.
+/// The verdict of a run for the table: `pass`, or `FAIL:` and the criteria that failed
+/// (`not measured` where the metric was not measured, so the criterion was not judged).
 pub fn verdict_cell(v: &Verdict) -> String {
     if v.passed {
         return "pass".into();
     }
-    let failed: Vec<&str> = v.criteria.iter().filter(|c| !c.passed).map(label).collect();
+    let failed: Vec<String> = v
+        .criteria
+        .iter()
+        .filter(|c| !c.passed)
+        .map(|c| {
+            if c.criterion.contains("not measured") {
+                format!("{} not measured", label(c))
+            } else {
+                label(c).to_string()
+            }
+        })
+        .collect();
     format!("FAIL: {}", failed.join(", "))
 }
 
-/// The summary table (Markdown).
+/// The summary table (Markdown); `-`: not measured (or no stop).
 pub fn table(verdicts: &[&Verdict]) -> String {
     let mut s = String::from(
         "| run | verdict | stop m | allowed m | ratio | utilisation | air l | max lock s | locks | timer |\n\
@@ -53,17 +66,18 @@ pub fn table(verdicts: &[&Verdict]) -> String {
         let lock = v.max_lock_s.iter().copied().fold(0.0, f64::max);
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {:.1} | {} | {:.3} | {:.1} | {:.2} | {} | {} |",
+            "| {} | {} | {} | {:.1} | {} | {:.3} | {} | {:.2} | {} | {} |",
             v.name,
             verdict_cell(v),
             opt(v.stopping_distance_m, 1),
             v.allowed_distance_m,
             opt(v.distance_ratio, 3),
             v.adhesion_utilisation,
-            v.air_consumption_l,
+            opt(v.air_consumption_l, 1),
             lock,
             v.lock_count.iter().sum::<u32>(),
             v.wsp_timer_actions
+                .map_or("-".to_string(), |t| t.to_string())
         );
     }
     s
@@ -198,7 +212,10 @@ fn per_wheelset(name: &str, t: &[f64], y: &[Vec<f64>; 4], scale: f64) -> Vec<Ser
         .collect()
 }
 
-fn run_plots(dir: &Path, o: &Outcome) -> Result<()> {
+/// Writes the plots of one run (`STEM-speeds.svg`, `STEM-pressures.svg`,
+/// `STEM-valves.svg`) into `dir`: called as each run is judged, so no trace is kept for the
+/// report (memory does not grow with the number of runs).
+pub fn write_run_plots(dir: &OutDir, stem: &str, o: &Outcome) -> Result<()> {
     let t = &o.trace.t_s;
     let mut speeds = Chart::new(
         &format!(
@@ -221,7 +238,7 @@ fn run_plots(dir: &Path, o: &Outcome) -> Result<()> {
     speeds
         .series
         .extend(per_wheelset("wheelset", t, &o.trace.wheel_mps, KMH_PER_MPS));
-    speeds.save_svg(&dir.join(format!("{}-speeds.svg", o.run.name)))?;
+    speeds.save_svg(&dir.file(&format!("{stem}-speeds.svg"))?)?;
 
     let mut pressures = Chart::new(
         &format!("{}: cylinder pressures", o.run.name),
@@ -229,7 +246,7 @@ fn run_plots(dir: &Path, o: &Outcome) -> Result<()> {
         "p, kPa",
     );
     pressures.series = per_wheelset("cylinder", t, &o.trace.p_cyl_pa, 1e-3);
-    pressures.save_svg(&dir.join(format!("{}-pressures.svg", o.run.name)))?;
+    pressures.save_svg(&dir.file(&format!("{stem}-pressures.svg"))?)?;
 
     let mut valves = Chart::new(
         &format!("{}: WSP valve commands (wheelset j at level j)", o.run.name),
@@ -253,48 +270,46 @@ fn run_plots(dir: &Path, o: &Outcome) -> Result<()> {
     });
     valves.series = per_wheelset("valve", t, &states, 1.0);
     valves.y_range = Some((0.5, 5.0));
-    valves.save_svg(&dir.join(format!("{}-valves.svg", o.run.name)))?;
+    valves.save_svg(&dir.file(&format!("{stem}-valves.svg"))?)?;
     Ok(())
 }
 
-/// Writes `report.md` and the plots of every run into `dir`.
-pub fn write(dir: &Path, outcomes: &[Outcome], criteria: &Criteria) -> Result<()> {
-    let verdicts: Vec<&Verdict> = outcomes.iter().map(|o| &o.verdict).collect();
+/// Writes `report.md` of the judged runs into `dir` (their plots are written as each run
+/// is judged, [`write_run_plots`]).
+pub fn write(dir: &OutDir, verdicts: &[Verdict], criteria: &Criteria) -> Result<PathBuf> {
+    let refs: Vec<&Verdict> = verdicts.iter().collect();
+    let sections: Vec<(&str, &Verdict)> = verdicts.iter().map(|v| (v.name.as_str(), v)).collect();
     write_with(
         dir,
         "# WSP test report\n\n",
-        &table(&verdicts),
-        outcomes,
+        &table(&refs),
+        &sections,
         criteria,
     )
 }
 
-/// Writes `report.md` (`heading`, the criteria, `summary`, then a section per outcome) and
-/// the plots of every outcome (files named after `run.name`) into `dir`.
+/// Writes `report.md` (`heading`, the criteria, `summary`, then a section per judged run
+/// with the plots of its file stem) into `dir`.
 pub fn write_with(
-    dir: &Path,
+    dir: &OutDir,
     heading: &str,
     summary: &str,
-    outcomes: &[Outcome],
+    sections: &[(&str, &Verdict)],
     criteria: &Criteria,
-) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+) -> Result<PathBuf> {
     let mut md = String::from(heading);
     let _ = writeln!(md, "## Criteria\n\n{}", criteria_table(criteria));
     let _ = writeln!(md, "## Runs\n\n{summary}");
-    for o in outcomes {
-        run_plots(dir, o)?;
-        let v = &o.verdict;
-        let _ = writeln!(md, "\n## {}\n", o.run.name);
+    for &(stem, v) in sections {
+        let _ = writeln!(md, "\n## {stem}\n");
         for c in &v.criteria {
             let verdict = if c.passed { "pass" } else { "FAIL" };
             let _ = writeln!(md, "- {}: {verdict}", c.criterion);
         }
         let _ = writeln!(md, "\n{}", wheelset_table(v));
         for kind in ["speeds", "pressures", "valves"] {
-            let _ = writeln!(md, "![{kind}]({}-{kind}.svg)", o.run.name);
+            let _ = writeln!(md, "![{kind}]({stem}-{kind}.svg)");
         }
     }
-    std::fs::write(dir.join("report.md"), md)
-        .with_context(|| format!("cannot write {}", dir.display()))
+    dir.write("report.md", md)
 }
