@@ -191,12 +191,12 @@ fn zone_shades(o: &Outcome) -> Vec<(f64, f64, usize)> {
 }
 
 /// The key of the shading: one entry per surface the leading wheelset ran on.
-fn shade_key(o: &Outcome) -> Vec<(usize, String)> {
-    let mut key: Vec<(usize, String)> = Vec::new();
+fn shade_key(o: &Outcome) -> Vec<(String, usize)> {
+    let mut key = Vec::new();
     for s in Surface::ALL {
         if o.surfaces.iter().any(|w| w[0] == s) {
             let (color, name) = surface_shade(s);
-            key.push((color, format!("surface: {name}")));
+            key.push((format!("surface: {name}"), color));
         }
     }
     key
