@@ -68,7 +68,7 @@ use super::track;
 use super::transport::Transport;
 use super::{FrictionArg, RigArgs, Stop, open};
 use crate::outputs::OutDir;
-use crate::wsp::log::VENT_FALL_PA_PER_S;
+use crate::wsp::log::{VENT_FALL_PA_PER_S, VENT_WINDOW_S};
 use crate::wsp::metrics::Verdict;
 use crate::wsp::programme::{Criteria, Programme, Run, demand_text, track_layout};
 use crate::wsp::{judge_log, report};
@@ -342,9 +342,10 @@ pub fn summary_table(rig: &[RigRun], sil: &[Verdict]) -> String {
                 if !v.estimated_from_cylinder_pressure.is_empty() {
                     let _ = writeln!(
                         not_judged,
-                        "- {} (rig): estimated from the measured cylinder pressure falls (> {} bar/s counts as venting): {}",
+                        "- {} (rig): estimated from the measured cylinder pressure falls (a fall faster than {} bar/s over {} ms counts as venting): {}",
                         r.name,
                         VENT_FALL_PA_PER_S / 1e5,
+                        VENT_WINDOW_S * 1e3,
                         v.estimated_from_cylinder_pressure.join(", ")
                     );
                 }
