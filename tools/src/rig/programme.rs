@@ -231,8 +231,10 @@ fn run_one<T: Transport>(
             send(s, *c)?;
         }
         send(s, Command::Arm)?;
-        send(s, super::track::with_setup_digest(&plan.setup, start)?)?;
+        // The run's demand is in force from its first step (t = 0), as a SIL run's: the
+        // board drives the brake command in force from the start (EB loop, service PWM).
         send(s, Command::Brake(demand))?;
+        send(s, super::track::with_setup_digest(&plan.setup, start)?)?;
         let mut running = true;
         s.run_for(args.max_run_s, |_, seen| match seen {
             Seen::Status(st) if st.state != RigState::Running => {

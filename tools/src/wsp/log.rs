@@ -408,11 +408,23 @@ pub fn fill_gaps(
 /// The brake response of a log from its cylinder pressures (in the spirit of EN 14531's
 /// equivalent response time): p_final the highest logged pressure; the fastest wheelset's
 /// times to 10 % and 63.2 % of it fit a first-order build-up after a dead time,
-/// tau = (t63 - t10) / (1 - ln(1/0.9)), t_d = t10 - ln(1/0.9) tau. None when the pressures
-/// are not logged or never reach 63.2 %.
+/// tau = (t63 - t10) / (1 - ln(1/0.9)), t_d = t10 - ln(1/0.9) tau, from the brake command to
+/// the stop. None when the pressures are not logged or never reach 63.2 %.
 pub fn response_of_log(trace: &Trace) -> Option<(f64, f64)> {
-    let n = trace.t_s.len();
-    let logged: Vec<&Vec<f64>> = trace.p_cyl_pa.iter().filter(|p| p.len() == n).collect();
+    // Up to the stop: at standstill the cylinders go on to the full demand (a controller
+    // holds the brake), which the build-up under way never reached.
+    let stop_mps = hils_sil::scenario::STOP_SPEED_MPS + trace.speed_resolution_mps.max(0.0);
+    let n = trace
+        .v_mps
+        .iter()
+        .position(|&v| v <= stop_mps)
+        .unwrap_or(trace.t_s.len());
+    let logged: Vec<&[f64]> = trace
+        .p_cyl_pa
+        .iter()
+        .filter(|p| p.len() == trace.t_s.len())
+        .map(|p| &p[..n])
+        .collect();
     let p_final = logged
         .iter()
         .flat_map(|p| p.iter())
