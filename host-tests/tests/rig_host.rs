@@ -401,6 +401,7 @@ fn programme_args(
         max_run_s: 120.0,
         settle_s: 3.0,
         only: None,
+        io: None,
     };
     let rig = hils::rig::RigArgs {
         interface: "sim".into(),

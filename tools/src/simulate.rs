@@ -349,7 +349,6 @@ fn fig9(path: &Path, params: &Params, var: &Run) -> Result<()> {
         Style::Dotted,
         2,
     ));
-    chart.legend_lower_right = true;
     chart.save_svg(path)
 }
 
@@ -447,6 +446,5 @@ fn fig11(path: &Path, params: &Params, rail: Rail, var: &Run, con: &Run) -> Resu
         4,
     ));
     chart.x_range = Some((0.0, 0.25));
-    chart.legend_lower_right = true;
     chart.save_svg(path)
 }

@@ -59,7 +59,8 @@ pub struct BrakeUnitParams {
 
 /// Defaults of the `[brake_unit]` keys added by issue 13 (the reference file predates
 /// them). Assumed values: a proportional EP valve of ~15 kPa hysteresis and 30 ms pilot
-/// lag; WSP probe pulses of at most 50 ms fill after 100 ms holds (issue 25; 30 / 50 ms before); 7 service steps up to 1.0 m/s^2.
+/// lag; WSP probe pulses of at most 50 ms fill after 100 ms holds (issue 25; 30 / 50 ms
+/// before); 7 service steps up to 1.0 m/s^2.
 mod defaults {
     pub fn ep_valve() -> bool {
         true

@@ -43,7 +43,8 @@
 //!
 //! **Reference speed.** v_ref follows the fastest wheel, rises at once when a wheel runs
 //! faster (a recovered wheel shows the true speed: it re-anchors the reference even when
-//! every axle has slid) and falls no faster than a_v + `ref_margin_decel_mps2` (nor than
+//! every axle has slid) and falls no faster than `ref_decel_gain` a_v +
+//! `ref_margin_decel_mps2` (nor than
 //! `ref_max_decel_mps2`): a group of wheels sliding together cannot drag it down.
 //!
 //! **Slide.** Speed deficit dv = v_ref - v_w against dv_th = max(`deficit_min_mps`,
@@ -86,7 +87,7 @@
 //!
 //! **Bounds** (EN 15595). Continuous WSP action (vent and hold together: the brake not
 //! applied) is limited to `vent_max_s` (the WSP timer): after it the valve returns to Apply
-//! and the channel may not act for `hold_max_s`, so that a faulty WSP cannot release a
+//! and the channel may not act for `timer_inhibit_s`, so that a faulty WSP cannot release a
 //! brake indefinitely, not even by cycling vent and hold. Below `min_speed_mps` the WSP is
 //! inhibited (Apply). A locked wheel always vents (no hold).
 
@@ -147,7 +148,7 @@ pub struct WspTuning {
     /// A wheel decelerating faster than the vehicle by more than this slides, m/s^2 (1.0).
     pub overbrake_decel_mps2: f64,
     /// ... once it has lost this share of the deficit threshold against the reference
-    /// (0.1).
+    /// (0.2; also the least loss at which a probe's cap counts).
     pub overbrake_deficit_ratio: f64,
     /// A held wheel has turned once its own acceleration exceeds this, m/s^2 (0).
     pub turn_accel_mps2: f64,
@@ -161,13 +162,13 @@ pub struct WspTuning {
     pub dump_settle_s: f64,
     /// Brake force share of the pressure memory the fast reapply fills to (0.9).
     pub memory_share: f64,
-    /// Each probe pulse raises the brake force by this share of itself (0.02).
+    /// Each probe pulse raises the brake force by this share of itself (0.015).
     pub probe_step_share: f64,
     /// A probe goes no higher than this share of the memory's brake force without a rise
     /// of the adhesion (1.2).
     pub cap_share: f64,
     /// The adhesion has risen when the wheel carries this share of the remembered peak
-    /// (1.05) ...
+    /// (1.1) ...
     pub risen_share: f64,
     /// ... or spins up faster than this while the brake force rises, m/s^2 (2.0).
     pub sudden_grip_accel_mps2: f64,
@@ -175,14 +176,19 @@ pub struct WspTuning {
     pub lock_ratio: f64,
     /// Longest continuous WSP action (vent and hold), s (EN 15595 WSP timer; 3.0).
     pub vent_max_s: f64,
-    /// Longest hold, and the time the channel may not act after the WSP timer, s (1.0).
+    /// Longest hold, s (2.0).
     pub hold_max_s: f64,
+    /// Time the channel may not act after the WSP timer, s (1.0).
+    pub timer_inhibit_s: f64,
     /// WSP inhibited below this reference speed, m/s (1.4).
     pub min_speed_mps: f64,
     /// Largest fall rate of the reference speed, m/s^2 (2.0).
     pub ref_max_decel_mps2: f64,
-    /// The reference falls no faster than the vehicle's deceleration (from the adhesion
-    /// the wheelsets carry) plus this, m/s^2 (0.5).
+    /// The reference falls no faster than this times the vehicle's deceleration (from the
+    /// adhesion the wheelsets carry; the pads' friction above mu_d0 makes that low by up to
+    /// ~25 %) ... (1.3)
+    pub ref_decel_gain: f64,
+    /// ... plus this, m/s^2 (0.1).
     pub ref_margin_decel_mps2: f64,
     /// Time constant of the wheel-deceleration filter, s (0.01).
     pub accel_filter_s: f64,
@@ -196,22 +202,24 @@ impl Default for WspTuning {
             reapply_ratio: 0.5,
             decel_threshold_mps2: 2.5,
             overbrake_decel_mps2: 1.0,
-            overbrake_deficit_ratio: 0.1,
+            overbrake_deficit_ratio: 0.2,
             turn_accel_mps2: 0.0,
             caught_up_accel_mps2: 0.0,
             dump_share: 0.8,
             dump_settle_s: 0.02,
             memory_share: 0.9,
-            probe_step_share: 0.02,
+            probe_step_share: 0.015,
             cap_share: 1.2,
-            risen_share: 1.05,
+            risen_share: 1.1,
             sudden_grip_accel_mps2: 2.0,
             lock_ratio: 0.5,
             vent_max_s: 3.0,
-            hold_max_s: 1.0,
+            hold_max_s: 2.0,
+            timer_inhibit_s: 1.0,
             min_speed_mps: 1.4,
             ref_max_decel_mps2: 2.0,
-            ref_margin_decel_mps2: 0.5,
+            ref_decel_gain: 1.3,
+            ref_margin_decel_mps2: 0.1,
             accel_filter_s: 0.01,
         }
     }
@@ -258,8 +266,10 @@ impl WspTuning {
             ("wsp.lock_ratio", self.lock_ratio, 0.0, 1.0),
             ("wsp.vent_max", self.vent_max_s, 0.0, 60.0),
             ("wsp.hold_max", self.hold_max_s, 0.0, 60.0),
+            ("wsp.timer_inhibit", self.timer_inhibit_s, 0.0, 60.0),
             ("wsp.min_speed", self.min_speed_mps, 0.0, 20.0),
             ("wsp.ref_max_decel", self.ref_max_decel_mps2, 0.0, accel),
+            ("wsp.ref_decel_gain", self.ref_decel_gain, 1.0, 10.0),
             (
                 "wsp.ref_margin_decel",
                 self.ref_margin_decel_mps2,
@@ -368,6 +378,8 @@ pub struct WspConstants<F> {
     pub vent_max_cycles: u32,
     /// [`WspTuning::hold_max_s`] in control periods (rounded).
     pub hold_max_cycles: u32,
+    /// [`WspTuning::timer_inhibit_s`] in control periods (rounded).
+    pub timer_inhibit_cycles: u32,
     /// Dead time plus [`WspTuning::dump_settle_s`] in control periods: how long after its
     /// vent a dump step is judged.
     pub settle_cycles: u32,
@@ -382,8 +394,8 @@ pub struct WspConstants<F> {
     pub ref_fall_per_cycle_mps: F,
     /// [`WspTuning::ref_margin_decel_mps2`] x dt, m/s.
     pub ref_margin_per_cycle_mps: F,
-    /// The control period dt, s.
-    pub dt: F,
+    /// [`WspTuning::ref_decel_gain`] x dt, s.
+    pub ref_gain_dt: F,
     /// 1 / dt, 1/s (the control period's rate).
     pub inv_dt: F,
     /// Filter gain dt / (tau + dt).
@@ -423,13 +435,14 @@ impl<F: Real> WspConstants<F> {
             lock_ratio: F::of(t.lock_ratio),
             vent_max_cycles: cycles(t.vent_max_s),
             hold_max_cycles: cycles(t.hold_max_s),
+            timer_inhibit_cycles: cycles(t.timer_inhibit_s),
             settle_cycles: cycles(p.dead_time_s + t.dump_settle_s),
             pulse_fill_cycles: cycles(p.pulse_fill_s).max(1),
             pulse_hold_cycles: cycles(p.pulse_hold_s),
             min_speed_mps: F::of(t.min_speed_mps),
             ref_fall_per_cycle_mps: F::of(t.ref_max_decel_mps2 * dt),
             ref_margin_per_cycle_mps: F::of(t.ref_margin_decel_mps2 * dt),
-            dt: F::of(dt),
+            ref_gain_dt: F::of(t.ref_decel_gain * dt),
             inv_dt: F::of(1.0 / dt),
             accel_gain: F::of(dt / (t.accel_filter_s + dt)),
             spring_pa: F::of(p.spring_pressure_pa),
@@ -470,7 +483,8 @@ pub struct ReferenceSpeed<F> {
 impl<F: Real> ReferenceSpeed<F> {
     /// One control period: the fastest wheel speed (m/s), its fall limited to the
     /// vehicle's deceleration `vehicle_decel` (m/s^2, [`vehicle_deceleration`]) plus
-    /// `ref_margin_decel_mps2` and to `ref_max_decel_mps2`; and the filtered rate of the
+    /// `ref_margin_decel_mps2` (times `ref_decel_gain`) and to `ref_max_decel_mps2`; and the
+    /// filtered rate of the
     /// fall. When every wheel slides, the reference follows the vehicle, not the wheels.
     pub fn update(&mut self, k: &WspConstants<F>, wheel_speeds: &[F; 4], vehicle_decel: F) {
         let fastest = wheel_speeds.iter().fold(F::ZERO, |m, &v| m.max(v));
@@ -480,7 +494,7 @@ impl<F: Real> ReferenceSpeed<F> {
             return;
         }
         let previous = self.speed;
-        let fall = (vehicle_decel.max(F::ZERO) * k.dt + k.ref_margin_per_cycle_mps)
+        let fall = (vehicle_decel.max(F::ZERO) * k.ref_gain_dt + k.ref_margin_per_cycle_mps)
             .min(k.ref_fall_per_cycle_mps);
         self.speed = fastest.max(previous - fall).max(F::ZERO);
         // Only the fall of the reference is a vehicle deceleration. A rise re-anchors the
@@ -552,6 +566,8 @@ pub struct WspChannel<F> {
 #[derive(Clone, Copy, Debug)]
 struct Signals {
     slide: bool,
+    /// It has lost `overbrake_deficit_ratio` of the deficit threshold against the reference.
+    creeping: bool,
     locked: bool,
     /// Back near the reference and no longer spinning up.
     caught_up: bool,
@@ -589,9 +605,9 @@ impl<F: Real> WspChannel<F> {
         } else if self.valve != Valve::Apply && self.released_cycles >= k.vent_max_cycles {
             // WSP timer: vent and hold together have kept the brake off for `vent_max_s`
             // (a Vent -> Hold -> Vent cycle does not restart it). Give the brake back and do
-            // not act again for `hold_max_s`, so a slide that never clears cannot keep the
+            // not act again for `timer_inhibit_s`, so a slide that never clears cannot keep the
             // brake off.
-            self.inhibit_cycles = k.hold_max_cycles;
+            self.inhibit_cycles = k.timer_inhibit_cycles;
             (Phase::Apply, Valve::Apply)
         } else {
             self.next(k, &signals, inputs)
@@ -624,10 +640,12 @@ impl<F: Real> WspChannel<F> {
         let threshold = k.deficit_min_mps.max(k.deficit_ratio * v_ref);
         let rel_accel = self.accel - reference.accel;
         let runaway = deficit > F::of(0.5) * threshold && rel_accel < -k.decel_threshold_mps2;
-        let overbraked = self.accel < -(inputs.vehicle_decel_mps2 + k.overbrake_decel_mps2)
-            && deficit > k.overbrake_deficit_ratio * threshold;
+        let creeping = deficit > k.overbrake_deficit_ratio * threshold;
+        let overbraked =
+            self.accel < -(inputs.vehicle_decel_mps2 + k.overbrake_decel_mps2) && creeping;
         Signals {
             slide: deficit > threshold || runaway || overbraked,
+            creeping,
             locked: v < k.lock_ratio * v_ref,
             caught_up: deficit < k.reapply_ratio * threshold && self.accel < k.caught_up_accel_mps2,
             spinning_up: self.accel > k.turn_accel_mps2,
@@ -645,10 +663,15 @@ impl<F: Real> WspChannel<F> {
         let p_d = inputs.demand_pressure_pa;
         let n = self.cycles_in_phase;
         if matches!(self.phase, Phase::Apply | Phase::Reapply | Phase::Probe) {
-            self.rise_max_pa = self.rise_max_pa.max(self.adhesion_pa);
-            // A probe at `cap_share` of the memory without a rise of the adhesion has
-            // passed the peak the memory knows.
+            // (Not while the wheel spins up suddenly: that transient is no adhesion it
+            // carries for long.)
+            if self.accel < k.sudden_grip_accel_mps2 {
+                self.rise_max_pa = self.rise_max_pa.max(self.adhesion_pa);
+            }
+            // A probe at `cap_share` of the memory without a rise of the adhesion, its wheel
+            // creeping, has passed the peak the memory knows.
             let capped = self.phase == Phase::Probe
+                && s.creeping
                 && p >= k.share_of(self.memory_pa, k.cap_share)
                 && !self.risen(k);
             if s.slide || capped {

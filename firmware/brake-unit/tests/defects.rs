@@ -63,7 +63,7 @@ fn cylinder_pressure_reaches_the_demand_in_f32() {
 /// cycles Vent -> Hold -> Vent (a wheel that spins up, then locks again) kept the brake off
 /// indefinitely. The timer exists so that WSP action, vent or hold, cannot release the
 /// brake for longer than `vent_max_s`: after it the channel applies and stays applied for
-/// `hold_max_s`.
+/// `timer_inhibit_s`.
 #[test]
 fn vent_hold_cycles_cannot_keep_the_brake_off_past_the_wsp_timer() {
     use hils_brake_unit::wsp::{

@@ -100,8 +100,8 @@ fn wsp_dumps_briefly_and_reapplies_to_the_pressure_memory() {
         assert_eq!(out.valves[0], Valve::Apply);
         // The reference speed follows the true speed (wheels 1-3) during the slide. (The
         // scripted wheels decelerate before the brake builds up, faster than the rail
-        // forces the observers see allow the reference to fall: from 1.5 s.)
-        if t > 1.5 {
+        // forces the observers see allow the reference to fall: from 2.5 s.)
+        if t > 2.5 {
             assert!(
                 (out.reference_speed_mps - v).abs() < 0.05,
                 "{} vs {v}",

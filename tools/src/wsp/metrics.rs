@@ -43,6 +43,7 @@ use hils_plant::{Params, Surface, Track};
 use serde::Serialize;
 
 use super::programme::Criteria;
+use crate::figures::round_dp;
 
 /// Standard atmosphere, Pa.
 const P_ATM_PA: f64 = 101_325.0;
@@ -424,7 +425,8 @@ impl AllowedStop<'_> {
     }
 }
 
-/// Per-run metrics and verdicts (JSON keys fixed by issue 13).
+/// Per-run metrics and verdicts (JSON keys fixed by issue 13), rounded to their resolution
+/// (issue 25): distances to the mm, times to the ms, ratios to 1e-4, air to 0.1 l.
 #[derive(Clone, Debug, Serialize)]
 pub struct Verdict {
     pub name: String,
@@ -613,48 +615,54 @@ pub fn judge(name: &str, trace: &Trace, allowed: &AllowedStop, c: &Criteria) -> 
     };
     let utilisation = utilisation_of(trace, allowed, stop, c);
     let ratio = stopping.map(|s| s / allowed_m);
-    let criteria: Vec<Criterion> = [
+    // A criterion that does not apply is not listed (it would read as passed): the
+    // adhesion reference needs the logged friction factors only when the rail recovers.
+    let reference_known = allowed.recovers.then(|| {
         (
-            "adhesion reference known (degraded adhesion: mu factors logged)".to_string(),
-            !allowed.recovers || allowed.mu_factor.is_some(),
-        ),
-        ("stops".to_string(), stop.is_some()),
-        (
-            format!("distance_ratio <= {}", c.max_distance_ratio),
-            ratio.is_some_and(|r| r <= c.max_distance_ratio),
-        ),
-        (
-            format!("max_lock_s <= {}", c.max_lock_s),
-            max_lock.iter().all(|&l| l <= c.max_lock_s),
-        ),
-        criterion_on(
-            format!("wsp_timer_actions <= {}", c.max_wsp_timer_actions),
-            timer,
-            |t| t <= c.max_wsp_timer_actions,
-        ),
-        criterion_on(
-            format!("air_consumption_l <= {}", c.max_air_consumption_l),
-            air_l,
-            |a| a <= c.max_air_consumption_l,
-        ),
-    ]
-    .into_iter()
-    .map(|(criterion, passed)| Criterion { criterion, passed })
-    .collect();
+            "adhesion reference known (degraded adhesion: friction factors logged)".to_string(),
+            allowed.mu_factor.is_some(),
+        )
+    });
+    let criteria: Vec<Criterion> = reference_known
+        .into_iter()
+        .chain([
+            ("stops".to_string(), stop.is_some()),
+            (
+                format!("distance_ratio <= {}", c.max_distance_ratio),
+                ratio.is_some_and(|r| r <= c.max_distance_ratio),
+            ),
+            (
+                format!("max_lock_s <= {}", c.max_lock_s),
+                max_lock.iter().all(|&l| l <= c.max_lock_s),
+            ),
+            criterion_on(
+                format!("wsp_timer_actions <= {}", c.max_wsp_timer_actions),
+                timer,
+                |t| t <= c.max_wsp_timer_actions,
+            ),
+            criterion_on(
+                format!("air_consumption_l <= {}", c.max_air_consumption_l),
+                air_l,
+                |a| a <= c.max_air_consumption_l,
+            ),
+        ])
+        .map(|(criterion, passed)| Criterion { criterion, passed })
+        .collect();
+    let (mm, ms, ratio_dp, litre) = (3, 3, 4, 1);
     Verdict {
         name: name.to_string(),
         passed: criteria.iter().all(|c| c.passed),
-        stopping_distance_m: stopping,
-        allowed_distance_m: allowed_m,
-        distance_ratio: ratio,
-        adhesion_utilisation: utilisation,
-        air_consumption_l: air_l,
-        max_lock_s: max_lock,
+        stopping_distance_m: stopping.map(|x| round_dp(x, mm)),
+        allowed_distance_m: round_dp(allowed_m, mm),
+        distance_ratio: ratio.map(|r| round_dp(r, ratio_dp)),
+        adhesion_utilisation: round_dp(utilisation, ratio_dp),
+        air_consumption_l: air_l.map(|a| round_dp(a, litre)),
+        max_lock_s: max_lock.map(|t| round_dp(t, ms)),
         lock_count: locks,
         wsp_timer_actions: timer,
         filled_samples: trace.filled_samples,
-        slide_onset_s: onsets,
-        stop_time_s: stop.map(|k| trace.t_s[k]),
+        slide_onset_s: onsets.map(|o| o.map(|t| round_dp(t, ms))),
+        stop_time_s: stop.map(|k| round_dp(trace.t_s[k], ms)),
         criteria,
         not_measured,
         estimated_from_cylinder_pressure: estimated,
