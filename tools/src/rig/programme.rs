@@ -291,6 +291,12 @@ pub fn run_programme<T: Transport>(
 ) -> (Vec<RigRun>, Option<Stop>) {
     let mut out = Vec::new();
     let mut stopped: Option<Stop> = None;
+    if runs.iter().any(|r| r.plan.is_ok()) {
+        println!(
+            "arming the board before each run: its pulse trains and wheel speeds drive the controller on {} during the runs (docs/rig.md, Arming)",
+            s.link.describe()
+        );
+    }
     for BoardRun { run, plan } in runs {
         let mut rig = RigRun {
             name: run.name.clone(),
