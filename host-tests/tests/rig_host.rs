@@ -830,3 +830,25 @@ fn a_lost_setup_frame_makes_the_start_rejected_not_a_wrong_run() {
         assert_eq!(s.link.rig().vehicle().0[0], Some(30_000.0));
     }
 }
+
+/// `arm` and `disarm` as session lines: armed, the run drives the controller (it brakes on
+/// the wheel speeds it reads); `disarm` during the run takes the speeds away at once
+/// ("not available": the controller vents) while the board's run goes on.
+#[test]
+fn arm_and_disarm_lines_drive_and_release_the_controller() {
+    let mut s = session(SimFaults::default());
+    let lines = script("arm\nstart --speed-kmh 80\nbrake eb\nwait --for-s 1.0\n");
+    run_session(&mut s, &lines, false).expect("session");
+    let (_, w) = s.board.wheel_speed.unwrap();
+    assert!(w.speeds_kmh.iter().all(Option::is_some), "{w:?}");
+    let st = s.board.status().unwrap();
+    assert!(st.deceleration_mps2 > 0.5, "the controller brakes: {st:?}");
+    run_session(&mut s, &script("disarm\nwait --for-s 0.2\n"), false).expect("disarm");
+    let (_, w) = s.board.wheel_speed.unwrap();
+    assert_eq!(w.speeds_kmh, [None; 4]);
+    assert_eq!(s.link.rig().state(), RigState::Running);
+    assert_eq!(s.board.armed(), Some(false));
+    // A second start needs a new `arm`: refused with the reason.
+    let e = run_session(&mut s, &script("stop\nstart --speed-kmh 60\n"), false).unwrap_err();
+    assert!(e.to_string().contains("not armed"), "{e}");
+}

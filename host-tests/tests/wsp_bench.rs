@@ -300,17 +300,32 @@ fn response_of_a_log_from_its_cylinder_pressures() {
             t.p_cyl_pa[j].push(p);
         }
     }
-    let (dead, tau) = hils::wsp::response_of_log(&t).unwrap();
+    let (dead, tau) = hils::wsp::response_of_log(&t, 350e3).unwrap();
     assert!(
         (dead - 0.2).abs() < 5e-3 && (tau - 0.8).abs() < 5e-3,
         "{dead} {tau}"
     );
+    // A wheelset whose WSP acts (vents, or holds) before 63.2 % of the demand: its build-up
+    // is not the brake's response; the others' still is. None when every wheelset's is cut.
+    let acting_from = |k0: usize| (0..10_000).map(|k| k >= k0).collect::<Vec<bool>>();
+    let mut cut = t.clone();
+    cut.venting[0] = acting_from(500);
+    cut.holding[1] = acting_from(500);
+    let (dead_cut, tau_cut) = hils::wsp::response_of_log(&cut, 350e3).unwrap();
+    assert!((dead_cut - dead).abs() < 1e-9 && (tau_cut - tau).abs() < 1e-9);
+    for j in 0..4 {
+        cut.venting[j] = acting_from(500);
+    }
+    assert!(hils::wsp::response_of_log(&cut, 350e3).is_none());
     // Not logged: no response (the parameter file's is used).
     assert!(
-        hils::wsp::response_of_log(&Trace {
-            t_s: t.t_s.clone(),
-            ..Trace::default()
-        })
+        hils::wsp::response_of_log(
+            &Trace {
+                t_s: t.t_s.clone(),
+                ..Trace::default()
+            },
+            350e3
+        )
         .is_none()
     );
 }

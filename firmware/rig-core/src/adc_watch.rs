@@ -12,10 +12,14 @@
 //!
 //! **Detection** ([`AdcWatch::poll`], thread mode, every ms): the step counts the fresh
 //! sequences it took; no new one for [`STALL_TICKS`] step ticks while the step runs, or
-//! ADC1_ISR.OVR set, is a stall. **Recovery** ([`restart`], with the step masked): stop the
-//! conversions (ADSTP), clear OVR, rewind the DMA to the start of its buffer, reset the
-//! ring's reader, start the conversions (rank 1 at the next trigger): the ring is aligned
-//! again. Restarts back off from [`BACKOFF_FIRST_MS`] to [`BACKOFF_MAX_MS`] while the stall
+//! ADC1_ISR.OVR set, is a stall. **Recovery** in two parts. [`stop`], in thread mode with
+//! the step running (it sees no fresh sequence meanwhile, as during the stall): stop the
+//! conversions (ADSTP, a bounded wait for ADSTART = 0), consume the conversion pending in
+//! ADC_DR (read it: EOC and its DMA request clear; else the re-enabled DMA would serve that
+//! old request first and put its rank at index 0, shifting every channel by one), clear
+//! OVR. Then [`realign`], with the step masked and no wait in it: rewind the DMA to the
+//! start of its buffer, reset the ring's reader, start the conversions (rank 1 at the next
+//! trigger): the ring is aligned again. Restarts back off from [`BACKOFF_FIRST_MS`] to [`BACKOFF_MAX_MS`] while the stall
 //! lasts; each is counted (`RIG_HEALTH` `AdcRestarts`). When sequences come again the step
 //! clears `ADC_STALE`'s cause and `ClearFaults` takes a faulted run to `Stopped`.
 
@@ -87,12 +91,19 @@ impl AdcWatch {
     }
 }
 
-/// The ADC and its DMA ring as the restart drives them.
-pub trait AdcRing {
+/// The ADC as [`stop`] drives it (thread mode, the step running).
+pub trait AdcConverter {
     /// ADSTP, then waits (bounded) until ADSTART reads 0; `false` if it did not stop.
     fn stop_conversions(&mut self) -> bool;
+    /// Reads ADC_DR (the value is discarded) and clears EOC/EOS: no DMA request is left
+    /// pending for a conversion made before the stop.
+    fn discard_pending_conversion(&mut self);
     /// Clears ADC_ISR.OVR (write 1): the ADC makes DMA requests again.
     fn clear_overrun(&mut self);
+}
+
+/// The DMA ring as [`realign`] drives it (the step masked: register writes only, no wait).
+pub trait AdcRing {
     /// Disables the DMA channel, reloads its count with the buffer's length and enables it:
     /// the next sample lands at index 0.
     fn rewind_dma(&mut self);
@@ -107,17 +118,23 @@ pub trait AdcRing {
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct AdcWouldNotStop;
 
-/// Restarts a stalled ring aligned (module doc): stop, clear the overrun, rewind the DMA,
-/// reset the reader, start.
-pub fn restart(r: &mut impl AdcRing) -> Result<(), AdcWouldNotStop> {
-    if !r.stop_conversions() {
+/// The first part of a restart (module doc), in thread mode: stop, consume the pending
+/// conversion, clear the overrun. Nothing the step owns is touched.
+pub fn stop(a: &mut impl AdcConverter) -> Result<(), AdcWouldNotStop> {
+    if !a.stop_conversions() {
         return Err(AdcWouldNotStop);
     }
-    r.clear_overrun();
+    a.discard_pending_conversion();
+    a.clear_overrun();
+    Ok(())
+}
+
+/// The second part, with the step masked (register writes only): rewind the DMA, reset the
+/// reader, start. Only after [`stop`] succeeded.
+pub fn realign(r: &mut impl AdcRing) {
     r.rewind_dma();
     r.reset_reader();
     r.start_conversions();
-    Ok(())
 }
 
 #[cfg(test)]
@@ -129,10 +146,14 @@ mod tests {
 
     /// ADC1 with OVRMOD = 0 and a circular DMA ring (RM0440: an unserved request sets OVR;
     /// while OVR is set conversions go on, their data is discarded and no DMA request is
-    /// made; ADSTP resets the sequence to rank 1). Each sample is tagged with its rank.
+    /// made, DR keeping the unread conversion and its request; ADSTP resets the sequence to
+    /// rank 1; an enabled DMA channel serves a pending request at once). Each sample is
+    /// tagged with its rank.
     struct Model {
         running: bool,
         ovr: bool,
+        /// The rank of the conversion in DR whose DMA request is not served yet.
+        dr_pending: Option<u8>,
         buf: [Option<u8>; RING],
         dma_pos: usize,
         /// The DMA misses the request of this rank once (bus busy): an overrun.
@@ -146,6 +167,7 @@ mod tests {
             Self {
                 running: true,
                 ovr: false,
+                dr_pending: None,
                 buf: [None; RING],
                 dma_pos: 0,
                 miss_rank: None,
@@ -164,6 +186,8 @@ mod tests {
                     continue;
                 }
                 if self.miss_rank.take_if(|r| *r == rank).is_some() {
+                    // Unserved: the next end of conversion finds DR unread.
+                    self.dr_pending = Some(rank);
                     self.ovr = true;
                     continue;
                 }
@@ -179,17 +203,28 @@ mod tests {
         }
     }
 
-    impl AdcRing for Model {
+    impl AdcConverter for Model {
         fn stop_conversions(&mut self) -> bool {
             self.running = !self.stops_ok;
             self.stops_ok
         }
+        fn discard_pending_conversion(&mut self) {
+            self.dr_pending = None;
+        }
         fn clear_overrun(&mut self) {
             self.ovr = false;
         }
+    }
+
+    impl AdcRing for Model {
         fn rewind_dma(&mut self) {
             self.dma_pos = 0;
             self.buf = [None; RING];
+            // Enabled again: a request still pending is served at once.
+            if let Some(rank) = self.dr_pending.take() {
+                self.buf[0] = Some(rank);
+                self.dma_pos = 1;
+            }
         }
         fn reset_reader(&mut self) {
             self.reader_at = self.dma_pos;
@@ -197,6 +232,13 @@ mod tests {
         fn start_conversions(&mut self) {
             self.running = true;
         }
+    }
+
+    /// Both parts of a restart, as the board runs them.
+    fn restart(m: &mut Model) -> Result<(), AdcWouldNotStop> {
+        stop(m)?;
+        realign(m);
+        Ok(())
     }
 
     /// Runs the step (a trigger per tick) and the watch (every 10 ticks = 1 ms) for `ticks`;
@@ -270,6 +312,32 @@ mod tests {
         // Rank 1 of the new sequence sits at index 55, not at a multiple of 16.
         assert_eq!((at, m.buf[at]), (55, Some(0)));
         assert_ne!(at % ADC_SEQUENCE_LEN, 0);
+    }
+
+    #[test]
+    fn a_conversion_left_pending_in_dr_would_shift_every_channel() {
+        // Negative control: the same restart without consuming DR: the re-enabled DMA
+        // serves the old request first: the missed rank lands at index 0 and every rank
+        // of the next sequence one place late.
+        let mut m = Model::new();
+        m.trigger();
+        m.miss_rank = Some(7);
+        m.trigger();
+        assert!(m.stop_conversions());
+        m.clear_overrun();
+        realign(&mut m);
+        m.trigger();
+        assert_eq!(m.buf[0], Some(7));
+        assert_eq!(m.buf[1], Some(0));
+        assert!(!m.aligned_since(0));
+        // With `stop` (DR consumed) the ring is aligned.
+        let mut m = Model::new();
+        m.trigger();
+        m.miss_rank = Some(7);
+        m.trigger();
+        restart(&mut m).unwrap();
+        m.trigger();
+        assert!(m.dma_pos == ADC_SEQUENCE_LEN && m.aligned_since(0));
     }
 
     #[test]

@@ -535,7 +535,8 @@ pub mod health {
     use super::Signal;
     /// Stack high-water mark: the most stack ever used since power-up, bytes (4 B per bit).
     pub const STACK_PEAK: Signal = Signal::scaled("StackPeak", 0, 16, 4.0);
-    /// `RIG_COMMAND` frames lost in the receive FIFO (FDCAN RF0L) since power-up, saturating.
+    /// `RIG_COMMAND` frames lost in reception since power-up, saturating; a lower bound:
+    /// FDCAN RF0L is a flag, so losses before the interrupt clears it count once.
     pub const RX_LOST: Signal = Signal::raw("RxLost", 16, 8);
     /// ADC ring restarts after a stall (no progress, overrun) since power-up, saturating.
     pub const ADC_RESTARTS: Signal = Signal::raw("AdcRestarts", 24, 8);
@@ -1139,7 +1140,8 @@ pub struct HealthFrame {
     pub stack_peak_bytes: u32,
     /// The stack's size, bytes (sent to 4 B).
     pub stack_size_bytes: u32,
-    /// Command frames lost in the receive FIFO since power-up (saturates at 255).
+    /// Command frames lost in reception since power-up, at least (saturates at 255; RF0L
+    /// is a flag: losses before the interrupt clears it count once).
     pub rx_lost: u8,
     /// ADC ring restarts since power-up (saturates at 255).
     pub adc_restarts: u8,

@@ -165,17 +165,19 @@ pub trait PulseTimerRegs {
     fn generate_update(&mut self);
 }
 
+/// PSC, ARR and CCR under UDIS (no update event between them).
+#[inline]
+fn write<T: PulseTimerRegs>(t: &mut T, r: &PulseRegisters) {
+    t.set_update_disable(true);
+    t.write_prescaler(r.psc);
+    t.write_period(r.arr);
+    t.write_compare(r.ccr);
+    t.set_update_disable(false);
+}
+
 /// Writes an update in the order that keeps every period whole (module doc).
 #[inline]
 pub fn apply(u: PulseUpdate, t: &mut impl PulseTimerRegs) {
-    let write = |t: &mut _, r: &PulseRegisters| {
-        let t: &mut dyn PulseTimerRegs = t;
-        t.set_update_disable(true);
-        t.write_prescaler(r.psc);
-        t.write_period(r.arr);
-        t.write_compare(r.ccr);
-        t.set_update_disable(false);
-    };
     match u {
         PulseUpdate::Keep => {}
         PulseUpdate::Preload(r) => write(t, &r),

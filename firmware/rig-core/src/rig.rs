@@ -175,7 +175,8 @@ pub struct BoardHealth {
     pub stack_peak_bytes: u32,
     /// The stack's size, bytes.
     pub stack_size_bytes: u32,
-    /// Command frames lost in the receive FIFO since power-up.
+    /// Command frames lost in reception since power-up: a lower bound (FDCAN RF0L is a
+    /// flag; losses before the interrupt clears it count once).
     pub rx_lost: u32,
     /// ADC ring restarts since power-up.
     pub adc_restarts: u32,

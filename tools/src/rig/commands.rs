@@ -318,6 +318,24 @@ impl<T: Transport> Session<T> {
         let mut reason = None;
         let mut accepted = status.command_result == CommandResult::Accepted;
         if !accepted {
+            let rig_start = matches!(
+                command,
+                Command::Start(StartCommand {
+                    mode: RigMode::Rig,
+                    ..
+                })
+            );
+            if rig_start && self.board.armed().is_none() {
+                // RIG_HEALTH (every 100 ms) says whether the board is armed: wait for one
+                // to name the reason exactly.
+                self.run_for(0.15, |b, _| {
+                    if b.armed().is_some() {
+                        Flow::Done
+                    } else {
+                        Flow::Continue
+                    }
+                })?;
+            }
             reason = rejection_reason(&command, &before, self.board.armed());
             if reason.is_none() && first {
                 self.send(command)?;

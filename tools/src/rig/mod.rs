@@ -19,6 +19,7 @@
 //! A rejected command, a lost board, a bus-off or a stuck alive counter ends the session
 //! (exit code 1) and what was recorded is written.
 
+pub mod agreement;
 pub mod commands;
 pub mod io_config;
 pub mod monitor;

@@ -43,7 +43,8 @@
 //! ([`crate::wsp::run_one`]). `--json` holds one entry per run: the rig verdict's keys
 //! (those of `hils wsp-test --json`) with `on_rig` and `end`, or for a run not judged its
 //! `name`, `passed: false`, `on_rig` and `end` (why). `--report DIR` writes `report.md`
-//! (rig and SIL rows side by side, the `wsp-test` sections and plots of both:
+//! (rig and SIL rows side by side, the rig against SIL ([`super::agreement`]: also printed,
+//! and `against_sil` in each judged run's JSON entry), the `wsp-test` sections and plots of both:
 //! `NAME-rig-*.svg`, `NAME-sil-*.svg`) and the logs. A lost board, a bus-off, a stuck alive
 //! counter or a rejected command ends the programme: the runs so far, the partial log and
 //! the summary are written, and the exit code is non-zero.
@@ -180,8 +181,9 @@ pub struct RigRun {
 }
 
 impl RigRun {
-    /// The JSON entry (module doc).
-    fn json(&self) -> serde_json::Value {
+    /// The JSON entry (module doc), with `against_sil` ([`super::agreement::Agreement`]) when
+    /// the rig run was judged.
+    fn json(&self, sil: &Verdict) -> serde_json::Value {
         let mut v = match &self.verdict {
             Some(verdict) => serde_json::to_value(verdict).unwrap_or_default(),
             None => serde_json::json!({ "name": self.name, "passed": false }),
@@ -189,6 +191,13 @@ impl RigRun {
         if let Some(m) = v.as_object_mut() {
             m.insert("on_rig".into(), self.on_rig.into());
             m.insert("end".into(), self.end.clone().into());
+            if let Some(rig) = &self.verdict {
+                let a = super::agreement::agreement(rig, sil);
+                m.insert(
+                    "against_sil".into(),
+                    serde_json::to_value(a).unwrap_or_default(),
+                );
+            }
         }
         v
     }
@@ -231,8 +240,10 @@ fn run_one<T: Transport>(
             send(s, *c)?;
         }
         send(s, Command::Arm)?;
-        send(s, super::track::with_setup_digest(&plan.setup, start)?)?;
+        // The run's demand is in force from its first step (t = 0), as a SIL run's: the
+        // board drives the brake command in force from the start (EB loop, service PWM).
         send(s, Command::Brake(demand))?;
+        send(s, super::track::with_setup_digest(&plan.setup, start)?)?;
         let mut running = true;
         s.run_for(args.max_run_s, |_, seen| match seen {
             Seen::Status(st) if st.state != RigState::Running => {
@@ -289,6 +300,12 @@ pub fn run_programme<T: Transport>(
 ) -> (Vec<RigRun>, Option<Stop>) {
     let mut out = Vec::new();
     let mut stopped: Option<Stop> = None;
+    if runs.iter().any(|r| r.plan.is_ok()) {
+        println!(
+            "arming the board before each run: its pulse trains and wheel speeds drive the controller on {} during the runs (docs/rig.md, Arming)",
+            s.link.describe()
+        );
+    }
     for BoardRun { run, plan } in runs {
         let mut rig = RigRun {
             name: run.name.clone(),
@@ -424,7 +441,16 @@ pub fn main(rig: &RigArgs, args: &RunArgs) -> Result<()> {
         &criteria,
         Some((&dir, "sil")),
     )?;
-    let table = summary_table(&rig_runs, &sil);
+    let pairs: Vec<(&Verdict, &Verdict)> = rig_runs
+        .iter()
+        .zip(&sil)
+        .filter_map(|(r, s)| r.verdict.as_ref().map(|v| (v, s)))
+        .collect();
+    let table = format!(
+        "{}\n{}",
+        summary_table(&rig_runs, &sil),
+        super::agreement::table(&pairs)
+    );
     crate::say!("{table}");
     let on_rig = rig_runs.iter().filter(|r| r.on_rig).count();
     let passed = rig_runs
@@ -435,7 +461,7 @@ pub fn main(rig: &RigArgs, args: &RunArgs) -> Result<()> {
         "{on_rig}/{} runs on the rig, {passed} passed",
         rig_runs.len()
     );
-    let json: Vec<serde_json::Value> = rig_runs.iter().map(RigRun::json).collect();
+    let json: Vec<serde_json::Value> = rig_runs.iter().zip(&sil).map(|(r, s)| r.json(s)).collect();
     out.write_json(&json)?;
     out.write_report(|dir| {
         let heading = format!(

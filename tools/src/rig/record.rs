@@ -443,19 +443,31 @@ impl Recorder {
     }
 
     /// `eb_command_s` and `brake_command_s`: the first emergency and the first brake
-    /// command after `t_from`, s from the first row `t0`.
+    /// command after `t_from`, s from the first row `t0`; a command in force at `t_from` (the
+    /// board drives it from the run's first step) counts at the first row.
     fn command_times(&self, t_from: f64, t0: f64) -> Vec<(&'static str, String)> {
+        let brakes = |t: f64| t > t_from;
         let first_brake = |code: Option<u8>| {
-            self.commands.iter().find(|(t, c)| {
-                *t > t_from
-                    && matches!(c, Command::Brake(b) if code.map_or(Cmd::of(*b) != Cmd::Release, |k| u8::from(Cmd::of(*b)) == k))
+            let is = |c: &Command| matches!(c, Command::Brake(b) if code.map_or(Cmd::of(*b) != Cmd::Release, |k| u8::from(Cmd::of(*b)) == k));
+            let in_force = self
+                .commands
+                .iter()
+                .filter(|(t, c)| *t <= t_from && matches!(c, Command::Brake(_)))
+                .next_back()
+                .filter(|(_, c)| is(c))
+                .map(|_| (t0, Command::Stop));
+            in_force.or_else(|| {
+                self.commands
+                    .iter()
+                    .find(|(t, c)| brakes(*t) && is(c))
+                    .copied()
             })
         };
         let mut meta = Vec::new();
-        if let Some(&(t_eb, _)) = first_brake(Some(Cmd::Emergency as u8)) {
+        if let Some((t_eb, _)) = first_brake(Some(Cmd::Emergency as u8)) {
             meta.push(("eb_command_s", format!("{:.4}", (t_eb - t0).max(0.0))));
         }
-        if let Some(&(t_b, _)) = first_brake(None) {
+        if let Some((t_b, _)) = first_brake(None) {
             meta.push(("brake_command_s", format!("{:.4}", (t_b - t0).max(0.0))));
         }
         meta

@@ -18,8 +18,11 @@
 //!   (`hils_brake_unit::BrakeUnit`, the one `hils simulate` runs, WSP on) at the plant step,
 //!   wired to the board as a real controller would be, every signal through the rig-core
 //!   code the board runs:
-//!   - wheel speeds only from the `RIG_WHEEL_SPEED` frames on the bus (held between frames,
-//!     as an ECU's CAN input);
+//!   - wheel speeds from the four axle-speed pulse trains, as a WSP unit's speed sensor
+//!     inputs read them ([`SpeedSensors`]): the frequency of the timer registers the board
+//!     wrote (`hils_rig_core::pulse::PulseTimer::frequency_of`) times the wheel
+//!     circumference over the teeth (its configuration: the `Configure Teeth` and `Vehicle`
+//!     frames it sees); a silent train is a wheel at rest;
 //!   - its brake demand from the train lines the board drives: the emergency brake loop
 //!     and the service demand PWM's registers, read through
 //!     `hils_rig_core::demand::{DemandConfig::decode_pwm, ControllerDemand}` (open loop or
@@ -33,9 +36,9 @@
 //!     stage), which the board samples and debounces.
 //!
 //!   It keeps the same I/O configuration as the board (the `Configure` frames it sees).
-//!   While the speeds are "not available" (board idle or in its safe state) or the train is
-//!   at standstill (a finished run: every speed 0.00 km/h) it vents (no pressure) and keeps
-//!   no WSP state; when the train moves again (the next run) it starts afresh and weighs
+//!   At standstill (every train silent: the board idle, in its safe state, or a run
+//!   finished) it keeps its brake as the lines demand; a jump from standstill to a running
+//!   speed is the next run: it starts afresh (no WSP state, its cylinders empty) and weighs
 //!   the car.
 //! * **Step timing**: the host time of each [`Rig::step`] call, in cycles of the board's
 //!   170 MHz clock, so the diagnostic frame shows real (host) figures. Unless paced
@@ -56,18 +59,17 @@ use hils_brake_unit::{BrakeDemand, BrakeUnit, UnitConfig, Valve};
 use hils_plant::params::STEP_S;
 use hils_plant::{Params, WHEELSETS};
 use hils_rig_core::can::{
-    ClassicFrame, Command, CommandFrame, ConfigItem, StatusFrame, VehicleKey, WheelSpeedFrame,
+    ClassicFrame, Command, CommandFrame, ConfigItem, StatusFrame, VehicleKey,
 };
 use hils_rig_core::controller_io::{DrivenOutputs, IoConfig};
 use hils_rig_core::demand::ControllerDemand;
 use hils_rig_core::hw::{RigIo, TelemetryEvent};
-use hils_rig_core::pulse::PulseRegisters;
+use hils_rig_core::pulse::{PulseRegisters, PulseTimer};
 use hils_rig_core::rig::{Rig, RigConfig};
 use hils_rig_core::sensor::{ADC_MAX_COUNTS, ADC_SEQUENCE_LEN, OVERSAMPLING, SensorKind};
 use hils_rig_core::valves::{ValveLevels, ValveWiring};
-use hils_rig_core::{CHANNELS, KMH_PER_MPS, STEP_RATE_HZ};
+use hils_rig_core::{CHANNELS, STEP_RATE_HZ};
 
-use super::monitor::Pairing;
 use super::transport::{ProbeEvent, Received, Transport, TransportError};
 
 /// Board time of one tick, s.
@@ -84,6 +86,35 @@ pub struct SimFaults {
     pub status_alive_frozen_at_s: Option<f64>,
 }
 
+/// The four pulse trains as the controller's axle speed sensor inputs read them: the
+/// frequency the board set each train to in its last step (`PulseTimer::frequency_of` of
+/// the registers it wrote; a silent train is a wheel at rest). An ideal frequency input, as
+/// SIL's unit reads the plant's wheel speeds: a real unit measures the pulses' period, a
+/// period late (at most 2 ms above 30 km/h with 90 teeth), which the simulated unit does
+/// not model in SIL either.
+struct SpeedSensors {
+    timer: PulseTimer,
+    /// Registers as written by the step.
+    written: [PulseRegisters; WHEELSETS],
+}
+
+impl SpeedSensors {
+    fn new(timer: PulseTimer) -> Self {
+        Self {
+            timer,
+            written: [timer.silent(); WHEELSETS],
+        }
+    }
+
+    /// Wheel circumferential speeds, m/s, for `teeth` teeth on wheels of radius `r_m`.
+    fn speeds_mps(&self, teeth: u16, r_m: f64) -> [f32; WHEELSETS] {
+        self.written.map(|regs| {
+            (self.timer.frequency_of(&regs) * core::f64::consts::TAU * r_m / teeth.max(1) as f64)
+                as f32
+        })
+    }
+}
+
 /// The rig's hardware as the board's step sees it.
 struct SimIo {
     /// Cylinder pressures the transducers see, Pa.
@@ -92,6 +123,8 @@ struct SimIo {
     valve_levels: ValveLevels,
     /// What the board drives on the controller's lines.
     driven: DrivenOutputs,
+    /// The axle speed pulse trains.
+    pulses: SpeedSensors,
     noise: u32,
     frames: Vec<ClassicFrame>,
     telemetry: Vec<TelemetryEvent>,
@@ -129,7 +162,11 @@ impl RigIo for SimIo {
         Some(seq)
     }
 
-    fn set_pulse(&mut self, _: usize, _: &PulseRegisters) {}
+    fn set_pulse(&mut self, wheelset: usize, registers: &PulseRegisters) {
+        if let Some(w) = self.pulses.written.get_mut(wheelset) {
+            *w = *registers;
+        }
+    }
 
     fn queue_frame(&mut self, frame: ClassicFrame) -> bool {
         self.frames.push(frame);
@@ -155,17 +192,21 @@ pub struct SimController {
     params: Params,
     /// Its I/O configuration (the board's, from the `Configure` frames it sees).
     io: IoConfig,
+    /// Teeth of its speed sensors' phonic wheels (the board's, from `Configure Teeth`).
+    teeth: u16,
     unit: Option<BrakeUnit<f32>>,
     demand: BrakeDemand,
-    /// Wheel circumferential speeds of the last wheel-speed frame, m/s (None: not available).
-    speeds_mps: Option<[f32; WHEELSETS]>,
-    /// Pairs the two wheel-speed frames of a cycle.
-    wheel_pairing: Pairing,
     pressure_pa: [f32; WHEELSETS],
+    /// Every speed sensor read zero at the last step.
+    was_stopped: bool,
     /// The carbody mass its load weighing found at the last start, kg (None: the air-spring
     /// signals were not valid; it took the configured vehicle's).
     weighed_carbody_kg: Option<f64>,
 }
+
+/// A wheel speed above this right after standstill is a new run, m/s (0.5 m/s within a
+/// 0.1 ms step is 5000 m/s^2: no braking or traction does it).
+const NEW_RUN_JUMP_MPS: f32 = 0.5;
 
 /// What the controller drives: its cylinder pressures and its valve coils.
 struct ControllerOut {
@@ -176,44 +217,36 @@ struct ControllerOut {
 }
 
 impl SimController {
-    fn new(io: IoConfig) -> Self {
+    fn new(io: IoConfig, teeth: u16) -> Self {
         Self {
             params: Params::default(),
             io,
+            teeth,
             unit: None,
             demand: BrakeDemand::Emergency,
-            speeds_mps: None,
-            wheel_pairing: Pairing::default(),
             pressure_pa: [0.0; WHEELSETS],
+            was_stopped: true,
             weighed_carbody_kg: None,
         }
     }
 
-    /// A frame on the bus: wheel speeds are its sensor input; the board's configuration
-    /// and vehicle frames its own configuration (a real unit is configured for its train).
+    /// A frame on the bus: the board's configuration and vehicle frames are its own
+    /// configuration (a real unit is configured for its train).
     fn on_frame(&mut self, frame: &ClassicFrame) {
-        if let Ok(half) = WheelSpeedFrame::decode(frame) {
-            let Some(w) = self.wheel_pairing.take(half) else {
-                return;
-            };
-            let s = w.speeds_kmh;
-            self.speeds_mps = if s.iter().all(Option::is_some) {
-                Some(s.map(|v| v.unwrap_or(0.0) / KMH_PER_MPS))
-            } else {
-                None
-            };
-        } else if let Ok(c) = CommandFrame::decode(frame) {
-            match c.command {
-                Command::Vehicle { key, value } => match key {
-                    VehicleKey::Default => self.params.vehicle = Params::default().vehicle,
-                    key => key.apply(&mut self.params.vehicle, value),
-                },
-                // The board refuses an inconsistent value; so does this copy.
-                Command::Configure(ConfigItem::Io(item, v)) => {
-                    let _ = self.io.set(item, v);
-                }
-                _ => {}
+        let Ok(c) = CommandFrame::decode(frame) else {
+            return;
+        };
+        match c.command {
+            Command::Vehicle { key, value } => match key {
+                VehicleKey::Default => self.params.vehicle = Params::default().vehicle,
+                key => key.apply(&mut self.params.vehicle, value),
+            },
+            // The board refuses an inconsistent value; so does this copy.
+            Command::Configure(ConfigItem::Io(item, v)) => {
+                let _ = self.io.set(item, v);
             }
+            Command::Configure(ConfigItem::Teeth(t)) => self.teeth = t.max(1),
+            _ => {}
         }
     }
 
@@ -252,8 +285,9 @@ impl SimController {
         }
     }
 
-    /// One plant step of the controller, reading the lines the board drove last.
-    fn step(&mut self, lines: &DrivenOutputs) -> ControllerOut {
+    /// One plant step of the controller, reading the lines the board drove last and its
+    /// speed sensors.
+    fn step(&mut self, lines: &DrivenOutputs, sensors: &SpeedSensors) -> ControllerOut {
         let demand = self.read_demand(lines);
         if demand != self.demand {
             self.demand = demand;
@@ -266,15 +300,18 @@ impl SimController {
             dump: [false; WHEELSETS],
             hold: [false; WHEELSETS],
         };
-        // Speeds not available (the board idle or in its safe state), or the train at
-        // standstill (a run finished: 0.00 km/h): no WSP state is kept; the unit starts
-        // afresh, weighing the car, when the train moves again (the next run).
-        let Some(speeds) = self.speeds_mps.filter(|s| s.iter().any(|&v| v > 0.0)) else {
-            self.unit = None;
-            self.pressure_pa = [0.0; WHEELSETS];
+        // A jump from standstill (every train silent: the board idle, in its safe state or
+        // a run finished) to a running speed, which no braking or traction makes within a
+        // step, is a new run on the rig: the unit starts afresh and weighs the car. At
+        // standstill it keeps its brake as demanded.
+        let speeds = sensors.speeds_mps(self.teeth, self.params.vehicle.wheel_radius);
+        let stopped = speeds.iter().all(|&v| v <= 0.0);
+        let new_run = self.was_stopped && speeds.iter().any(|&v| v > NEW_RUN_JUMP_MPS);
+        self.was_stopped = stopped;
+        if self.unit.is_none() && stopped {
             return out;
-        };
-        if self.unit.is_none() {
+        }
+        if self.unit.is_none() || new_run {
             self.start_unit(lines);
         }
         if let Some(u) = &mut self.unit {
@@ -320,11 +357,12 @@ impl SimBoard {
                 pressure_pa: [0.0; CHANNELS],
                 valve_levels: ValveLevels::of_coils([false; 4], [false; 4], &config.io.valves),
                 driven: DrivenOutputs::safe(&config.pulse_timer),
+                pulses: SpeedSensors::new(config.pulse_timer),
                 noise: 0x2545_F491,
                 frames: Vec::new(),
                 telemetry: Vec::new(),
             },
-            controller: SimController::new(config.io),
+            controller: SimController::new(config.io, config.teeth),
             tick: 0,
             to_board: VecDeque::new(),
             to_host: VecDeque::new(),
@@ -360,7 +398,7 @@ impl SimBoard {
         // The board's builder task (thread mode): a requested run is built and handed over
         // between two steps; a build error is in the status frame as on the board.
         let _ = self.rig.build_pending();
-        let out = self.controller.step(&self.io.driven);
+        let out = self.controller.step(&self.io.driven, &self.io.pulses);
         self.io.pressure_pa = out.pressure_pa;
         let wiring = self.rig.config().io.valves;
         self.io.valve_levels = ValveLevels::of_coils(out.dump, out.hold, &wiring);

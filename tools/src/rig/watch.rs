@@ -103,7 +103,7 @@ pub fn render(board: &BoardView, source: &str, t_s: f64) -> String {
         };
         let _ = write!(
             s,
-            "\n{arming}  stack peak {} of {} B  rx lost {}  adc restarts {}  fault resets {}",
+            "\n{arming}  stack peak {} of {} B  rx lost at least {}  adc restarts {}  fault resets {}",
             h.stack_peak_bytes, h.stack_size_bytes, h.rx_lost, h.adc_restarts, h.fault_resets
         );
     }

@@ -429,34 +429,42 @@ pub fn fill_gaps(
 }
 
 /// The brake response of a log from its cylinder pressures (in the spirit of EN 14531's
-/// equivalent response time): p_final the highest logged pressure; the fastest wheelset's
-/// times to 10 % and 63.2 % of it fit a first-order build-up after a dead time,
-/// tau = (t63 - t10) / (1 - ln(1/0.9)), t_d = t10 - ln(1/0.9) tau. None when the pressures
-/// are not logged or never reach 63.2 %.
-pub fn response_of_log(trace: &Trace) -> Option<(f64, f64)> {
+/// equivalent response time) towards the demand's pressure `demand_pressure_pa`: the
+/// fastest wheelset's times to 10 % and 63.2 % of it fit a first-order build-up after a dead
+/// time, tau = (t63 - t10) / (1 - ln(1/0.9)), t_d = t10 - ln(1/0.9) tau. Each wheelset only
+/// up to its first WSP action (vent or hold) and the stop: a build-up that WSP or the stop
+/// cut short is not the brake's response (on a very low adhesion rail the pressure reaches
+/// the demand only at the end, which gave tau ~ 100 s). None when the pressures are not
+/// logged or no wheelset reaches 63.2 % before its WSP acts (the parameter file's response
+/// is then used).
+pub fn response_of_log(trace: &Trace, demand_pressure_pa: f64) -> Option<(f64, f64)> {
+    if !(demand_pressure_pa > 0.0) {
+        return None;
+    }
     let n = trace.t_s.len();
-    let logged: Vec<&Vec<f64>> = trace.p_cyl_pa.iter().filter(|p| p.len() == n).collect();
-    let p_final = logged
-        .iter()
-        .flat_map(|p| p.iter())
-        .fold(0.0f64, |m, &p| m.max(p));
-    if logged.is_empty() || p_final <= 0.0 {
-        return None;
-    }
-    let first = |share: f64| {
-        logged
-            .iter()
-            .filter_map(|p| p.iter().position(|&x| x >= share * p_final))
-            .map(|k| trace.t_s[k])
-            .fold(f64::INFINITY, f64::min)
-    };
-    let (t10, t63) = (first(0.1), first(1.0 - (-1.0f64).exp()));
-    if !(t10.is_finite() && t63.is_finite()) {
-        return None;
-    }
+    // Up to the stop: at standstill the cylinders go on to the full demand (a controller
+    // holds the brake), which the build-up under way never reached.
+    let stop_mps = hils_sil::scenario::STOP_SPEED_MPS + trace.speed_resolution_mps.max(0.0);
+    let stop = trace.v_mps.iter().position(|&v| v <= stop_mps).unwrap_or(n);
+    let acts = |states: &Vec<bool>| states.iter().position(|&a| a).unwrap_or(n);
     let l10 = (1.0f64 / 0.9).ln();
-    let tau = ((t63 - t10) / (1.0 - l10)).max(0.0);
-    Some(((t10 - l10 * tau).max(0.0), tau))
+    (0..4)
+        .filter(|&j| trace.p_cyl_pa[j].len() == n)
+        .filter_map(|j| {
+            let end = stop
+                .min(acts(&trace.venting[j]))
+                .min(acts(&trace.holding[j]));
+            let p = &trace.p_cyl_pa[j][..end];
+            let first = |share: f64| {
+                p.iter()
+                    .position(|&x| x >= share * demand_pressure_pa)
+                    .map(|k| trace.t_s[k])
+            };
+            let (t10, t63) = (first(0.1)?, first(1.0 - (-1.0f64).exp())?);
+            let tau = ((t63 - t10) / (1.0 - l10)).max(0.0);
+            Some(((t10 - l10 * tau).max(0.0), tau))
+        })
+        .min_by(|a, b| (a.0 + a.1).total_cmp(&(b.0 + b.1)))
 }
 
 /// Judges a log's trace as `run` of the programme: the same metrics and criteria as a SIL
@@ -465,7 +473,9 @@ pub fn response_of_log(trace: &Trace) -> Option<(f64, f64)> {
 pub fn judge_trace(run: Run, trace: Trace, criteria: &Criteria) -> Outcome {
     let adhesion = AvailableAdhesion::new(&run.file.plant, &run.sets);
     let mut allowed = allowed_stop(&run, &adhesion, &trace);
-    if let Some((dead_time_s, build_up_s)) = response_of_log(&trace) {
+    let demand_pressure_pa =
+        hils_brake_unit::demand_pressure(&run.file.plant, &run.file.brake_unit, run.demand);
+    if let Some((dead_time_s, build_up_s)) = response_of_log(&trace, demand_pressure_pa) {
         (allowed.dead_time_s, allowed.build_up_s) = (dead_time_s, build_up_s);
     }
     let verdict = judge(&run.name, &trace, &allowed, criteria);

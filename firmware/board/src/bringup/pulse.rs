@@ -1,5 +1,7 @@
 //! A pulse train measured through one jumper wire: D7 (PA8, TIM1_CH1, wheelset 1's pulse
-//! output) to D12 (PA6, TIM16_CH1 input capture, AF1).
+//! output) to D12 (PA6, TIM16_CH1 input capture, AF1); then the timer's break: a software
+//! break (EGR.BG, the path a lockup or a clock failure takes in hardware) must clear MOE and
+//! hold the pin low with no further edge.
 
 use cortex_m::peripheral::DWT;
 use embassy_stm32::Peri;
@@ -48,9 +50,9 @@ pub async fn pulse_through_jumper(
 ) -> bool {
     let config = RigConfig::nucleo_g474re();
     let timer: PulseTimer = config.pulse_timer;
-    let out = PulseOut::new(
+    let mut out = PulseOut::new(
         Timer::new(tim1),
-        PwmPin::new(pa8, OutputType::PushPull),
+        || PwmPin::new(pa8, OutputType::PushPull),
         &timer.silent(),
     );
     let radius = Params::default().vehicle.wheel_radius as f32;
@@ -84,12 +86,24 @@ pub async fn pulse_through_jumper(
             }
         }
     }
+    // The break: MOE cleared by hardware, the output at its idle level (low), no edge.
+    let tim = out.regs();
+    tim.egr().write(|w| w.set_bg(0, true));
+    t16.sr().write(|w| w.0 = 0);
+    let quiet = next_capture(timeout).is_none();
+    let low = pac::GPIOA.idr().read().0 & (1 << 8) == 0;
+    let broke = !tim.bdtr().read().moe() && quiet && low;
     capture.stop();
-    // Silent registers take effect at the end of the running period (< 1 ms); then the
-    // timer may be dropped (its clock off) with the pin low.
     out.write(&timer.silent());
-    embassy_time::Timer::after_millis(2).await;
     let pass = edges && c.matches(PULSE_CAPTURE_HZ, expected_hz, 100);
+    defmt::println!(
+        "{=str} break: software break on TIM1: MOE cleared {=bool}, no edge after it {=bool}, PA8 low {=bool} (the path of a lockup, SYSCFG_CFGR2.CLL {=bool})",
+        verdict(broke),
+        !tim.bdtr().read().moe(),
+        quiet,
+        low,
+        pac::SYSCFG.cfgr2().read().cll()
+    );
     defmt::println!(
         "{=str} pulse: D7 (PA8) -> D12 (PA6): {=f32} Hz measured over {=u32} periods (min {=u32}, max {=u32} counts at {=u32} Hz), {=f32} Hz set for {=f32} km/h (PSC {=u16}, ARR {=u32}){=str}",
         verdict(pass),
@@ -108,5 +122,5 @@ pub async fn pulse_through_jumper(
             "; no edges: fit the jumper D7-D12"
         }
     );
-    pass
+    pass && broke
 }
