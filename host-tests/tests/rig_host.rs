@@ -498,9 +498,10 @@ fn programme_runs_each_run_on_the_board_and_reports() {
     );
     let v0 = 50.0 / KMH_PER_MPS;
     assert!(x > 0.5 * v0 * t && x < v0 * t, "x {x} t {t}");
+    // (The JSON's ratio is rounded to 1e-4 and the distances to the mm: issue 25.)
     let ratio = runs[0]["distance_ratio"].as_f64().unwrap();
     assert!(
-        (ratio - x / allowed).abs() < 1e-9 && allowed > 0.5 * v0 * t,
+        (ratio - x / allowed).abs() < 1e-4 && allowed > 0.5 * v0 * t,
         "{}",
         runs[0]
     );

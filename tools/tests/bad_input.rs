@@ -317,7 +317,7 @@ fn programme_values_are_range_checked_naming_the_key() {
     }
     cases.push((
         programme_text("", RUN, "[tracks.s]\nbase = \"low\"\n[tracks.s.sets.low]\nk_a = -1.0\nk_s = 0.1\nmu_0 = 0.08\na_ratio = 0.4\nb_exp = 0.2\n"),
-        "sets.low",
+        "sets.low.k_a",
     ));
     for (i, (text, cause)) in cases.iter().enumerate() {
         let path = dir.join(format!("p{i}.toml"));

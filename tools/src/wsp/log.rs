@@ -46,7 +46,9 @@ use hils_brake_unit::BrakeDemand;
 use hils_plant::{Surface, WHEELSETS};
 use hils_sil::{Cmd, KMH_PER_MPS, ParamFile};
 
-use super::metrics::{AvailableAdhesion, Trace, judge, wheelset_offsets};
+use super::metrics::{
+    AvailableAdhesion, BrakeModel, CaliperBrake, DiscTemps, Trace, judge, wheelset_offsets,
+};
 use super::programme::{Criteria, Run, demand_text, parse_demand, track_layout};
 use super::{Outcome, allowed_stop};
 use crate::measured::{RunLog, read_run_log};
@@ -467,6 +469,22 @@ pub fn response_of_log(trace: &Trace, demand_pressure_pa: f64) -> Option<(f64, f
         .min_by(|a, b| (a.0 + a.1).total_cmp(&(b.0 + b.1)))
 }
 
+/// The disc temperatures of the perfect-WSP brake (Eq (2)'s pad friction depends on them)
+/// for a log that does not hold them (a rig's log): those of the SIL run of the same
+/// programme run, the plant's disc heat balance (Eqs 3-6) under the reference unit. A cold
+/// disc instead (0 rise, Eq (2)'s highest friction) made the reference of a low -> dry ->
+/// low EB 3.3 % shorter on the rig than in SIL. None when the log holds them, or when the
+/// SIL run fails (then the cold disc of [`DiscTemps::at`]).
+fn sil_disc_temps(run: &Run, trace: &Trace) -> Option<DiscTemps> {
+    let n = trace.t_s.len();
+    if trace.disc_temp_c.iter().all(|t| t.len() == n) {
+        return None;
+    }
+    super::simulate(run)
+        .ok()
+        .map(|(sil, _)| DiscTemps::of(&sil))
+}
+
 /// Judges a log's trace as `run` of the programme: the same metrics and criteria as a SIL
 /// run, the brake response from the logged pressures when they show it; the surfaces under
 /// the wheelsets are those of the run's track at the logged distance.
@@ -475,6 +493,10 @@ pub fn judge_trace(run: Run, trace: Trace, criteria: &Criteria) -> Outcome {
     let mut allowed = allowed_stop(&run, &adhesion, &trace);
     let demand_pressure_pa =
         hils_brake_unit::demand_pressure(&run.file.plant, &run.file.brake_unit, run.demand);
+    if let Some(disc) = sil_disc_temps(&run, &trace) {
+        allowed.brake =
+            BrakeModel::Caliper(CaliperBrake::new(&run.file.plant, demand_pressure_pa, disc));
+    }
     if let Some((dead_time_s, build_up_s)) = response_of_log(&trace, demand_pressure_pa) {
         (allowed.dead_time_s, allowed.build_up_s) = (dead_time_s, build_up_s);
     }
