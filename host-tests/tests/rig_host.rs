@@ -402,6 +402,7 @@ fn programme_args(
         settle_s: 3.0,
         only: None,
         arm: true,
+        io: None,
     };
     let rig = hils::rig::RigArgs {
         interface: "sim".into(),
@@ -456,36 +457,21 @@ fn programme_runs_each_run_on_the_board_and_reports() {
     ] {
         assert!(runs[0].get(key).is_some(), "key {key}: {}", runs[0]);
     }
-    // The rig's log has no vent commands of the controller under test: the air is estimated
-    // from the measured cylinder pressures, and flagged so; the WSP timer needs the hold
-    // states, which no pressure shows: not measured, its criterion not judged, the run not
-    // passed.
-    assert_eq!(
-        runs[0]["estimated_from_cylinder_pressure"],
-        serde_json::json!(["air_consumption_l"])
-    );
-    assert_eq!(
-        runs[0]["not_measured"],
-        serde_json::json!(["wsp_timer_actions"])
-    );
-    assert_eq!(runs[0]["passed"], false, "{}", runs[0]);
-    let criteria = runs[0]["criteria"].as_array().unwrap();
-    let timer = criteria
-        .iter()
-        .find(|c| {
-            c["criterion"]
-                .as_str()
-                .unwrap()
-                .starts_with("wsp_timer_actions")
-        })
-        .unwrap();
-    assert_eq!(timer["passed"], false);
-    assert!(
-        timer["criterion"]
-            .as_str()
-            .unwrap()
-            .ends_with("(not measured: not judged)")
-    );
+    // The board reads the controller's valve coils (every input wired on the simulated
+    // rig): air and WSP timer judged from them, nothing "not measured"; the log has the
+    // valves and what the board drove.
+    assert!(runs[0].get("not_measured").is_none(), "{}", runs[0]);
+    for c in runs[0]["criteria"].as_array().unwrap() {
+        assert!(
+            !c["criterion"].as_str().unwrap().contains("not measured"),
+            "{c}"
+        );
+    }
+    let log = hils::measured::read_run_log(&dir.join("report").join("wet-eb-50.csv")).unwrap();
+    for j in 0..4 {
+        assert!(log.wsp[j].as_ref().unwrap().iter().all(|x| x.is_finite()));
+        assert!(log.hold[j].as_ref().unwrap().iter().all(|x| x.is_finite()));
+    }
     // The low-adhesion track runs on the board.
     assert_eq!(runs[1]["on_rig"], true, "{}", runs[1]);
     assert_eq!(runs[1]["end"], "finished");
@@ -526,9 +512,10 @@ fn programme_runs_each_run_on_the_board_and_reports() {
     );
     let v0 = 50.0 / KMH_PER_MPS;
     assert!(x > 0.5 * v0 * t && x < v0 * t, "x {x} t {t}");
+    // (The JSON's ratio is rounded to 1e-4 and the distances to the mm: issue 25.)
     let ratio = runs[0]["distance_ratio"].as_f64().unwrap();
     assert!(
-        (ratio - x / allowed).abs() < 1e-9 && allowed > 0.5 * v0 * t,
+        (ratio - x / allowed).abs() < 1e-4 && allowed > 0.5 * v0 * t,
         "{}",
         runs[0]
     );

@@ -194,6 +194,11 @@ const HOST_ISA: &str = if cfg!(all(target_feature = "avx2", target_feature = "fm
 pub fn main(args: BenchArgs) -> Result<()> {
     if let Some(path) = &args.reader {
         if let Some(mb) = args.write_log_mb {
+            crate::outputs::OutFile::check_file(
+                path,
+                "--reader",
+                "the synthetic log is written to a file and then read",
+            )?;
             write_log(path, mb)?;
         }
         return bench_reader(path, args.json);
@@ -233,9 +238,11 @@ pub fn main(args: BenchArgs) -> Result<()> {
 /// Writes a synthetic braking run log of about `mb` MB (the spec's columns, values
 /// formatted like `hils decode`'s f32 cells), streaming (small memory).
 pub fn write_log(path: &std::path::Path, mb: f64) -> Result<()> {
-    use std::io::Write;
-    let file = std::fs::File::create(path)?;
-    let mut w = std::io::BufWriter::new(file);
+    crate::outputs::write_atomic(path, |w| write_log_to(w, mb))
+}
+
+/// The synthetic run log of [`write_log`].
+fn write_log_to(w: &mut dyn std::io::Write, mb: f64) -> Result<()> {
     writeln!(w, "# source: hils bench --write-log-mb {mb}\n# rail: dry")?;
     let mut header = vec!["t_s".to_string(), "v_ref_mps".to_string()];
     for stem in ["omega", "p_cyl", "f_clamp", "f_brake", "t_disc", "wsp"] {
@@ -283,12 +290,11 @@ pub fn write_log(path: &std::path::Path, mb: f64) -> Result<()> {
         written += line.len() as u64;
         k += 1;
     }
-    w.flush()?;
     Ok(())
 }
 
 /// The process's peak resident memory, bytes (Linux `VmHWM`; 0 where unknown).
-fn peak_rss_bytes() -> u64 {
+pub fn peak_rss_bytes() -> u64 {
     std::fs::read_to_string("/proc/self/status")
         .ok()
         .and_then(|s| {

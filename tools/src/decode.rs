@@ -26,13 +26,13 @@ use clap::Args;
 pub use hils_rig_core as rig_core;
 use hils_rig_core::Code;
 use hils_rig_core::can::RigState;
-use hils_rig_core::telemetry::{
-    Line, ParseError, RunHeader, TelemetryRecord, WSP_KNOWN, parse_line,
-};
+use hils_rig_core::telemetry::{Line, ParseError, RunHeader, TelemetryRecord, parse_line};
+use hils_rig_core::valves::ValveStates;
 use hils_sil::Cmd;
 use hils_sil::record::Channel;
 use hils_sil::record::run_log::{self, *};
 
+use crate::outputs::OutFile;
 use crate::runlog;
 
 /// Arguments of `hils decode`.
@@ -43,8 +43,8 @@ pub struct DecodeArgs {
     /// Firmware ELF whose defmt table decodes a raw capture (target/thumbv7em-none-eabihf/release/board).
     #[arg(long)]
     pub elf: Option<PathBuf>,
-    /// Output CSV file; with several runs in the log, `-N` is added before the extension
-    /// unless --run picks one.
+    /// Output CSV file (`-`: standard output, one run); with several runs in the log, `-N`
+    /// is added before the extension unless --run picks one.
     #[arg(short, long)]
     pub out: PathBuf,
     /// Decode only this run of the log (1 = the first).
@@ -230,16 +230,24 @@ impl Run {
     fn has_clamp(&self) -> bool {
         self.self_test() || self.header.pressure_channels & 0x0F != 0x0F
     }
-    fn has_wsp(&self) -> bool {
-        self.records.iter().any(|r| r.wsp & WSP_KNOWN != 0)
+    /// Whether any record knows a dump (`hold`: a hold) valve's state: a valve input wired
+    /// (rig mode) or the simulated unit's valves (self-test).
+    fn has_valves(&self, hold: bool) -> bool {
+        self.records.iter().any(|r| {
+            let v = ValveStates::of_bits(r.valves);
+            (if hold { v.hold_known } else { v.dump_known }) != 0
+        })
     }
 
-    /// The logged channels, in the schema's order.
+    /// The logged channels, in the schema's order: the controller outputs the board drove
+    /// (EB loop, service demand, air springs) in rig mode only (self-test drives none).
     pub fn channels(&self) -> Vec<Channel> {
         let logged = |c: Channel| match c {
             P_CYL => self.has_pressure(),
             F_CLAMP => self.has_clamp(),
-            WSP => self.has_wsp(),
+            WSP => self.has_valves(false),
+            HOLD => self.has_valves(true),
+            EB_LOOP | SERVICE_DEMAND | AIR_SPRING1 | AIR_SPRING2 => !self.self_test(),
             CREEPAGE | ADHESION | X | V_REF_EST => false,
             _ => true,
         };
@@ -314,7 +322,7 @@ impl Run {
         }
         m.push((
             "notes",
-            "p_cyl/f_clamp empty = not measured on that channel; faults = hils_rig_core::rig::Faults bits; sensor_faults = 4 bits per channel; step times from the DWT cycle counter; surface = zone under the wheelset (board telemetry); mu_avail = available adhesion of that surface at v_ref (default vehicle and contact sets, as the board's plant; hils wsp-test's table)".to_string(),
+            "p_cyl/f_clamp empty = not measured on that channel; wsp = dump valve coil, hold = hold valve coil (rig: the valve inputs, empty where not wired; self-test: the simulated unit's valves); eb_loop_closed, service_demand_mps2, air_spring1/2_pa = what the board drove on the controller's lines (rig mode; air springs empty while silent); faults = hils_rig_core::rig::Faults bits; sensor_faults = 4 bits per channel; step times from the DWT cycle counter; surface = zone under the wheelset (board telemetry); mu_avail = available adhesion of that surface at v_ref (default vehicle and contact sets, as the board's plant; hils wsp-test's table)".to_string(),
         ));
         m
     }
@@ -336,8 +344,15 @@ impl Run {
             F_BRAKE => cell(r.f_brake[j]),
             T_DISC => cell(r.t_disc[j]),
             Q => cell(r.q[j]),
-            WSP if r.wsp & WSP_KNOWN == 0 => String::new(),
-            WSP => ((r.wsp >> j) & 1).to_string(),
+            WSP | HOLD => {
+                let v = ValveStates::of_bits(r.valves);
+                let state = if c == WSP { v.dump(j) } else { v.hold(j) };
+                state.map_or(String::new(), |on| (on as u8).to_string())
+            }
+            EB_LOOP => (r.driven & 1).to_string(),
+            SERVICE_DEMAND => cell(r.service_demand),
+            AIR_SPRING1 => cell(r.air_spring[0]),
+            AIR_SPRING2 => cell(r.air_spring[1]),
             A_X => cell(r.a_x),
             CMD => cmd_text(r.cmd).to_string(),
             MU_D => cell(r.mu_d[j]),
@@ -438,6 +453,7 @@ pub fn read_log(input: &Path, elf: Option<&Path>) -> Result<LogText> {
 }
 
 pub fn main(args: DecodeArgs) -> Result<()> {
+    let out = OutFile::check(&args.out, "-o")?;
     let log = read_log(&args.input, args.elf.as_deref())?;
     if log.malformed_frames > 0 {
         eprintln!(
@@ -463,39 +479,26 @@ pub fn main(args: DecodeArgs) -> Result<()> {
         }
         None => runs.iter().enumerate().map(|(i, r)| (i + 1, r)).collect(),
     };
+    let outputs = run_outputs(&out, &args.out, &chosen)?;
     let source = args.input.display().to_string();
-    for (k, run) in &chosen {
-        let path = if chosen.len() == 1 {
-            args.out.clone()
-        } else {
-            let stem = args
-                .out
-                .file_stem()
-                .and_then(|s| s.to_str())
-                .unwrap_or("run");
-            let ext = args
-                .out
-                .extension()
-                .and_then(|s| s.to_str())
-                .unwrap_or("csv");
-            args.out.with_file_name(format!("{stem}-{k}.{ext}"))
-        };
+    for ((k, run), out) in chosen.iter().zip(&outputs) {
         if run.records.is_empty() {
             bail!("run {k} (line {}): no telemetry records", run.line);
         }
-        // Written whole once it is complete: a run refused half-way leaves no file.
+        // Written whole once it is complete (atomically): a run refused half-way leaves no
+        // file.
         let mut csv = Vec::new();
         run.write_csv(&mut csv, &source)
             .with_context(|| format!("{}", args.input.display()))?;
-        std::fs::write(&path, csv).with_context(|| format!("cannot create {}", path.display()))?;
+        out.write(csv)?;
         let last = run.records.last().map(|r| run.time_s(r)).unwrap_or(0.0);
-        println!(
+        crate::say!(
             "run {k}: {} records, 0 to {last:.3} s, {} missing, {} corrupt, end: {} -> {}",
             run.records.len(),
             run.missing_records,
             run.corrupt_records,
             run.end.map(|(_, s)| state_text(s)).unwrap_or("none"),
-            path.display()
+            out.describe()
         );
         if run.corrupt_records > 0 {
             eprintln!(
@@ -511,4 +514,24 @@ pub fn main(args: DecodeArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The output of each chosen run, checked before any is written: `-o` itself for one run;
+/// for several, `-N` before the extension of `-o` (standard output takes one run only).
+fn run_outputs(out: &OutFile, path: &Path, chosen: &[(usize, &Run)]) -> Result<Vec<OutFile>> {
+    if chosen.len() == 1 {
+        return Ok(vec![out.clone()]);
+    }
+    if *out == OutFile::Stdout {
+        bail!(
+            "-o -: the log holds {} runs and standard output takes one: pick it with --run N",
+            chosen.len()
+        );
+    }
+    let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("run");
+    let ext = path.extension().and_then(|s| s.to_str()).unwrap_or("csv");
+    chosen
+        .iter()
+        .map(|(k, _)| OutFile::check(&path.with_file_name(format!("{stem}-{k}.{ext}")), "-o"))
+        .collect()
 }

@@ -42,10 +42,12 @@ pub struct BrakeUnitParams {
     /// Pilot pressure lag of the EP valve, s.
     #[cfg_attr(feature = "serde", serde(default = "defaults::ep_time_constant_s"))]
     pub ep_time_constant_s: f64,
-    /// WSP reapply in pulses: fill time of a pulse, s (0: one continuous refill).
+    /// WSP probe after a slide: the longest fill of one pulse, s (each pulse raises the brake
+    /// force by the WSP's `probe_step_share`, [`crate::wsp`]).
     #[cfg_attr(feature = "serde", serde(default = "defaults::reapply_pulse_fill_s"))]
     pub reapply_pulse_fill_s: f64,
-    /// WSP reapply in pulses: hold between pulses, s.
+    /// WSP probe after a slide: the hold before each pulse's fill, s (longer than the dead
+    /// time and the wheel's settling, so that the wheel shows each step's effect).
     #[cfg_attr(feature = "serde", serde(default = "defaults::reapply_pulse_hold_s"))]
     pub reapply_pulse_hold_s: f64,
     /// Deceleration of the highest service brake step, m/s^2.
@@ -58,7 +60,8 @@ pub struct BrakeUnitParams {
 
 /// Defaults of the `[brake_unit]` keys added by issue 13 (the reference file predates
 /// them). Assumed values: a proportional EP valve of ~15 kPa hysteresis and 30 ms pilot
-/// lag; pulsed reapply of 30 ms fill / 50 ms hold; 7 service steps up to 1.0 m/s^2.
+/// lag; WSP probe pulses of at most 50 ms fill after 100 ms holds (issue 25; 30 / 50 ms
+/// before); 7 service steps up to 1.0 m/s^2.
 mod defaults {
     pub fn ep_valve() -> bool {
         true
@@ -76,10 +79,10 @@ mod defaults {
         0.03
     }
     pub fn reapply_pulse_fill_s() -> f64 {
-        0.03
+        0.05
     }
     pub fn reapply_pulse_hold_s() -> f64 {
-        0.05
+        0.1
     }
     pub fn full_service_mps2() -> f64 {
         1.0

@@ -159,14 +159,31 @@ impl ContactSets {
         }
     }
 
-    /// Checks both sets' ranges (the key names the set).
+    /// Checks both sets' ranges (the key names the set and the value: `sets.low.mu_0`).
     pub fn validate(&self) -> Result<(), ParamError> {
-        for (set, name) in [(&self.low, "sets.low"), (&self.very_low, "sets.very_low")] {
-            check(name, set.k_a, 1e-3, 100.0)?;
-            check(name, set.k_s, 1e-3, 100.0)?;
-            check(name, set.mu_0, 1e-3, 2.0)?;
-            check(name, set.a_ratio, 0.0, 1.0)?;
-            check(name, set.b_exp, 0.0, 100.0)?;
+        let keys = |set: &'static str| match set {
+            "low" => [
+                "sets.low.k_a",
+                "sets.low.k_s",
+                "sets.low.mu_0",
+                "sets.low.a_ratio",
+                "sets.low.b_exp",
+            ],
+            _ => [
+                "sets.very_low.k_a",
+                "sets.very_low.k_s",
+                "sets.very_low.mu_0",
+                "sets.very_low.a_ratio",
+                "sets.very_low.b_exp",
+            ],
+        };
+        for (set, name) in [(&self.low, "low"), (&self.very_low, "very_low")] {
+            let [k_a, k_s, mu_0, a_ratio, b_exp] = keys(name);
+            check(k_a, set.k_a, 1e-3, 100.0)?;
+            check(k_s, set.k_s, 1e-3, 100.0)?;
+            check(mu_0, set.mu_0, 1e-3, 2.0)?;
+            check(a_ratio, set.a_ratio, 0.0, 1.0)?;
+            check(b_exp, set.b_exp, 0.0, 100.0)?;
         }
         Ok(())
     }

@@ -30,6 +30,10 @@
 //! * [`telemetry`]: the decimated telemetry record, its defmt line and its parser.
 //! * [`setup`]: the track and vehicle a run is set up with, as the board keeps them.
 //! * [`digest`]: the CRC-16 setup digest a `Start` carries.
+//! * [`valves`]: the controller's WSP dump and hold valve inputs, debounced.
+//! * [`demand`]: the brake demand to the controller: emergency brake loop, service PWM.
+//! * [`load`]: the air-spring pressure (load-weighing) signals on the DACs.
+//! * [`controller_io`]: the controller I/O's configuration and what the step drives.
 //! * [`rig`]: the real-time step and the run state machine (commands, faults, safe state).
 //! * [`hw`]: the hardware-interface traits the board implements.
 //! * [`script`]: a scripted self-test run shared by the QEMU telemetry fixture and its host check.
@@ -46,11 +50,14 @@ pub mod bus;
 pub mod can;
 pub mod can_timing;
 pub mod can_tx;
+pub mod controller_io;
+pub mod demand;
 pub mod digest;
 pub mod fdcan;
 pub mod handoff;
 pub mod heartbeat;
 pub mod hw;
+pub mod load;
 pub mod log_gate;
 pub mod pulse;
 pub mod reset_loop;
@@ -61,6 +68,7 @@ pub mod setup;
 pub mod stack;
 pub mod telemetry;
 pub mod timing;
+pub mod valves;
 
 pub use hils_plant::WHEELSETS;
 

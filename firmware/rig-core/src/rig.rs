@@ -62,17 +62,20 @@ use hils_sil::{ClosedLoop, LoopError};
 use crate::Code;
 use crate::arming::{ArmRefused, ArmingGate, Disarm};
 use crate::can::{
-    BrakeCommand, Calibration, Command, CommandFrame, CommandResult, ConfigItem, DecodeError,
-    DiagFrame, HealthFrame, RigMode, RigState, StartCommand, StatusFrame, TrackCommand,
-    WHEEL_SPEED_MAX_KMH, WheelSpeedFrame, ZoneFrame, friction_code, rail_code, surface_code,
+    BrakeCommand, BrakeDemandFrame, Calibration, Command, CommandFrame, CommandResult, ConfigItem,
+    DecodeError, DiagFrame, HealthFrame, RigMode, RigState, StartCommand, StatusFrame,
+    TrackCommand, WHEEL_SPEED_MAX_KMH, WheelSpeedFrame, ZoneFrame, friction_code, rail_code,
+    surface_code,
 };
+use crate::controller_io::{DrivenOutputs, IoConfig, IoConfigError, IoItem};
 use crate::digest::setup_digest;
 use crate::hw::{RigIo, TelemetryEvent};
 use crate::pulse::{PulseRegisters, PulseTimer, wheel_frequency_hz};
 use crate::sensor::{CalibrationError, SensorChannel, SensorFault, SensorKind, split_sequence};
 use crate::setup::{TrackFrames, VehicleValues};
-use crate::telemetry::{RunHeader, TelemetryRecord, WSP_KNOWN};
+use crate::telemetry::{RunHeader, TelemetryRecord};
 use crate::timing::{StepTiming, cycles_to_us};
+use crate::valves::{ValveInputs, ValveStates};
 use crate::{CHANNELS, KMH_PER_MPS, STEP_RATE_HZ, WHEELSETS};
 
 /// A frame schedule in ticks: sent when `tick % period == phase`.
@@ -110,6 +113,12 @@ pub const DIAG_SCHEDULE: Schedule = Schedule {
 pub const HEALTH_SCHEDULE: Schedule = Schedule {
     period: 1000,
     phase: 550,
+};
+/// `RIG_BRAKE_DEMAND` (when configured) every 100 ticks (10 ms), and in the tick the demand
+/// changes.
+pub const DEMAND_SCHEDULE: Schedule = Schedule {
+    period: 100,
+    phase: 2,
 };
 /// Ticks without a fresh ADC sequence after which a rig-mode run faults (1 ms).
 pub const ADC_STALE_TICKS: u32 = 10;
@@ -187,16 +196,20 @@ pub struct RigConfig {
     pub teeth: u16,
     /// Telemetry every this many plant steps.
     pub telemetry_divider: u16,
+    /// The controller I/O: valve inputs wired, demand and load signals.
+    pub io: IoConfig,
 }
 
 impl RigConfig {
-    /// NUCLEO-G474RE at 170 MHz, 16-bit pulse timers at 170 MHz, 90 teeth, 100 Hz telemetry.
+    /// NUCLEO-G474RE at 170 MHz, 16-bit pulse timers (the demand PWM's too) at 170 MHz, 90
+    /// teeth, 100 Hz telemetry, no valve input wired, the default demand and load signals.
     pub const fn nucleo_g474re() -> Self {
         Self {
             cpu_hz: 170_000_000,
             pulse_timer: PulseTimer::timer16(170_000_000),
             teeth: 90,
             telemetry_divider: 100,
+            io: IoConfig::DEFAULT,
         }
     }
 }
@@ -236,6 +249,9 @@ pub enum CommandError {
     },
     /// The calibration command was refused.
     Calibration(CalibrationError),
+    /// A controller I/O configuration value that would make the configuration
+    /// inconsistent ([`IoConfig::set`]).
+    IoConfig(IoConfigError),
     /// A `Start` whose `StartDigest` differs from the digest of the track and vehicle the
     /// board keeps ([`crate::digest::setup_digest`]): a `Track` or `Vehicle` frame the
     /// sender sent did not arrive. Nothing changes; the sender resends the setup.
@@ -435,9 +451,13 @@ pub struct Rig<S: SimStore = Simulation> {
     stale_ticks: u32,
     /// `ClearFaults` asked the bus supervision to clear its sticky bus-off (board).
     bus_clear_requested: bool,
-    /// Alive counters: wheel speeds, status, health.
-    counters: [u8; 3],
+    /// Alive counters: wheel speeds, status, health, brake demand.
+    counters: [u8; 4],
     diag_window: DiagWindow,
+    /// The valve inputs (debounced each tick).
+    valves: ValveInputs,
+    /// The controller outputs as last driven.
+    driven: DrivenOutputs,
     wheel_speed_kmh: [Option<f32>; WHEELSETS],
     pulses: [PulseRegisters; WHEELSETS],
     /// Sensor channels with a condition present but not latched (this tick).
@@ -605,8 +625,10 @@ impl<S: SimStore> Rig<S> {
             last_result: CommandResult::None,
             stale_ticks: 0,
             bus_clear_requested: false,
-            counters: [0; 3],
+            counters: [0; 4],
             diag_window: DiagWindow::default(),
+            valves: ValveInputs::new(config.io.valves),
+            driven: DrivenOutputs::safe(&config.pulse_timer),
             wheel_speed_kmh: [None; WHEELSETS],
             pulses: [silent; WHEELSETS],
             pending: [false; CHANNELS],
@@ -959,10 +981,11 @@ impl<S: SimStore> Rig<S> {
         self.rail = req.rail;
         self.friction = req.friction;
         self.initial_speed_kmh = req.initial_speed_kmh;
+        // Rig mode: the demand in force (the board drives it on the train lines) stays.
         self.brake = match (req.mode, req.emergency) {
             (RigMode::SelfTest, true) => Some(BrakeCommand::Emergency),
             (RigMode::SelfTest, false) => Some(BrakeCommand::Release),
-            (RigMode::Rig, _) => None,
+            (RigMode::Rig, _) => self.brake,
         };
         self.state = RigState::Running;
         self.arming.run_started(req.mode);
@@ -999,8 +1022,8 @@ impl<S: SimStore> Rig<S> {
                 if let Some(Sim::SelfTest(c)) = self.sim_mut() {
                     c.set_demand(b);
                 }
-                // In rig mode the brake controller gets its command from the train lines;
-                // the command is kept as the run log's `cmd` marker.
+                // In rig mode the board drives the command on the train lines (EB loop,
+                // service PWM: `update_outputs`, this tick) and logs it as `cmd`.
                 self.brake = Some(b);
                 Ok(())
             }
@@ -1057,6 +1080,15 @@ impl<S: SimStore> Rig<S> {
                 match item {
                     ConfigItem::TelemetryDivider(d) => self.config.telemetry_divider = d.max(1),
                     ConfigItem::Teeth(t) => self.config.teeth = t.max(1),
+                    ConfigItem::Io(item, v) => {
+                        self.config
+                            .io
+                            .set(item, v)
+                            .map_err(CommandError::IoConfig)?;
+                        if item == IoItem::ValveWiring {
+                            self.valves.set_wiring(self.config.io.valves);
+                        }
+                    }
                 }
                 Ok(())
             }
@@ -1087,6 +1119,9 @@ impl<S: SimStore> Rig<S> {
     /// One tick of the real-time loop.
     pub fn step<IO: RigIo>(&mut self, io: &mut IO) {
         self.tick = self.tick.wrapping_add(1);
+
+        // 0. Valve inputs, sampled at the start of every tick.
+        self.valves.update(io.valve_levels());
 
         // 1. Sensors.
         // Without a fresh sequence the channels are not updated (a stalled DMA is one
@@ -1234,18 +1269,13 @@ impl<S: SimStore> Rig<S> {
             surfaces |= surface_code(*s) << (2 * j);
         }
         let w = |f: &dyn Fn(usize) -> f32| -> [f32; 4] { [f(0), f(1), f(2), f(3)] };
-        let (p_cyl, f_clamp, wsp) = match unit {
+        let (p_cyl, f_clamp, valves) = match unit {
             Some(u) => {
-                let mut bits = WSP_KNOWN;
-                for j in 0..WHEELSETS {
-                    if u.venting[j] {
-                        bits |= 1 << j;
-                    }
-                }
+                let holding = u.valves.map(|v| v == hils_brake_unit::Valve::Hold);
                 (
                     u.cylinder_pressure_pa,
                     w(&|j| o.wheelsets[j].clamp_force),
-                    bits,
+                    ValveStates::of_unit(u.venting, holding),
                 )
             }
             None => {
@@ -1261,7 +1291,7 @@ impl<S: SimStore> Rig<S> {
                 (
                     measured(SensorKind::PressureTransducer),
                     measured(SensorKind::LoadCell),
-                    0,
+                    self.valves.states(),
                 )
             }
         };
@@ -1273,7 +1303,8 @@ impl<S: SimStore> Rig<S> {
                 .brake
                 .map(|b| u8::from(hils_sil::Cmd::of(b)))
                 .unwrap_or(0xFF),
-            wsp,
+            driven: self.driven.bits(),
+            valves: valves.bits(),
             v_ref: o.vehicle_speed,
             omega: w(&|j| o.wheelsets[j].omega),
             p_cyl,
@@ -1283,6 +1314,8 @@ impl<S: SimStore> Rig<S> {
             q: w(&|j| o.wheelsets[j].axle_load),
             mu_d: w(&|j| o.wheelsets[j].mu_d),
             a_x: o.carbody_accel,
+            service_demand: self.driven.service_mps2,
+            air_spring: self.driven.air_spring_pa,
             step_max_cycles: window.max_cycles,
             step_mean_cycles: window.mean_cycles,
             overruns: self.timing.overruns,
@@ -1347,6 +1380,8 @@ impl<S: SimStore> Rig<S> {
             });
         }
 
+        self.drive_controller(io);
+
         if WHEEL_SPEED_SCHEDULE.due(self.tick) {
             let mut saturated = false;
             for s in self.wheel_speed_kmh {
@@ -1355,7 +1390,8 @@ impl<S: SimStore> Rig<S> {
             if saturated {
                 self.sticky |= Faults::SPEED_SATURATED;
             }
-            for frame in WheelSpeedFrame::cycle(self.wheel_speed_kmh, self.counters[0]) {
+            let valves = self.valves.states();
+            for frame in WheelSpeedFrame::cycle(self.wheel_speed_kmh, valves, self.counters[0]) {
                 self.send(io, frame.encode());
             }
             self.counters[0] = (self.counters[0] + 1) & 0x0F;
@@ -1404,6 +1440,52 @@ impl<S: SimStore> Rig<S> {
             self.counters[2] = (self.counters[2] + 1) & 0x0F;
             self.send(io, frame.encode());
         }
+    }
+
+    /// The controller's demand and load lines ([`crate::controller_io`]): while the arming
+    /// gate says the controller-facing outputs are live (armed, a rig-mode run running or
+    /// finished: [`Rig::controller_outputs_live`]) the brake command in force (release when
+    /// none was given) and the plant's air-spring forces; else, in the same tick, the safe
+    /// outputs. The demand frame, when configured, on its schedule and in the tick the
+    /// demand changes.
+    fn drive_controller<IO: RigIo>(&mut self, io: &mut IO) {
+        let timer = self.config.pulse_timer;
+        let plant = if self.controller_outputs_live() {
+            self.plant()
+        } else {
+            None
+        };
+        let driven = match plant {
+            Some(p) => self.config.io.driven(
+                &timer,
+                self.brake.unwrap_or(BrakeCommand::Release),
+                p.air_spring_forces(),
+            ),
+            None => DrivenOutputs::safe(&timer),
+        };
+        let changed = (driven.eb_loop_closed, driven.service_mps2)
+            != (self.driven.eb_loop_closed, self.driven.service_mps2);
+        self.driven = driven;
+        io.set_controller_outputs(&driven);
+        if self.config.io.demand.frame && (changed || DEMAND_SCHEDULE.due(self.tick)) {
+            let frame = BrakeDemandFrame {
+                eb_loop_closed: driven.eb_loop_closed,
+                service_mps2: driven.service_mps2,
+                counter: self.counters[3],
+            };
+            self.counters[3] = (self.counters[3] + 1) & 0x0F;
+            self.send(io, frame.encode());
+        }
+    }
+
+    /// The valve inputs as the step last sampled them (debounced; wired ones known).
+    pub fn valve_states(&self) -> ValveStates {
+        self.valves.states()
+    }
+
+    /// The controller outputs as last driven.
+    pub fn driven(&self) -> DrivenOutputs {
+        self.driven
     }
 
     fn send<IO: RigIo>(&mut self, io: &mut IO, frame: Option<IO::Frame>) {

@@ -17,11 +17,13 @@ use embedded_can::{Frame, StandardId};
 use hils_plant::{FrictionModel, Rail, Surface};
 use hils_rig_core::Code;
 use hils_rig_core::can::{
-    self, BrakeCommand, Calibration, Command, CommandFrame, CommandResult, ConfigItem, DiagFrame,
-    HealthFrame, InjectedFault, RigMode, RigState, StartCommand, StatusFrame, TrackCommand,
-    VehicleKey, WheelSpeedFrame, ZoneFrame,
+    self, BrakeCommand, BrakeDemandFrame, Calibration, Command, CommandFrame, CommandResult,
+    ConfigItem, DiagFrame, HealthFrame, InjectedFault, RigMode, RigState, StartCommand,
+    StatusFrame, TrackCommand, VehicleKey, WheelSpeedFrame, ZoneFrame,
 };
+use hils_rig_core::controller_io::IoItem;
 use hils_rig_core::sensor::{SensorFault, SensorKind};
+use hils_rig_core::valves::ValveStates;
 use proptest::prelude::*;
 
 type TestFrame = can::ClassicFrame;
@@ -214,6 +216,18 @@ fn wheel_fields(w: &WheelSpeedFrame, frame: Option<&TestFrame>) -> Fields {
         // Not available: raw 0xFFFF = 655.35 km/h in the DBC's scaling.
         m.insert(n, w.speeds_kmh[j].map(|v| v as f64).unwrap_or(655.35));
     }
+    // The valve inputs of the pair's wheelsets: 0 off, 1 energised, 3 not wired.
+    const VALVE_NAMES: [[&str; 2]; 4] = [
+        ["Dump1", "Hold1"],
+        ["Dump2", "Hold2"],
+        ["Dump3", "Hold3"],
+        ["Dump4", "Hold4"],
+    ];
+    let code = |x: Option<bool>| x.map_or(3.0, |on| on as u8 as f64);
+    for j in 2 * w.pair..2 * w.pair + 2 {
+        m.insert(VALVE_NAMES[j][0], code(w.valves.dump(j)));
+        m.insert(VALVE_NAMES[j][1], code(w.valves.hold(j)));
+    }
     m.insert(alive, w.counter as f64);
     m.insert(crc, frame.map(checksum_of).unwrap_or(0.0));
     m
@@ -226,9 +240,11 @@ proptest! {
     /// 350 km/h (raw 35 000).
     #[test]
     fn wheel_speed_frames(speeds in proptest::array::uniform4(proptest::option::weighted(0.9,
-                              prop_oneof![0u32..=65534, 35_000u32..=65534])), counter in 0u8..16) {
+                              prop_oneof![0u32..=65534, 35_000u32..=65534])), counter in 0u8..16,
+                          valve_bits: u16) {
         let kmh = speeds.map(|s| s.map(|r| r as f32 * 0.01));
-        for w in WheelSpeedFrame::cycle(kmh, counter) {
+        let valves = ValveStates::of_bits(valve_bits);
+        for w in WheelSpeedFrame::cycle(kmh, valves, counter) {
             let f: TestFrame = w.encode().unwrap();
             let checksum = if w.pair == 0 { "WheelSpeed12Checksum" } else { "WheelSpeed34Checksum" };
             both_ways(w.id().unwrap(), None, &f, &wheel_fields(&w, Some(&f)),
@@ -263,6 +279,22 @@ proptest! {
         let f: TestFrame = s.encode().unwrap();
         both_ways(can::ID_STATUS, None, &f, &fields(&s, Some(&f)),
             |f| StatusFrame::decode(f).unwrap(), |s| fields(s, None), Some("StatusChecksum"));
+    }
+
+    #[test]
+    fn brake_demand_frame(closed: bool, demand in 0u32..=65535, counter in 0u8..16) {
+        let d = BrakeDemandFrame { eb_loop_closed: closed, service_mps2: demand as f32 * 0.001, counter };
+        let fields = |d: &BrakeDemandFrame, f: Option<&TestFrame>| -> Fields {
+            Fields::from([
+                ("EbLoopClosed", d.eb_loop_closed as u8 as f64),
+                ("ServiceDemand", d.service_mps2 as f64),
+                ("DemandAlive", d.counter as f64),
+                ("DemandChecksum", f.map(checksum_of).unwrap_or(0.0)),
+            ])
+        };
+        let f: TestFrame = d.encode().unwrap();
+        both_ways(can::ID_BRAKE_DEMAND, None, &f, &fields(&d, Some(&f)),
+            |f| BrakeDemandFrame::decode(f).unwrap(), |d| fields(d, None), Some("DemandChecksum"));
     }
 
     #[test]
@@ -322,7 +354,7 @@ proptest! {
     }
 
     #[test]
-    fn command_frame(pick in 0usize..14, a in 0u32..=16382, b in 0u32..=10000, ch in 0u8..4, k in 0u8..5,
+    fn command_frame(pick in 0usize..15, a in 0u32..=16382, b in 0u32..=10000, ch in 0u8..4, k in 0u8..5,
                      flags in 0u8..32, gain in 0.001f32..1.0e6, counter in 0u8..16,
                      zone in (0u32..(1 << 20), 0u32..(1 << 20), 0u8..32, 0u8..4, 1u8..=255),
                      digest in 0u16..=u16::MAX) {
@@ -362,6 +394,11 @@ proptest! {
             } else {
                 Command::Vehicle { key: VehicleKey::VALUES[k as usize], value: gain }
             },
+            8 => {
+                let item = IoItem::ALL[(a as usize) % IoItem::ALL.len()];
+                let (lo, hi) = item.range();
+                Command::Configure(ConfigItem::Io(item, lo + (b as u16) % (hi - lo + 1)))
+            }
             _ => Command::Configure(if k % 2 == 0 { ConfigItem::TelemetryDivider(b.max(1) as u16) } else { ConfigItem::Teeth((b % 1000).max(1) as u16) }),
         };
         let cf = CommandFrame { command, counter };
@@ -413,7 +450,11 @@ proptest! {
                     m.insert("CalValue", value);
                 }
                 Command::Configure(item) => {
-                    let (code, v) = match item { ConfigItem::TelemetryDivider(v) => (0.0, v), ConfigItem::Teeth(v) => (1.0, v) };
+                    let (code, v) = match item {
+                        ConfigItem::TelemetryDivider(v) => (0.0, v),
+                        ConfigItem::Teeth(v) => (1.0, v),
+                        ConfigItem::Io(item, v) => (u8::from(item) as f64, v),
+                    };
                     m.insert("ConfigItem", code);
                     m.insert("ConfigValue", v as f64);
                 }
@@ -453,7 +494,7 @@ proptest! {
 fn dbc_describes_exactly_the_codec_messages_and_no_signals_overlap() {
     let dbc = dbc();
     let ids: Vec<u32> = dbc.messages.iter().map(|m| m.id.raw()).collect();
-    assert_eq!(ids, vec![0x100, 0x101, 0x110, 0x120, 0x121, 0x200]);
+    assert_eq!(ids, vec![0x100, 0x101, 0x102, 0x110, 0x120, 0x121, 0x200]);
     for m in &dbc.messages {
         let MessageId::Standard(id) = m.id else {
             panic!()
@@ -484,8 +525,14 @@ fn dbc_describes_exactly_the_codec_messages_and_no_signals_overlap() {
         other => panic!("{other:?}"),
     };
     assert_eq!(
-        (cycle(0x100), cycle(0x110), cycle(0x120), cycle(0x121)),
-        (1, 10, 100, 100)
+        (
+            cycle(0x100),
+            cycle(0x102),
+            cycle(0x110),
+            cycle(0x120),
+            cycle(0x121)
+        ),
+        (1, 10, 10, 100, 100)
     );
 }
 

@@ -14,7 +14,8 @@ use hils_rig_core::hw::{RigIo, TelemetryEvent};
 use hils_rig_core::pulse::PulseRegisters;
 use hils_rig_core::rig::{Built, CommandError, Faults, Rig, RigConfig, SimStore, Simulation};
 use hils_rig_core::sensor::{ADC_SEQUENCE_LEN, SensorFault, SensorKind};
-use hils_rig_core::telemetry::{TelemetryRecord, WSP_KNOWN};
+use hils_rig_core::telemetry::TelemetryRecord;
+use hils_rig_core::valves::ValveStates;
 use hils_sil::ClosedLoop;
 use std::cell::Cell;
 use std::rc::Rc;
@@ -241,10 +242,11 @@ fn self_test_paper_run_matches_the_closed_loop_and_streams_it() {
     // WSP vents on wheelsets 2 and 4 only (the paper's result), and the bits say "known".
     let mut vented = [false; 4];
     for r in &recs {
-        assert!(r.wsp & WSP_KNOWN != 0);
+        let valves = ValveStates::of_bits(r.valves);
+        assert_eq!((valves.dump_known, valves.hold_known), (0x0F, 0x0F));
         assert_eq!(r.cmd, 1);
         for (j, v) in vented.iter_mut().enumerate() {
-            *v |= r.wsp & (1 << j) != 0;
+            *v |= valves.venting(j).unwrap();
         }
         // Self-test: pressure from the unit, clamp force = Eq 1 of that pressure.
         for j in 0..4 {
@@ -595,12 +597,13 @@ fn rig_mode_steps_the_plant_with_the_measured_clamp_forces() {
         rig.outputs().unwrap().vehicle_speed < 100.0 / 3.6 - 1.0,
         "the brakes act"
     );
-    // Rig-mode records: measured clamp force or pressure, NaN where not measured, WSP unknown.
+    // Rig-mode records: measured clamp force or pressure, NaN where not measured, valves
+    // not known (no input wired by default).
     let r = *io.records().last().unwrap();
     assert!(r.p_cyl[0].is_nan() && r.f_clamp[2].is_nan());
     assert!((r.p_cyl[2] as f64 - pressure).abs() < 1000.0);
     assert!((r.f_clamp[0] as f64 - force).abs() < 30.0);
-    assert_eq!((r.wsp, r.cmd), (0, 0xFF));
+    assert_eq!((r.valves, r.cmd), (0, 0xFF));
 }
 
 #[test]

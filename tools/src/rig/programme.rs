@@ -28,43 +28,39 @@
 //! `start` (rig mode, on the track), the run's brake demand, then frames until the board
 //! leaves `running` (or `--max-run-s`, then `stop`).
 //!
-//! # Air consumption and WSP timer actions on the rig
+//! # Judging
 //!
-//! The board does not see the controller's dump valves (no frame of `hils.dbc` carries
-//! them), but it measures the cylinder pressures (its transducer channels; in the log from
-//! the probe's telemetry). Under a constant brake demand (every programme run) the
-//! controller only lowers a cylinder pressure to relieve a sliding wheelset, so a sample is
-//! counted as venting while its cylinder pressure falls faster than
-//! [`VENT_FALL_PA_PER_S`] (2 bar/s: above the transducer noise of +-2 ADC counts over a
-//! 10 ms telemetry interval, below a dump valve's fall). The vent flags feed the same
-//! formulas as SIL (`crate::wsp::metrics`): free air = sum over vent samples of
-//! V_cyl (p[k-1] - p[k]) / p_atm. WSP timer actions need the valves' hold states too (a
-//! cylinder held low does not fall), which no pressure shows: they are `not_measured` on the
-//! rig, as is the air without measured pressures. A criterion on a metric not measured is
-//! not judged: it is listed as `... (not measured: not judged)` and fails, so a run with one
-//! never passes (nothing is passed that was not measured). The run's log (`NAME.csv`, spec run-log schema) is judged
-//! from its brake command exactly as `hils wsp-test --programme FILE --log NAME.csv` judges
-//! it ([`crate::wsp::trace_of_log`], [`crate::wsp::judge_trace`]); every run of the programme
-//! is also simulated in SIL ([`crate::wsp::run_one`]). `--json` holds one entry per run: the
-//! rig verdict's keys (those of `hils wsp-test --json`) with `on_rig` and `end`, or for a
-//! run not judged its `name`, `passed: false`, `on_rig` and `end` (why). `--report DIR`
-//! writes `report.md` (rig and SIL rows side by side, the `wsp-test` sections and plots of
-//! both: `NAME-rig-*.svg`, `NAME-sil-*.svg`) and the logs. A lost board, a bus-off, a stuck
-//! alive counter or a rejected command ends the programme: the runs so far, the partial
-//! log and the summary are written, and the exit code is non-zero.
+//! Each run's log (`NAME.csv`, the spec's run-log schema with `# run`, `# track`,
+//! `# demand` and `# speed_resolution_kmh`) is judged by the one path of
+//! `hils wsp-test --programme FILE --log NAME.csv` ([`crate::wsp::judge_log`]): the same
+//! recording gets the same verdict from both. The board reads the controller's dump and
+//! hold valve coils on its valve inputs (`hils_rig_core::valves`); the wheel-speed frames
+//! carry them every 1 ms and the log has them as `wsp1..4` (dump) and `hold1..4`
+//! ([`super::record`]): air and WSP timer actions are judged from them as a SIL run's from
+//! the simulated unit's valves (`crate::wsp::log`: the dump valve acts one pneumatic dead
+//! time after its coil). An input the rig's configuration says is not wired gives empty
+//! cells: the judge then estimates the vents from the pressure falls or says "not
+//! measured" (`crate::wsp::log`), the criterion not judged and the run not passed. Every run of the programme is also simulated in SIL
+//! ([`crate::wsp::run_one`]). `--json` holds one entry per run: the rig verdict's keys
+//! (those of `hils wsp-test --json`) with `on_rig` and `end`, or for a run not judged its
+//! `name`, `passed: false`, `on_rig` and `end` (why). `--report DIR` writes `report.md`
+//! (rig and SIL rows side by side, the rig against SIL ([`super::agreement`]: also printed,
+//! and `against_sil` in each judged run's JSON entry), the `wsp-test` sections and plots of both:
+//! `NAME-rig-*.svg`, `NAME-sil-*.svg`) and the logs. A lost board, a bus-off, a stuck alive
+//! counter or a rejected command ends the programme: the runs so far, the partial log and
+//! the summary are written, and the exit code is non-zero.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, anyhow};
+use anyhow::{Result, anyhow, bail};
 use clap::Args;
 use hils_brake_unit::BrakeDemand;
 use hils_plant::Rail;
 use hils_rig_core::can::{
-    BrakeCommand, Command, RigMode, RigState, StartCommand, WHEEL_SPEED_MAX_KMH,
-    WHEEL_SPEED_RESOLUTION_KMH,
+    BrakeCommand, Command, ConfigItem, RigMode, RigState, StartCommand, WHEEL_SPEED_MAX_KMH,
 };
-use rayon::prelude::*;
+use hils_rig_core::controller_io::IoConfig;
 
 use super::commands::{Flow, Session};
 use super::monitor::Seen;
@@ -73,9 +69,11 @@ use super::record::{Recorder, RunMeta};
 use super::track;
 use super::transport::Transport;
 use super::{FrictionArg, RigArgs, Stop, open};
+use crate::outputs::OutDir;
+use crate::wsp::log::{VENT_FALL_PA_PER_S, VENT_WINDOW_S};
 use crate::wsp::metrics::Verdict;
-use crate::wsp::programme::{Criteria, Programme, Run};
-use crate::wsp::{Outcome, judge_trace, report, trace_of_log};
+use crate::wsp::programme::{Criteria, Programme, Run, demand_text, track_layout};
+use crate::wsp::{judge_log, report};
 
 /// Arguments of `hils rig run`.
 #[derive(Args, Debug, Clone)]
@@ -104,6 +102,11 @@ pub struct RunArgs {
     /// reset, so each run is armed again.
     #[arg(long)]
     pub arm: bool,
+    /// The rig's controller I/O configuration, sent before the first run (`hils rig
+    /// configure io FILE`; format: docs/rig.md, "Controller I/O"). Without it the board
+    /// keeps what it has (the simulated board: every valve input wired).
+    #[arg(long)]
+    pub io: Option<PathBuf>,
 }
 
 /// What the board is sent for a run: the vehicle and track frames, then the brake command
@@ -147,32 +150,12 @@ fn board_plan(vehicle: Option<&str>, run: &Run) -> Result<Plan, String> {
         BrakeDemand::ServiceStep { step } if step > 0 => BrakeCommand::ServiceStep { step },
         other => {
             return Err(format!(
-                "demand {other:?}: the brake frame carries emergency, service 0-10 m/s^2 or a step 1-255"
+                "demand `{}`: the brake frame carries emergency, service 0-10 m/s^2 or a step 1-255",
+                demand_text(other)
             ));
         }
     };
     Ok(Plan { setup, demand })
-}
-
-/// Falls of a cylinder pressure faster than this count as venting (module doc), Pa/s.
-pub const VENT_FALL_PA_PER_S: f64 = 2.0e5;
-
-/// Vent flags from the measured cylinder pressures (module doc): sample k vents while
-/// (p[k-1] - p[k]) / dt > [`VENT_FALL_PA_PER_S`]. False when no pressure was measured.
-pub fn vents_from_pressure(trace: &mut crate::wsp::metrics::Trace) -> bool {
-    if trace.p_cyl_pa.iter().any(Vec::is_empty) {
-        return false;
-    }
-    for j in 0..hils_plant::WHEELSETS {
-        let p = &trace.p_cyl_pa[j];
-        let mut vent = vec![false; p.len()];
-        for k in 1..p.len() {
-            let dt = trace.t_s[k] - trace.t_s[k - 1];
-            vent[k] = dt > 0.0 && (p[k - 1] - p[k]) / dt > VENT_FALL_PA_PER_S;
-        }
-        trace.venting[j] = vent;
-    }
-    true
 }
 
 /// Reads a programme with `hils wsp-test`'s parser: its criteria and runs (on the default
@@ -181,9 +164,7 @@ pub fn load(path: &Path, friction: FrictionArg) -> Result<(Criteria, Vec<BoardRu
     let programme = Programme::load(path)?;
     let mut file = crate::params_file::params_or_default(None)?;
     file.plant.friction.model = friction.model();
-    let runs = programme
-        .runs(&file)
-        .with_context(|| format!("programme {}", path.display()))?;
+    let runs = programme.runs(&file)?;
     let runs = programme
         .run
         .iter()
@@ -196,43 +177,31 @@ pub fn load(path: &Path, friction: FrictionArg) -> Result<(Criteria, Vec<BoardRu
     Ok((programme.criteria, runs))
 }
 
-/// The rig's side of one run: its log, how it ended, its judged outcome.
+/// The rig's side of one run: how it ended, its verdict (its log and plots are written).
 pub struct RigRun {
     pub name: String,
     pub on_rig: bool,
     /// `finished`, `stopped`, `fault`, or why the run did not run or ended early.
     pub end: String,
-    pub outcome: Option<Outcome>,
-    /// Metrics the log cannot give (their values are 0, not measured).
-    pub not_measured: Vec<&'static str>,
-    /// Metrics estimated from the measured cylinder pressures (module doc).
-    pub estimated: Vec<&'static str>,
+    pub verdict: Option<Verdict>,
 }
 
-/// The metrics that need the dump valves' states.
-const VENT_METRICS: [&str; 2] = ["air_consumption_l", "wsp_timer_actions"];
-/// Of those, what the measured cylinder pressure falls estimate (module doc).
-const PRESSURE_METRICS: [&str; 1] = ["air_consumption_l"];
-/// Of those, what needs the hold states (module doc).
-const HOLD_METRICS: [&str; 1] = ["wsp_timer_actions"];
-
 impl RigRun {
-    /// The JSON entry (module doc).
-    fn json(&self) -> serde_json::Value {
-        let mut v = match &self.outcome {
-            Some(o) => serde_json::to_value(&o.verdict).unwrap_or_default(),
+    /// The JSON entry (module doc), with `against_sil` ([`super::agreement::Agreement`]) when
+    /// the rig run was judged.
+    fn json(&self, sil: &Verdict) -> serde_json::Value {
+        let mut v = match &self.verdict {
+            Some(verdict) => serde_json::to_value(verdict).unwrap_or_default(),
             None => serde_json::json!({ "name": self.name, "passed": false }),
         };
         if let Some(m) = v.as_object_mut() {
             m.insert("on_rig".into(), self.on_rig.into());
             m.insert("end".into(), self.end.clone().into());
-            if !self.not_measured.is_empty() {
-                m.insert("not_measured".into(), self.not_measured.clone().into());
-            }
-            if !self.estimated.is_empty() {
+            if let Some(rig) = &self.verdict {
+                let a = super::agreement::agreement(rig, sil);
                 m.insert(
-                    "estimated_from_cylinder_pressure".into(),
-                    self.estimated.clone().into(),
+                    "against_sil".into(),
+                    serde_json::to_value(a).unwrap_or_default(),
                 );
             }
         }
@@ -276,11 +245,11 @@ fn run_one<T: Transport>(
         for c in &plan.setup {
             send(s, *c)?;
         }
-        if args.arm {
-            send(s, Command::Arm)?;
-        }
-        send(s, super::track::with_setup_digest(&plan.setup, start)?)?;
+        send(s, Command::Arm)?;
+        // The run's demand is in force from its first step (t = 0), as a SIL run's: the
+        // board drives the brake command in force from the start (EB loop, service PWM).
         send(s, Command::Brake(demand))?;
+        send(s, super::track::with_setup_digest(&plan.setup, start)?)?;
         let mut running = true;
         s.run_for(args.max_run_s, |_, seen| match seen {
             Seen::Status(st) if st.state != RigState::Running => {
@@ -317,6 +286,8 @@ fn run_one<T: Transport>(
         start: s.last_start,
         end: end.clone(),
         wheel_radius_m: Some(run.file.plant.vehicle.wheel_radius),
+        track: Some(track_layout(&run.track)),
+        demand: Some(demand_text(run.demand)),
     };
     if let Err(e) = rec.write(log, &meta) {
         end = format!("{end}; log: {e:#}");
@@ -324,13 +295,14 @@ fn run_one<T: Transport>(
     (end, stop)
 }
 
-/// Runs a programme in a session and judges each run's log; what ended it early.
+/// Runs a programme in a session, recording each run's log into `dir` and judging it (its
+/// plots written into `dir` as it is judged: only the verdict is kept); what ended it early.
 pub fn run_programme<T: Transport>(
     s: &mut Session<T>,
     runs: &[BoardRun],
     criteria: &Criteria,
     args: &RunArgs,
-    log_dir: &Path,
+    dir: &OutDir,
 ) -> (Vec<RigRun>, Option<Stop>) {
     let mut out = Vec::new();
     let mut stopped: Option<Stop> = None;
@@ -345,72 +317,67 @@ pub fn run_programme<T: Transport>(
             name: run.name.clone(),
             on_rig: false,
             end: String::new(),
-            outcome: None,
-            not_measured: Vec::new(),
-            estimated: Vec::new(),
+            verdict: None,
         };
         match (&stopped, plan) {
             (Some(e), _) => rig.end = format!("not run: the programme ended ({e})"),
             (None, Err(why)) => rig.end = format!("not run on the rig: {why}"),
             (None, Ok(plan)) => {
-                let log = log_dir.join(format!("{}.csv", run.name));
+                let log = match dir.file(&format!("{}.csv", run.name)) {
+                    Ok(log) => log,
+                    Err(e) => {
+                        rig.end = format!("not run: {e:#}");
+                        out.push(rig);
+                        continue;
+                    }
+                };
                 let (end, stop) = run_one(s, run, plan, args, &log);
                 rig.on_rig = true;
                 rig.end = end;
                 stopped = stop;
-                match trace_of_log(&log, &run.file) {
-                    Ok((mut trace, _)) => {
-                        // RIG_STATUS carries the vehicle speed at 0.01 km/h.
-                        trace.speed_resolution_mps =
-                            (WHEEL_SPEED_RESOLUTION_KMH / hils_sil::KMH_PER_MPS as f32) as f64;
-                        if trace.venting.iter().any(Vec::is_empty) {
-                            if vents_from_pressure(&mut trace) {
-                                rig.estimated = PRESSURE_METRICS.to_vec();
-                                rig.not_measured = HOLD_METRICS.to_vec();
-                            } else {
-                                rig.not_measured = VENT_METRICS.to_vec();
-                            }
-                        }
-                        let mut outcome = judge_trace(run.clone(), trace, criteria);
-                        outcome.verdict.not_judged(&rig.not_measured);
-                        rig.outcome = Some(outcome);
-                    }
+                let judged = judge_log(&log, run, criteria).and_then(|o| {
+                    report::write_run_plots(dir, &format!("{}-rig", run.name), &o)?;
+                    Ok(o.verdict)
+                });
+                match judged {
+                    Ok(verdict) => rig.verdict = Some(verdict),
                     Err(e) => rig.end = format!("{}; not judged: {e:#}", rig.end),
                 }
             }
         }
-        println!("{}: {}", rig.name, rig.end);
+        crate::say!("{}: {}", rig.name, rig.end);
         out.push(rig);
     }
     (out, stopped)
 }
 
 /// The summary table: each run's rig row beside its SIL row, then the runs not judged.
-pub fn summary_table(rig: &[RigRun], sil: &[Outcome]) -> String {
+pub fn summary_table(rig: &[RigRun], sil: &[Verdict]) -> String {
     let mut rows: Vec<Verdict> = Vec::new();
     let mut not_judged = String::new();
     for (r, s) in rig.iter().zip(sil) {
-        match &r.outcome {
-            Some(o) => {
+        match &r.verdict {
+            Some(v) => {
                 rows.push(Verdict {
                     name: format!("{} (rig)", r.name),
-                    ..o.verdict.clone()
+                    ..v.clone()
                 });
-                if !r.estimated.is_empty() {
+                if !v.estimated_from_cylinder_pressure.is_empty() {
                     let _ = writeln!(
                         not_judged,
-                        "- {} (rig): estimated from the measured cylinder pressure falls (> {} bar/s counts as venting): {}",
+                        "- {} (rig): estimated from the measured cylinder pressure falls (a fall faster than {} bar/s over {} ms counts as venting): {}",
                         r.name,
                         VENT_FALL_PA_PER_S / 1e5,
-                        r.estimated.join(", ")
+                        VENT_WINDOW_S * 1e3,
+                        v.estimated_from_cylinder_pressure.join(", ")
                     );
                 }
-                if !r.not_measured.is_empty() {
+                if !v.not_measured.is_empty() {
                     let _ = writeln!(
                         not_judged,
-                        "- {} (rig): not measured, not judged (the log has no WSP valve states; a hold shows in no pressure): {}",
+                        "- {} (rig): not measured, not judged (a valve input or a cylinder pressure the log lacks: not wired, or no probe capture): {}",
                         r.name,
-                        r.not_measured.join(", ")
+                        v.not_measured.join(", ")
                     );
                 }
             }
@@ -419,8 +386,8 @@ pub fn summary_table(rig: &[RigRun], sil: &[Outcome]) -> String {
             }
         }
         rows.push(Verdict {
-            name: format!("{} (SIL)", s.verdict.name),
-            ..s.verdict.clone()
+            name: format!("{} (SIL)", s.name),
+            ..s.clone()
         });
     }
     let refs: Vec<&Verdict> = rows.iter().collect();
@@ -428,69 +395,104 @@ pub fn summary_table(rig: &[RigRun], sil: &[Outcome]) -> String {
     if !not_judged.is_empty() {
         let _ = write!(
             t,
-            "\nNot judged, not measured or estimated on the rig:\n\n{not_judged}"
+            "\nNot judged or not measured on the rig:\n\n{not_judged}"
         );
     }
     t
 }
 
-/// Renames an outcome's run (its plot files) to `NAME-suffix`.
-fn tagged(mut o: Outcome, suffix: &str) -> Outcome {
-    o.run.name = format!("{}-{suffix}", o.run.name);
-    o
+/// Telemetry divider of a programme: a record every 10 plant steps (1 kHz), so the
+/// cylinder pressures the air is judged from are logged at the valves' pace (at the
+/// default 100 Hz the pressure falls between records are interpolated and the air comes
+/// out 2-3 % low; docs/rig.md, "Controller I/O").
+pub const PROGRAMME_TELEMETRY_DIVIDER: u16 = 10;
+
+/// Before the runs: the controller I/O of `--io` (if given) and the programme's telemetry
+/// rate, each command accepted or an error.
+fn configure_board<T: Transport>(s: &mut Session<T>, io: Option<&IoConfig>) -> Result<()> {
+    let mut commands = io.map(super::io_config::commands).unwrap_or_default();
+    commands.push(Command::Configure(ConfigItem::TelemetryDivider(
+        PROGRAMME_TELEMETRY_DIVIDER,
+    )));
+    for c in commands {
+        let o = s.command(c).map_err(anyhow::Error::from)?;
+        if !o.accepted {
+            return Err(anyhow!("the board refused the configuration: {o}"));
+        }
+    }
+    Ok(())
 }
 
-/// `hils rig run`.
+/// `hils rig run`: `--report DIR` is required (each run's log is written there, with the
+/// report: nothing is written into the current folder unasked).
 pub fn main(rig: &RigArgs, args: &RunArgs) -> Result<()> {
     if !args.arm {
         return Err(anyhow!(
             "hils rig run --programme drives the controller under test from each run's start: add --arm to arm the board before each run (docs/rig.md, Arming)"
         ));
     }
+    let out = args.out.check()?;
+    let Some(dir) = out.report.clone() else {
+        bail!(
+            "hils rig run records each run's log (NAME.csv) and writes its report into \
+             --report DIR: give one (nothing was run)"
+        );
+    };
     let (criteria, mut runs) = load(&args.programme, args.friction)?;
     if let Some(only) = &args.only {
         runs.retain(|r| r.run.name.contains(only.as_str()));
     }
-    let log_dir = args
-        .out
-        .report
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("."));
-    std::fs::create_dir_all(&log_dir)
-        .with_context(|| format!("cannot create {}", log_dir.display()))?;
+    let io = args.io.as_deref().map(super::io_config::load).transpose()?;
+    dir.create()?;
     let mut s = Session::new(open(rig)?, rig.lost_after_s);
-    let (rig_runs, stopped) = run_programme(&mut s, &runs, &criteria, args, &log_dir);
-    let sil: Vec<Outcome> = runs
-        .par_iter()
-        .map(|r| crate::wsp::run_one(r.run.clone(), &criteria))
-        .collect::<Result<_>>()?;
-    let table = summary_table(&rig_runs, &sil);
-    println!("{table}");
+    configure_board(&mut s, io.as_ref())?;
+    let (rig_runs, stopped) = run_programme(&mut s, &runs, &criteria, args, &dir);
+    let sil = crate::wsp::judge_runs(
+        runs.iter().map(|r| r.run.clone()).collect(),
+        &criteria,
+        Some((&dir, "sil")),
+    )?;
+    let pairs: Vec<(&Verdict, &Verdict)> = rig_runs
+        .iter()
+        .zip(&sil)
+        .filter_map(|(r, s)| r.verdict.as_ref().map(|v| (v, s)))
+        .collect();
+    let table = format!(
+        "{}\n{}",
+        summary_table(&rig_runs, &sil),
+        super::agreement::table(&pairs)
+    );
+    crate::say!("{table}");
     let on_rig = rig_runs.iter().filter(|r| r.on_rig).count();
     let passed = rig_runs
         .iter()
-        .filter(|r| r.outcome.as_ref().is_some_and(|o| o.verdict.passed))
+        .filter(|r| r.verdict.as_ref().is_some_and(|v| v.passed))
         .count();
-    println!(
+    crate::say!(
         "{on_rig}/{} runs on the rig, {passed} passed",
         rig_runs.len()
     );
-    let json: Vec<serde_json::Value> = rig_runs.iter().map(RigRun::json).collect();
-    args.out.write_json(&json)?;
-    args.out.write_report(|dir| {
+    let json: Vec<serde_json::Value> = rig_runs.iter().zip(&sil).map(|(r, s)| r.json(s)).collect();
+    out.write_json(&json)?;
+    out.write_report(|dir| {
         let heading = format!(
             "# Rig runs of {}\n\nInterface: {}. Each run's log is `NAME.csv` here (spec run-log schema, `# run: NAME`), judged from its brake command as `hils wsp-test --programme {} --log NAME.csv` judges it; `(SIL)` rows: the same run simulated with the simulated brake unit.\n\n",
             args.programme.display(),
             s.link.describe(),
             args.programme.display()
         );
-        let mut outcomes = Vec::new();
-        for (r, o) in rig_runs.into_iter().zip(sil) {
-            outcomes.extend(r.outcome.map(|x| tagged(x, "rig")));
-            outcomes.push(tagged(o, "sil"));
-        }
-        report::write_with(dir, &heading, &table, &outcomes, &criteria)?;
-        Ok(vec![dir.join("report.md")])
+        let stems: Vec<(String, &Verdict)> = rig_runs
+            .iter()
+            .zip(&sil)
+            .flat_map(|(r, v)| {
+                let rig = r.verdict.as_ref().map(|x| (format!("{}-rig", r.name), x));
+                rig.into_iter().chain([(format!("{}-sil", v.name), v)])
+            })
+            .collect();
+        let sections: Vec<(&str, &Verdict)> = stems.iter().map(|(s, v)| (s.as_str(), *v)).collect();
+        Ok(vec![report::write_with(
+            dir, &heading, &table, &sections, &criteria,
+        )?])
     })?;
     match stopped {
         Some(e) => Err(anyhow!("programme ended early: {e}")),

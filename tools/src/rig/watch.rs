@@ -8,8 +8,8 @@ use std::io::{IsTerminal, Write};
 
 use hils_rig_core::rig::Faults;
 
-use super::monitor::state_name;
 use super::monitor::{BoardView, Seen};
+use super::monitor::{mode_name, result_name, sensor_fault_name, state_name};
 
 /// The names of the fault bits set (sensor channels as `sensorN`, the other flags of
 /// `RIG_STATUS` by their [`Faults`] name in kebab case: `CAN_BUS_OFF` -> `can-bus-off`).
@@ -38,8 +38,8 @@ pub fn render(board: &BoardView, source: &str, t_s: f64) -> String {
                 s,
                 "state {:<9} mode {:<9} last command {}",
                 state_name(st.state),
-                format!("{:?}", st.mode).to_lowercase(),
-                format!("{:?}", st.command_result).to_lowercase()
+                mode_name(st.mode),
+                result_name(st.command_result)
             );
             let _ = writeln!(
                 s,
@@ -80,7 +80,7 @@ pub fn render(board: &BoardView, source: &str, t_s: f64) -> String {
                 .iter()
                 .enumerate()
                 .map(|(j, f)| match f {
-                    Some(f) => format!("{}:{f:?}", j + 1).to_lowercase(),
+                    Some(f) => format!("{}:{}", j + 1, sensor_fault_name(*f)),
                     None => format!("{}:ok", j + 1),
                 })
                 .collect();
