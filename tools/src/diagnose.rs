@@ -41,10 +41,12 @@
 //!
 //! See docs/diagnosis.md for the user's view.
 
+pub mod admit;
 pub mod analysis;
 pub mod baseline;
 pub mod causes;
 pub mod effects;
+pub mod inputs;
 pub mod json;
 pub mod links;
 pub mod lsq;
@@ -53,6 +55,7 @@ pub mod replay;
 pub mod report;
 pub mod search;
 pub mod settle;
+pub mod spikes;
 pub mod verdict;
 
 use std::path::PathBuf;
@@ -98,7 +101,10 @@ pub fn diagnose(
     step_s: f64,
 ) -> Result<Outcome> {
     let started = Instant::now();
+    let admitted = admit::admit(baseline, logs)?;
+    let logs = &admitted.logs[..];
     let (base, mut notes) = baseline::prepare(baseline, logs, step_s)?;
+    notes.splice(0..0, admitted.notes);
     let causes = causes::find(&base, baseline, logs, step_s, started)?;
     let settled = settle::settle(&base, &causes, &mut notes);
     let analysis = analysis::analyse(&base.d.runs, &base.replays);

@@ -73,7 +73,8 @@ pub fn prepare(
 fn reader_notes(d: &Diagnoser, logs: &[RunLog]) -> Vec<String> {
     let mut notes = Vec::new();
     for (log, run) in logs.iter().zip(&d.runs) {
-        for n in log.notes.iter().chain(&run.notes) {
+        // The reader's notes are among the admission's (restated per column there).
+        for n in &run.notes {
             notes.push(format!("{}: {n}", run.name));
         }
         if !log.unknown_columns.is_empty() {
