@@ -145,7 +145,7 @@ pub fn main(args: DiagnoseArgs) -> Result<()> {
     let name = args.baseline.display().to_string();
     let out = diagnose(&baseline.plant, &name, &logs, args.step_s)?;
     print_summary(&out);
-    args.out.write_json(&out.report)?;
+    args.out.write_json(&out.report.rounded())?;
     args.out.write_report(|dir| report::write(dir, &out))
 }
 
@@ -195,8 +195,10 @@ fn print_summary(out: &Outcome) {
         );
     }
     println!(
-        "slides: measured {:?}, baseline {:?}, extended {:?}",
-        r.slides.measured, r.slides.baseline, r.slides.extended
+        "slides: measured {}, baseline {}, extended {}",
+        report::wheelset_list(&r.slides.measured),
+        report::wheelset_list(&r.slides.baseline),
+        report::wheelset_list(&r.slides.extended)
     );
     println!(
         "diagnosed in {:.2} s ({} replays)",

@@ -54,7 +54,7 @@ pub fn find(
         fit_base_validation: base.validation.clone(),
         evaluations: 0,
     };
-    if base.discrepancy {
+    if base.fitted_discrepancy {
         let fit_base = fit_baseline(&fit_d)?;
         causes.fit_base_validation = fit_base.validation.clone();
         let unlisted: Vec<Effect> =

@@ -201,6 +201,7 @@ pub fn choose(baseline: &Params, log: &mut RunLog, trace: &SpeedTrace) -> Result
         roles: Vec::new(),
         notes: Vec::new(),
     };
+    let mut refused = Vec::new();
     for j in 0..WHEELSETS {
         let check = |channel: Channel, x: &Option<Vec<f64>>| {
             x.as_ref().map(|x| {
@@ -223,11 +224,12 @@ pub fn choose(baseline: &Params, log: &mut RunLog, trace: &SpeedTrace) -> Result
                 .flatten()
                 .filter_map(|(name, r)| r.err().map(|e| format!("{name}: {e}")))
                 .collect();
-            return Err(format!(
+            refused.push(format!(
                 "wheelset {} has no usable brake input: {}",
                 j + 1,
                 why.join("; ")
             ));
+            continue;
         }
         for (name, r) in [&force, &pressure].into_iter().flatten() {
             let role = match (r, name.starts_with(F_CLAMP.stem), force_ok) {
@@ -253,6 +255,9 @@ pub fn choose(baseline: &Params, log: &mut RunLog, trace: &SpeedTrace) -> Result
         if !pressure_ok {
             log.p_cyl_pa[j] = None;
         }
+    }
+    if !refused.is_empty() {
+        return Err(refused.join("; "));
     }
     for j in 0..WHEELSETS {
         chosen
@@ -290,7 +295,9 @@ fn plausible_units(
     let mut sorted = x.to_vec();
     sorted.sort_by(f64::total_cmp);
     let q = |p: f64| sorted[((sorted.len() - 1) as f64 * p).round() as usize];
-    let (rest, peak) = (q(0.05), q(0.99));
+    // At rest: the released brake (an emergency brake from the first sample is released
+    // for its dead time only); applied: the held level (spikes are already removed).
+    let (rest, peak) = (q(0.001), q(0.99));
     if peak - rest <= SIGNAL_SIGMAS * noise_sigma(t, x) {
         return Ok(()); // no signal: a released brake (or a cut-out one)
     }

@@ -335,25 +335,32 @@ fn amount(x: f64, unit: &str) -> String {
 }
 
 /// The size of wheelset `j`'s difference on `link` against the other wheelsets (extended
-/// model): its measured-to-model scale relative to theirs, and its largest difference.
+/// model): its measured-to-model scale relative to theirs where a scale describes it (its
+/// own scale explains most of its error), and its largest difference beside theirs.
 fn size_note(runs: &[Prepared], reps: &[Replay], link: Link, j: usize) -> Option<String> {
     let sums = scale_sums(runs, reps, link);
     let own = sums[j]?;
-    let others: Vec<f64> = (0..WHEELSETS)
+    let others: Vec<ScaleSums> = (0..WHEELSETS)
         .filter(|&k| k != j)
-        .filter_map(|k| sums[k].map(|s| s.scale()))
+        .filter_map(|k| sums[k])
         .collect();
     let unit = link.channel(j)?.unit();
     let (diff, at) = own.largest;
-    let largest = format!(
+    let mut largest = format!(
         "largest difference from the model {} at {} s",
         amount(diff, unit),
         round_dp(at, 2)
     );
-    if others.is_empty() {
-        return Some(largest);
+    if !others.is_empty() {
+        let theirs = others.iter().map(|s| s.largest.0.abs()).fold(0.0, f64::max);
+        largest += &format!(", the others' at most {}", amount(theirs, unit));
     }
-    let rel = own.scale() / median(others) - 1.0;
+    let common = median(others.iter().map(|s| s.scale()).collect());
+    let is_level = own.rms_at(own.scale()) < 0.5 * own.rms_at(common);
+    if others.is_empty() || !is_level {
+        return Some(format!("wheelset {}: {largest}", j + 1));
+    }
+    let rel = own.scale() / common - 1.0;
     let pct = round_dp(rel.abs() * 100.0, 1);
     let dir = if rel >= 0.0 { "above" } else { "below" };
     Some(format!(
