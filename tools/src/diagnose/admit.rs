@@ -74,6 +74,7 @@ pub fn admit(baseline: &Params, logs: &[RunLog]) -> Result<Admitted, CannotJudge
             file: log.name(),
             reason,
         };
+        let speed_notes = check_speeds(log).map_err(refuse)?;
         check_rate(log).map_err(refuse)?;
         check_duration(log).map_err(refuse)?;
         let mut clean = log.clone();
@@ -81,7 +82,8 @@ pub fn admit(baseline: &Params, logs: &[RunLog]) -> Result<Admitted, CannotJudge
         let trace = inputs::SpeedTrace::new(baseline, &clean);
         let chosen = inputs::choose(baseline, &mut clean, &trace).map_err(refuse)?;
         check_speed_lost(&trace).map_err(refuse)?;
-        let mut notes = column_notes(log, &spiked, &chosen.roles);
+        let mut notes = speed_notes;
+        notes.extend(column_notes(log, &spiked, &chosen.roles));
         notes.extend(chosen.notes);
         // The reader's notes on empty cells are restated above with what the diagnosis does
         // with them (one note per column).
@@ -94,6 +96,30 @@ pub fn admit(baseline: &Params, logs: &[RunLog]) -> Result<Admitted, CannotJudge
         out.logs.push(clean);
     }
     Ok(out)
+}
+
+/// The speeds the method needs: v_ref (the vehicle's speed, against which slides and creep
+/// are judged); a wheel speed without any value leaves that wheelset's speed uncompared.
+fn check_speeds(log: &RunLog) -> Result<Vec<String>, String> {
+    let dead = |x: &[f64]| !x.iter().any(|v| v.is_finite());
+    if dead(&log.v_ref_mps) {
+        return Err(format!(
+            "{} has no value at all: the vehicle speed, against which the wheels' slides and \
+             creep are judged, is not measured",
+            V_REF.name(0)
+        ));
+    }
+    Ok((0..log.omega_radps.len())
+        .filter(|&j| dead(&log.omega_radps[j]))
+        .map(|j| {
+            format!(
+                "{} has no value at all: wheelset {}'s speed is not compared (its wheel-rail \
+                 link is not checked, its slides not judged)",
+                OMEGA.name(j),
+                j + 1
+            )
+        })
+        .collect())
 }
 
 /// The sample rate the method needs (see the module doc).
@@ -254,7 +280,9 @@ fn column_notes(log: &RunLog, spiked: &Spiked, roles: &[(String, Role)]) -> Vec<
     };
     names
         .into_iter()
+        // Unused columns and dead wheel speeds have their own note.
         .filter(|c| role_of(c) != Role::Unused)
+        .filter(|c| !(c.starts_with(OMEGA.stem) && log.missing.get(*c) == Some(&log.len())))
         .map(|c| {
             let empty = log.missing.get(c).copied().unwrap_or(0);
             let spikes = spiked

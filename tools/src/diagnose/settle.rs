@@ -36,17 +36,14 @@ pub fn settle(base: &Baseline, causes: &Causes, notes: &mut Vec<String>) -> Sett
             what_separates(group)
         ));
     }
-    let full = d
-        .replays(&d.models(&causes.effects, &causes.x))
-        .map(|r| d.score(&r, Split::Validation));
-    let listed: Vec<usize> = (0..causes.effects.len())
-        .filter(|&k| causes.effects[k].is_listed())
-        .collect();
     for (e, x) in causes.effects.iter().zip(&causes.x) {
         if !e.is_listed() {
             notes.push(unlisted_note(*e, x[0]));
         }
     }
+    let listed: Vec<usize> = (0..causes.effects.len())
+        .filter(|&k| causes.effects[k].is_listed())
+        .collect();
     let mut effects: Vec<_> = listed.iter().map(|&k| causes.effects[k]).collect();
     let mut x: Vec<_> = listed.iter().map(|&k| causes.x[k].clone()).collect();
     let mut ci: Vec<_> = listed
@@ -57,33 +54,17 @@ pub fn settle(base: &Baseline, causes: &Causes, notes: &mut Vec<String>) -> Sett
     let mut models = d.models(&effects, &x);
     let mut replays = d.replays(&models).unwrap_or_else(|| base.replays.clone());
     let mut validation = d.score(&replays, Split::Validation);
-    let judged = full.as_ref().unwrap_or(&validation);
     let mut unexplained = if base.discrepancy {
         unexplained_share(&base.validation, &validation)
     } else {
         0.0
     };
-    let claim_unexplained = unexplained_share(&base.validation, judged);
-    let spoiled = links::spoiled(
-        &links::errors(&d.runs, &base.replays),
-        &links::errors(&d.runs, &replays),
-    );
-    let withdraw = if claim_unexplained > MAX_UNEXPLAINED {
-        Some(format!(
-            "leaves {:.0} % of the error unexplained",
-            claim_unexplained * 100.0
-        ))
+    let withdraw = if base.discrepancy && !effects.is_empty() {
+        withdrawal(base, causes, &replays, &validation)
     } else {
-        spoiled.map(|(k, b, e)| {
-            format!(
-                "makes {} worse than the baseline ({:.2} -> {:.2} x noise)",
-                links::key_name(k),
-                b,
-                e
-            )
-        })
+        None
     };
-    if let (true, false, Some(why)) = (base.discrepancy, effects.is_empty(), withdraw) {
+    if let Some(why) = withdraw {
         notes.push(format!(
             "the best combination of listed effects ({}) {why}: no cause is claimed",
             effects
@@ -121,6 +102,41 @@ pub fn settle(base: &Baseline, causes: &Causes, notes: &mut Vec<String>) -> Sett
         unexplained_share: unexplained,
         confounded,
     }
+}
+
+/// Why the claim cannot stand, if it cannot: the causes with the effects outside the list
+/// (the whole fit) leave more than [`MAX_UNEXPLAINED`] of the baseline's error, or the
+/// listed causes (`replays`, `validation`) make a link worse than the baseline.
+fn withdrawal(
+    base: &Baseline,
+    causes: &Causes,
+    replays: &[Replay],
+    validation: &Score,
+) -> Option<String> {
+    let d = &base.d;
+    let full = d
+        .replays(&d.models(&causes.effects, &causes.x))
+        .map(|r| d.score(&r, Split::Validation));
+    let claim_unexplained =
+        unexplained_share(&base.validation, full.as_ref().unwrap_or(validation));
+    if claim_unexplained > MAX_UNEXPLAINED {
+        return Some(format!(
+            "leaves {:.0} % of the error unexplained",
+            claim_unexplained * 100.0
+        ));
+    }
+    let spoiled = links::spoiled(
+        &links::errors(&d.runs, &base.replays),
+        &links::errors(&d.runs, replays),
+    );
+    spoiled.map(|(k, b, e)| {
+        format!(
+            "makes {} worse than the baseline ({:.2} -> {:.2} x noise)",
+            links::key_name(k),
+            b,
+            e
+        )
+    })
 }
 
 /// The note on an effect outside the list that the search fitted.
