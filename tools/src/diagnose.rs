@@ -194,6 +194,13 @@ fn print_summary(out: &Outcome) {
             r.unexplained_share
         );
     }
+    for l in r.localisation.iter().filter(|l| !l.explained) {
+        let which = l
+            .wheelset
+            .map(|w| format!(" of wheelset {w}"))
+            .unwrap_or_default();
+        println!("unexplained: {}{which}: {}", l.link, l.note);
+    }
     println!(
         "slides: measured {}, baseline {}, extended {}",
         report::wheelset_list(&r.slides.measured),

@@ -81,9 +81,10 @@ pub fn cause_paragraph(out: &Outcome) -> String {
         return format!(
             "The baseline does not explain the data (validation error {:.1} times the noise), and none of \
              the listed effects, alone or combined, explains it: {:.0} % of the error stays unexplained. \
-             No cause is claimed; the plots below show where and when the error grows.",
+             No cause is claimed;{} the plots below show where and when the error grows.",
             r.gain.baseline,
-            r.unexplained_share * 100.0
+            r.unexplained_share * 100.0,
+            wheelset_differences(r)
         );
     }
     let mut s = String::from("The cause: ");
@@ -151,6 +152,22 @@ pub fn cause_paragraph(out: &Outcome) -> String {
         );
     }
     s
+}
+
+/// The differences of single wheelsets the localisation found, in words (empty if none).
+fn wheelset_differences(r: &Report) -> String {
+    let found: Vec<String> = r
+        .localisation
+        .iter()
+        .filter(|l| !l.explained && l.wheelset.is_some())
+        .filter_map(|l| l.note.split_once(": no listed effect explains it: "))
+        .map(|(_, size)| size.to_string())
+        .collect();
+    if found.is_empty() {
+        String::new()
+    } else {
+        format!(" where it sits: {};", found.join("; "))
+    }
 }
 
 /// Wheelsets (1-based) as people read them: `2, 4`, or `none`.
