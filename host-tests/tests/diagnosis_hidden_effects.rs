@@ -319,7 +319,8 @@ fn field_logger_adhesion() {
     assert_field_case(Kind::Hidden(Effect::Adhesion), 107);
 }
 
-/// `HILS_DIAG_CASES=N`: N more seeded cases over every effect (not in plain `cargo test`).
+/// `HILS_DIAG_CASES=N`: N more seeded cases over every effect (not in plain `cargo test`);
+/// `HILS_DIAG_KINDS=Wheelset,Mass` keeps the kinds whose name contains one of the words.
 #[test]
 fn more_cases_behind_flag() {
     let Some(n) = std::env::var("HILS_DIAG_CASES")
@@ -333,9 +334,15 @@ fn more_cases_behind_flag() {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(1000);
+    let words = std::env::var("HILS_DIAG_KINDS").unwrap_or_default();
+    let kinds: Vec<Kind> = KINDS
+        .into_iter()
+        .filter(|k| words.is_empty() || words.split(',').any(|w| format!("{k:?}").contains(w)))
+        .collect();
+    assert!(!kinds.is_empty(), "HILS_DIAG_KINDS={words} matches no kind");
     let mut failures = Vec::new();
     for i in 0..n {
-        let kind = KINDS[i % KINDS.len()];
+        let kind = kinds[i % kinds.len()];
         let seed = first + i as u64;
         let c = case(kind, seed);
         let r = run(&c);

@@ -51,6 +51,7 @@ pub mod json;
 pub mod links;
 pub mod lsq;
 pub mod outcome;
+pub mod plausible;
 pub mod replay;
 pub mod report;
 pub mod search;

@@ -26,6 +26,7 @@ use hils_plant::Params;
 use hils_sil::record::run_log::{A_X, F_BRAKE, OMEGA, Q, T_DISC, V_REF};
 
 use super::inputs::{self, Role};
+use super::plausible;
 use super::replay::{self, SPEED_FLOOR_MPS, VALIDATION_BLOCK_S, WINDOW_MIN_COUNT};
 use super::spikes;
 use crate::measured::RunLog;
@@ -74,17 +75,23 @@ pub fn admit(baseline: &Params, logs: &[RunLog]) -> Result<Admitted, CannotJudge
             file: log.name(),
             reason,
         };
-        let speed_notes = check_speeds(log).map_err(refuse)?;
-        check_rate(log).map_err(refuse)?;
-        check_duration(log).map_err(refuse)?;
         let mut clean = log.clone();
+        let stuck = plausible::remove_stuck(&mut clean);
+        let speed_notes = check_speeds(&clean, &stuck).map_err(refuse)?;
+        plausible::check_speed_units(baseline, &clean).map_err(refuse)?;
+        check_rate(log).map_err(refuse)?;
+        check_duration(&clean).map_err(refuse)?;
         let spiked = remove_spikes(baseline, &mut clean);
         let trace = inputs::SpeedTrace::new(baseline, &clean);
         let chosen = inputs::choose(baseline, &mut clean, &trace).map_err(refuse)?;
         check_speed_lost(&trace).map_err(refuse)?;
         let mut notes = speed_notes;
+        notes.extend(stuck_notes(&stuck));
         notes.extend(column_notes(log, &spiked, &chosen.roles));
         notes.extend(chosen.notes);
+        notes.extend(plausible::remove_implausible_observations(
+            baseline, &mut clean,
+        ));
         // The reader's notes on empty cells are restated above with what the diagnosis does
         // with them (one note per column).
         clean
@@ -99,33 +106,50 @@ pub fn admit(baseline: &Params, logs: &[RunLog]) -> Result<Admitted, CannotJudge
 }
 
 /// The speeds the method needs: v_ref (the vehicle's speed, against which slides and creep
-/// are judged); a wheel speed without any value leaves that wheelset's speed uncompared.
-fn check_speeds(log: &RunLog) -> Result<Vec<String>, String> {
+/// are judged); a wheel speed without any value, or stuck at one (`stuck`, from
+/// [`plausible::remove_stuck`]), leaves that wheelset's speed uncompared.
+fn check_speeds(log: &RunLog, stuck: &[(String, f64)]) -> Result<Vec<String>, String> {
     let dead = |x: &[f64]| !x.iter().any(|v| v.is_finite());
+    let what = |name: &str| match stuck.iter().find(|(c, _)| c == name) {
+        Some((_, v)) => plausible::stuck_text(*v),
+        None => "has no value at all".to_string(),
+    };
     if dead(&log.v_ref_mps) {
+        let name = V_REF.name(0).to_string();
         return Err(format!(
-            "{} has no value at all: the vehicle speed, against which the wheels' slides and \
-             creep are judged, is not measured",
-            V_REF.name(0)
+            "{name} {}: the vehicle speed, against which the wheels' slides and creep are \
+             judged, is not measured",
+            what(&name)
         ));
     }
     Ok((0..log.omega_radps.len())
         .filter(|&j| dead(&log.omega_radps[j]))
         .map(|j| {
+            let name = OMEGA.name(j).to_string();
             format!(
-                "{} has no value at all: wheelset {}'s speed is not compared (its wheel-rail \
-                 link is not checked, its slides not judged)",
-                OMEGA.name(j),
+                "{name} {}: wheelset {}'s speed is not compared (its wheel-rail link is not \
+                 checked, its slides not judged)",
+                what(&name),
                 j + 1
             )
         })
         .collect())
 }
 
+/// The notes on stuck observed channels (the speeds have theirs in [`check_speeds`]).
+fn stuck_notes(stuck: &[(String, f64)]) -> Vec<String> {
+    stuck
+        .iter()
+        .filter(|(c, _)| !c.starts_with(OMEGA.stem) && !c.starts_with(V_REF.stem))
+        .map(|(c, v)| format!("{c} {}: not compared", plausible::stuck_text(*v)))
+        .collect()
+}
+
 /// The sample rate the method needs (see the module doc).
 fn check_rate(log: &RunLog) -> Result<(), String> {
     let dt = log.median_interval_s();
-    if dt <= MAX_SAMPLE_INTERVAL_S {
+    // (time stamps written with a few decimals: 10 Hz may read 0.1000000001 s)
+    if dt <= MAX_SAMPLE_INTERVAL_S * (1.0 + 1e-6) {
         return Ok(());
     }
     Err(format!(

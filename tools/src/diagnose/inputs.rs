@@ -20,7 +20,7 @@
 use hils_plant::brake::Caliper;
 use hils_plant::{Params, WHEELSETS};
 use hils_sil::record::Channel;
-use hils_sil::record::run_log::{F_CLAMP, P_CYL, T_DISC, WSP};
+use hils_sil::record::run_log::{F_BRAKE, F_CLAMP, P_CYL, T_DISC, WSP};
 
 use super::replay::VALIDATION_BLOCK_S;
 use super::spikes::MU_MAX;
@@ -202,20 +202,42 @@ pub fn choose(baseline: &Params, log: &mut RunLog, trace: &SpeedTrace) -> Result
         notes: Vec::new(),
     };
     let mut refused = Vec::new();
-    for j in 0..WHEELSETS {
-        let check = |channel: Channel, x: &Option<Vec<f64>>| {
-            x.as_ref().map(|x| {
-                let c = Column {
-                    channel,
-                    j,
-                    t: &log.t_s,
-                    x,
-                };
-                (c.name(), usable(baseline, &c, trace))
-            })
-        };
-        let force = check(F_CLAMP, &log.f_clamp_n[j]);
-        let pressure = check(P_CYL, &log.p_cyl_pa[j]);
+    let checks: Vec<(Check, Check)> = (0..WHEELSETS)
+        .map(|j| {
+            let check = |channel: Channel, x: &Option<Vec<f64>>| {
+                x.as_ref().map(|x| {
+                    let c = Column {
+                        channel,
+                        j,
+                        t: &log.t_s,
+                        x,
+                    };
+                    (c.name(), usable(baseline, &c, trace))
+                })
+            };
+            (
+                check(F_CLAMP, &log.f_clamp_n[j]),
+                check(P_CYL, &log.p_cyl_pa[j]),
+            )
+        })
+        .collect();
+    let others_brake = checks.iter().any(|(f, p)| signal(f) || signal(p));
+    for (j, (force, pressure)) in checks.into_iter().enumerate() {
+        let isolated_checked = log.f_brake_n[j].is_some();
+        let unbraked = !signal(&force) && !signal(&pressure);
+        let [force, pressure] = quiet_inputs([force, pressure], others_brake, isolated_checked, j)
+            .map(|c| c.map(|(name, r)| (name, r.map(|_| ()))));
+        let usable_any = [&force, &pressure]
+            .into_iter()
+            .any(|c| c.as_ref().is_some_and(|c| c.1.is_ok()));
+        if isolated_checked && unbraked && others_brake && usable_any {
+            chosen.notes.push(format!(
+                "wheelset {}'s brake input stays at its released level while the others brake: \
+                 replayed as an isolated brake ({} shows whether it is)",
+                j + 1,
+                F_BRAKE.name(j)
+            ));
+        }
         let ok = |c: &Option<(String, Result<(), String>)>| c.as_ref().is_some_and(|c| c.1.is_ok());
         let (force_ok, pressure_ok) = (ok(&force), ok(&pressure));
         if !force_ok && !pressure_ok {
@@ -268,8 +290,71 @@ pub fn choose(baseline: &Params, log: &mut RunLog, trace: &SpeedTrace) -> Result
     Ok(chosen)
 }
 
-/// Whether a brake-input column is usable (see the module doc), or why not.
-fn usable(baseline: &Params, c: &Column, trace: &SpeedTrace) -> Result<(), String> {
+/// A brake-input column's name and whether it is usable (`Ok(true)`: with a signal).
+type Check = Option<(String, Result<bool, String>)>;
+
+fn signal(c: &Check) -> bool {
+    matches!(c, Some((_, Ok(true))))
+}
+
+fn quiet(c: &Check) -> bool {
+    matches!(c, Some((_, Ok(false))))
+}
+
+/// Brake inputs that carry no signal (stay at one level within their noise), judged
+/// against the wheelset's other input and the other wheelsets (issue 24 item 2): quiet
+/// beside the wheelset's other input that applies, it is a dead transducer; quiet while
+/// other wheelsets brake and nothing of this one does, it is a dead transducer or an
+/// isolated brake, which the speeds cannot tell apart, unless the wheelset's brake force
+/// `f_brake` is logged (then it is replayed as isolated and that channel checks it).
+fn quiet_inputs(
+    [force, pressure]: [Check; 2],
+    others_brake: bool,
+    isolated_checked: bool,
+    j: usize,
+) -> [Check; 2] {
+    let dead = |c: Check, why: String| c.map(|(name, _)| (name, Err(why)));
+    let applies = |c: &Check| c.as_ref().map_or(String::new(), |(n, _)| n.clone());
+    let beside = |other: &Check| {
+        format!(
+            "carries no signal (it stays within its noise) while {} applies the brake: a dead \
+             transducer",
+            applies(other)
+        )
+    };
+    if signal(&force) && quiet(&pressure) {
+        let why = beside(&force);
+        return [force, dead(pressure, why)];
+    }
+    if signal(&pressure) && quiet(&force) {
+        let why = beside(&pressure);
+        return [dead(force, why), pressure];
+    }
+    if others_brake && !signal(&force) && !signal(&pressure) && !isolated_checked {
+        let why = format!(
+            "carries no signal (it stays within its noise) while the other wheelsets brake: a \
+             dead transducer or an isolated brake, which the speeds cannot tell apart (with \
+             {} logged an isolated brake is judged)",
+            F_BRAKE.name(j)
+        );
+        let f = if quiet(&force) {
+            dead(force, why.clone())
+        } else {
+            force
+        };
+        let p = if quiet(&pressure) {
+            dead(pressure, why)
+        } else {
+            pressure
+        };
+        return [f, p];
+    }
+    [force, pressure]
+}
+
+/// Whether a brake-input column is usable (see the module doc), or why not; Ok(true) when
+/// it carries a signal (rises above its noise), Ok(false) when it stays at one level.
+fn usable(baseline: &Params, c: &Column, trace: &SpeedTrace) -> Result<bool, String> {
     let idx: Vec<usize> = (0..c.x.len()).filter(|&i| c.x[i].is_finite()).collect();
     if idx.is_empty() {
         return Err(
@@ -280,8 +365,19 @@ fn usable(baseline: &Params, c: &Column, trace: &SpeedTrace) -> Result<(), Strin
     }
     let t: Vec<f64> = idx.iter().map(|&i| c.t[i]).collect();
     let x: Vec<f64> = idx.iter().map(|&i| c.x[i]).collect();
-    plausible_units(baseline, c, &t, &x, trace)?;
-    bridgeable(c, &t, &x)
+    let (rest, peak) = (quantile(&x, 0.001), quantile(&x, 0.99));
+    if peak - rest <= SIGNAL_SIGMAS * noise_sigma(&t, &x) {
+        return Ok(false);
+    }
+    plausible_units(baseline, c, &t, &x, (rest, peak), trace)?;
+    bridgeable(c, &t, &x).map(|()| true)
+}
+
+/// A quantile of values (not empty).
+fn quantile(x: &[f64], p: f64) -> f64 {
+    let mut sorted = x.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    sorted[((sorted.len() - 1) as f64 * p).round() as usize]
 }
 
 /// The unit or channel check (see the module doc).
@@ -290,17 +386,11 @@ fn plausible_units(
     c: &Column,
     t: &[f64],
     x: &[f64],
+    (rest, peak): (f64, f64),
     trace: &SpeedTrace,
 ) -> Result<(), String> {
-    let mut sorted = x.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    let q = |p: f64| sorted[((sorted.len() - 1) as f64 * p).round() as usize];
     // At rest: the released brake (an emergency brake from the first sample is released
     // for its dead time only); applied: the held level (spikes are already removed).
-    let (rest, peak) = (q(0.001), q(0.99));
-    if peak - rest <= SIGNAL_SIGMAS * noise_sigma(t, x) {
-        return Ok(()); // no signal: a released brake (or a cut-out one)
-    }
     let caliper = Caliper::<f64>::new(&baseline.brake);
     let pressure = c.channel == P_CYL;
     let clamp = if pressure {

@@ -624,11 +624,13 @@ impl ChannelSetup<'_> {
             count: cnt,
         } = self.bins.sums(t, x);
         // A brake force at standstill is static friction (any value up to the limit
-        // holds the wheel): compared only while the wheelset turns.
+        // holds the wheel): compared only while the wheelset turns. Where its speed is not
+        // measured (a dead sensor), the vehicle's standstill is the wheel's.
         let turning = |b: usize| match quantity {
             Quantity::BrakeForce(j) => {
                 let w = wheel_bin[j][b];
-                !(w.is_finite() && w < STANDSTILL_MPS && v_bin[b].abs() < STANDSTILL_MPS)
+                let wheel_still = !w.is_finite() || w < STANDSTILL_MPS;
+                !(wheel_still && v_bin[b].abs() < STANDSTILL_MPS)
             }
             _ => true,
         };

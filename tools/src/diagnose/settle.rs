@@ -41,6 +41,7 @@ pub fn settle(base: &Baseline, causes: &Causes, notes: &mut Vec<String>) -> Sett
             notes.push(unlisted_note(*e, x[0]));
         }
     }
+    notes.extend(sensor_gain_lookalikes(causes));
     let listed: Vec<usize> = (0..causes.effects.len())
         .filter(|&k| causes.effects[k].is_listed())
         .collect();
@@ -140,6 +141,46 @@ fn withdrawal(
 }
 
 /// The note on an effect outside the list that the search fitted.
+/// Least departure of a wheelset's sensor gain from 1 that names that wheelset.
+const GAIN_DEPARTS: f64 = 0.03;
+
+/// Found on data the method was not tuned on: where one wheelset's pads differ (not a
+/// listed effect) and the channel that tells them from a sensor (its other brake-input
+/// transducer) is not logged or not usable, a sensor gain of that wheelset's brake input
+/// explains the data alike. The gain is claimed (a listed explanation the data cannot tell
+/// from an unlisted one wins) with a note naming the look-alike.
+fn sensor_gain_lookalikes(causes: &Causes) -> Vec<String> {
+    let mut out = Vec::new();
+    for (e, x) in causes.effects.iter().zip(&causes.x) {
+        if !matches!(e, Effect::SensorGain | Effect::SensorGainPressure) {
+            continue;
+        }
+        let off: Vec<usize> = (0..x.len())
+            .filter(|&j| (x[j] - 1.0).abs() > GAIN_DEPARTS)
+            .collect();
+        for &j in off.iter().filter(|_| off.len() <= 2) {
+            let pads = causes.singles.iter().find_map(|s| match s.effects[..] {
+                [Effect::WheelsetFriction(w)] if w as usize == j => Some(s.x[0][0]),
+                _ => None,
+            });
+            if let Some(scale) = pads {
+                let pct = crate::figures::round_dp((scale - 1.0).abs() * 100.0, 1);
+                out.push(format!(
+                    "sensor-gain on wheelset {} (gain {}) looks, on the channels used, like the \
+                     pads of wheelset {} differing from the others' (mu_d {pct} % {}, not a \
+                     listed effect): a second brake-input transducer on that wheelset (p_cyl \
+                     beside f_clamp) that is logged and usable separates them",
+                    j + 1,
+                    crate::figures::round_sig(x[j], 4),
+                    j + 1,
+                    if scale >= 1.0 { "above" } else { "below" }
+                ));
+            }
+        }
+    }
+    out
+}
+
 fn unlisted_note(e: Effect, scale: f64) -> String {
     let j = match e {
         Effect::WheelsetFriction(j) => j as usize + 1,
