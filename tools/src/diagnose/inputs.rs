@@ -22,6 +22,7 @@ use hils_plant::{Params, WHEELSETS};
 use hils_sil::record::Channel;
 use hils_sil::record::run_log::{F_BRAKE, F_CLAMP, P_CYL, T_DISC, WSP};
 
+use super::plausible::quantile;
 use super::replay::VALIDATION_BLOCK_S;
 use super::spikes::MU_MAX;
 use crate::figures::{round_dp, round_sig};
@@ -371,13 +372,6 @@ fn usable(baseline: &Params, c: &Column, trace: &SpeedTrace) -> Result<bool, Str
     }
     plausible_units(baseline, c, &t, &x, (rest, peak), trace)?;
     bridgeable(c, &t, &x).map(|()| true)
-}
-
-/// A quantile of values (not empty).
-fn quantile(x: &[f64], p: f64) -> f64 {
-    let mut sorted = x.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    sorted[((sorted.len() - 1) as f64 * p).round() as usize]
 }
 
 /// The unit or channel check (see the module doc).

@@ -238,7 +238,7 @@ pub fn remove_implausible_observations(baseline: &Params, log: &mut RunLog) -> V
 }
 
 /// A quantile of the finite values (NaN when none).
-fn quantile(x: &[f64], p: f64) -> f64 {
+pub fn quantile(x: &[f64], p: f64) -> f64 {
     let mut v: Vec<f64> = x.iter().copied().filter(|v| v.is_finite()).collect();
     if v.is_empty() {
         return f64::NAN;
