@@ -470,8 +470,8 @@ fn observed_forces_and_loads_in_kn_are_left_out_naming_the_column() {
     }
 }
 
-/// A 10 Hz log (the slowest the method judges) whose time stamps carry float rounding
-/// (0.30000000000000004 - 0.2 > 0.1) was refused as too coarse.
+/// A 10 Hz log (the slowest the method judges) whose time stamps carry a logger's clock
+/// rounding (every interval 0.1000000001 s) was refused as too coarse.
 #[test]
 fn a_10_hz_log_is_judged() {
     let c = null_case(Inputs::Pressure, 215);
@@ -479,7 +479,7 @@ fn a_10_hz_log_is_judged() {
     t.keep(|i, _| i % 50 == 0);
     let col = t.col("t_s");
     for (i, r) in t.rows.iter_mut().enumerate() {
-        r[col] = format!("{}", i as f64 * 0.1);
+        r[col] = format!("{:.10}", i as f64 * 0.100_000_000_1);
     }
     if let Err(e) = judge(&c, "10hz.csv", &t.text()) {
         assert!(!e.contains("sampled every"), "{e}");
