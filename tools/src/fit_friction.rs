@@ -93,21 +93,29 @@ pub struct CellsUsed {
 }
 
 impl FrictionFit {
-    /// The fit with every figure rounded to what it means (JSON and terminal): parameters
-    /// and intervals to 5 significant digits, rms to 3, correlations to 1e-3, times to
-    /// 1 ms.
+    /// The fit with every figure rounded to what it means (JSON and terminal): each parameter
+    /// and its interval to [`FrictionFit::decimals`], rms to 3 significant digits,
+    /// correlations to 1e-3, times to 1 ms.
     pub fn rounded(&self) -> FrictionFit {
-        let sig = |x: f64| round_sig(x, 5);
+        let names_values = NAMES
+            .iter()
+            .zip([self.mu_d0, self.n_v, self.m_v, self.n_t, self.m_t]);
+        let x: Vec<f64> = names_values
+            .map(|(name, x)| round_dp(x, self.decimals(name, x)))
+            .collect();
         FrictionFit {
-            mu_d0: sig(self.mu_d0),
-            n_v: sig(self.n_v),
-            m_v: sig(self.m_v),
-            n_t: sig(self.n_t),
-            m_t: sig(self.m_t),
+            mu_d0: x[0],
+            n_v: x[1],
+            m_v: x[2],
+            n_t: x[3],
+            m_t: x[4],
             ci95: self
                 .ci95
                 .iter()
-                .map(|(k, [lo, hi])| (k.clone(), [sig(*lo), sig(*hi)]))
+                .map(|(k, [lo, hi])| {
+                    let d = self.decimals(k, 0.5 * (lo + hi));
+                    (k.clone(), [round_dp(*lo, d), round_dp(*hi, d)])
+                })
                 .collect(),
             rms: round_sig(self.rms, 3),
             correlated: self
@@ -127,6 +135,27 @@ impl FrictionFit {
 }
 
 impl FrictionFit {
+    /// Decimals of parameter `name` (value `x`) and its interval: 5 significant digits, or
+    /// 2 of the interval's half-width when that is finer (50 M points pin mu_d0 to 3e-6).
+    pub fn decimals(&self, name: &str, x: f64) -> u32 {
+        let decimals_for = |y: f64, digits: i32| digits - 1 - y.abs().log10().floor() as i32;
+        let sig5 = if x.is_finite() && x != 0.0 {
+            decimals_for(x, 5)
+        } else {
+            5
+        };
+        let half = self
+            .ci95
+            .get(name)
+            .map_or(f64::NAN, |[lo, hi]| 0.5 * (hi - lo));
+        let of_interval = if half.is_finite() && half > 0.0 {
+            decimals_for(half, 2)
+        } else {
+            0
+        };
+        sig5.max(of_interval).clamp(0, 12) as u32
+    }
+
     /// The fit as friction parameters (variable model, c as fitted with).
     pub fn params(&self) -> FrictionParams {
         FrictionParams {
@@ -526,7 +555,8 @@ fn print_fit(f: &FrictionFit) {
     );
     for (name, value) in NAMES.iter().zip([f.mu_d0, f.n_v, f.m_v, f.n_t, f.m_t]) {
         let [lo, hi] = f.ci95[*name];
-        crate::say!("  {name:6} = {value:10.5}   95 % CI [{lo:.5}, {hi:.5}]");
+        let d = f.decimals(name, value).max(5) as usize;
+        crate::say!("  {name:6} = {value:10.d$}   95 % CI [{lo:.d$}, {hi:.d$}]");
     }
     crate::say!("  rms error of mu = {:.5}", f.rms);
     if let Some(c) = &f.cells {
@@ -658,4 +688,40 @@ pub fn write_report(
     files.push(dir.join("report.md"));
     crate::outputs::write_file(files.last().unwrap(), md)?;
     Ok(files)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A fit whose parameters are all `x` with intervals of half-width `half`.
+    fn fit_of(x: f64, half: f64) -> FrictionFit {
+        let ci95 = NAMES
+            .iter()
+            .map(|n| (n.to_string(), [x - half, x + half]))
+            .collect();
+        let mut f = fit_points(
+            &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0],
+            &[10.0, 200.0, 30.0, 150.0, 50.0, 250.0, 70.0, 120.0],
+            &[0.45, 0.42, 0.43, 0.41, 0.42, 0.39, 0.41, 0.40],
+            0.98,
+        )
+        .unwrap();
+        (f.mu_d0, f.n_v, f.m_v, f.n_t, f.m_t, f.ci95) = (x, x, x, x, x, ci95);
+        f
+    }
+
+    /// Item 16: 5 significant digits, finer when the interval is (50 M points pin mu_d0 to
+    /// a few 1e-6: rounded to 5 digits its interval read [0.38, 0.38]).
+    #[test]
+    fn parameters_and_intervals_are_rounded_to_what_they_mean() {
+        let wide = fit_of(0.379_961_274, 6.6e-4).rounded();
+        assert_eq!(wide.mu_d0, 0.37996);
+        assert_eq!(wide.ci95["mu_d0"], [0.3793, 0.38062]);
+        let narrow = fit_of(0.380_000_312_7, 3.1e-6).rounded();
+        assert_eq!(narrow.mu_d0, 0.3800003);
+        let [lo, hi] = narrow.ci95["mu_d0"];
+        assert!(lo < narrow.mu_d0 && narrow.mu_d0 < hi, "{lo} {hi}");
+        assert_eq!([lo, hi], [0.3799972, 0.3800034]);
+    }
 }

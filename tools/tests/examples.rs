@@ -48,7 +48,8 @@ fn the_friction_test_example_is_synthetic_fits_and_is_remade_by_its_command() {
         );
     }
     // Item 16: figures rounded to what they mean (the JSON had `0.37996127409530385`):
-    // parameters, intervals, rms, correlations to at most 5 significant digits, times to 1 ms.
+    // parameters and intervals to 5 significant digits (finer only for intervals narrower than
+    // the example's), rms and correlations fewer, times to 1 ms.
     assert_rounded(&fit, "");
     hils_ok(
         &dir,
