@@ -110,6 +110,8 @@ fn fit_friction_on_degenerate_data() {
         e.contains("degenerate") && e.contains("disc temperatures"),
         "{e}"
     );
+    // Item 16: the values in words, not a Rust debug list (`[50.0]`).
+    assert!(e.contains("(50)") && !e.contains('['), "{e}");
     // Near-degenerate and exact sets: whatever the fit, its statistics are meaningful.
     let mut seed = 12345u64;
     let mut rnd = || {

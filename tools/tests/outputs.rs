@@ -247,6 +247,30 @@ fn waiting_for_the_end_of_a_run_that_never_ends_is_an_error() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// Item 16: the rig's status was lower-cased Rust debug forms (`sensors 1:outofrange`,
+/// `mode selftest`). Now each state, mode, result and sensor fault by its name.
+#[test]
+fn rig_status_names_states_and_faults_in_words() {
+    let dir = temp_dir("rig-words");
+    let (code, out, err) = rig_session(
+        &dir,
+        "start --speed-kmh 30 --rail dry\ninject 1 out-of-range\nwait --for-s 0.2\nstatus\n",
+    );
+    assert_eq!(code, Some(0), "{out}{err}");
+    for words in [
+        "state fault",
+        "mode rig",
+        "last command accepted",
+        "1:out-of-range 2:ok",
+    ] {
+        assert!(out.contains(words), "no `{words}` in:\n{out}");
+    }
+    for debug in ["outofrange", "Some(", "None", "Rig", "Accepted", "Fault "] {
+        assert!(!out.contains(debug), "`{debug}` in:\n{out}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// Item 15: `summary.json` reported mu_d "at 10 s / 20 s" of a run that stopped at 3.8 s
 /// (the standstill's value). Now an instant the run did not reach is `null`, and the
 /// terminal says "not reached". Item 16: the terminal showed `[None, Some(4.54), None,

@@ -32,7 +32,7 @@ pub mod table;
 use std::io::BufReader;
 use std::path::Path;
 
-pub use friction_test::{FrictionTest, RELEASED_SHARE};
+pub use friction_test::{FrictionTest, RELEASED_SHARE, stream_friction_test};
 pub use limits::{Limit, MAX_SPAN_S, plausible_range};
 pub use run_log::{PerWheelset, RunLog};
 pub use table::{MeasuredError, Metadata, TextColumn, noise_sigma};

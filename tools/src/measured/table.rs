@@ -164,6 +164,10 @@ pub(crate) struct Table {
     pub(crate) columns: Vec<Cells>,
     /// 1-based file line of each data row.
     pub(crate) lines: Vec<u32>,
+    /// Data rows read before the rows held (read in chunks: [`read_table_chunks`]).
+    pub(crate) rows_before: usize,
+    /// The time of the last row before the rows held (read in chunks).
+    pub(crate) time_before: Option<f64>,
 }
 
 impl Table {
@@ -190,7 +194,12 @@ impl Table {
         idx: usize,
         message: impl Into<String>,
     ) -> MeasuredError {
-        self.err(self.lines[r] as usize, r + 1, &self.header[idx], message)
+        self.err(
+            self.lines[r] as usize,
+            self.rows_before + r + 1,
+            &self.header[idx],
+            message,
+        )
     }
 
     pub(crate) fn rows(&self) -> usize {
@@ -363,7 +372,20 @@ fn cells_of(kind: Kind, header: &[String]) -> Vec<Cells> {
 /// typed columns (no `String` per cell). Every numeric cell is checked as it is read: a
 /// number, finite, within its column's plausible range ([`limits`]); the time column has
 /// no empty cell, increases strictly and spans at most [`limits::MAX_SPAN_S`].
-pub(crate) fn read_table<R: BufRead>(path: &Path, mut input: R) -> Result<Table, MeasuredError> {
+pub(crate) fn read_table<R: BufRead>(path: &Path, input: R) -> Result<Table, MeasuredError> {
+    read_table_chunks(path, input, usize::MAX, |_| Ok(()))
+}
+
+/// [`read_table`] in chunks of `chunk_rows` rows, for files too large to hold: each full
+/// chunk is handed to `each` (the table holding those rows only; row numbers in errors
+/// count from the file's first row), then dropped; the table returned holds the last,
+/// partial chunk. Memory is bounded by the chunk, whatever the file's length.
+pub(crate) fn read_table_chunks<R: BufRead>(
+    path: &Path,
+    mut input: R,
+    chunk_rows: usize,
+    mut each: impl FnMut(&mut Table) -> Result<(), MeasuredError>,
+) -> Result<Table, MeasuredError> {
     let (metadata, header_text, header_line) = read_preamble(path, &mut input)?;
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(true)
@@ -389,17 +411,24 @@ pub(crate) fn read_table<R: BufRead>(path: &Path, mut input: R) -> Result<Table,
         header_line,
         kind,
         lines: Vec::new(),
+        rows_before: 0,
+        time_before: None,
     };
     let time = table.column(&rl::T.name(0).to_string());
     let mut record = csv::ByteRecord::new();
     let mut t_first = None;
     loop {
+        if table.lines.len() >= chunk_rows {
+            each(&mut table)?;
+            table.next_chunk(time);
+        }
         let r = table.lines.len();
         let more = reader.read_byte_record(&mut record).map_err(|e| {
             let line = e
                 .position()
                 .map_or(0, |p| p.line() as usize + header_line - 1);
-            table.err(line, r + 1, "", format!("malformed CSV row: {e}"))
+            let row = table.rows_before + r + 1;
+            table.err(line, row, "", format!("malformed CSV row: {e}"))
         })?;
         if !more {
             break;
@@ -419,6 +448,18 @@ pub(crate) fn read_table<R: BufRead>(path: &Path, mut input: R) -> Result<Table,
 }
 
 impl Table {
+    /// Drops the rows held (a chunk handed on), keeping what the checks of the next rows
+    /// need: the row count and the last time (`time`: the time column).
+    fn next_chunk(&mut self, time: Option<usize>) {
+        if let Some(Cells::Numeric(t, _)) = time.map(|i| &self.columns[i]) {
+            self.time_before = t.last().copied().or(self.time_before);
+        }
+        self.rows_before += self.lines.len();
+        self.lines.clear();
+        // Fresh columns: the chunk's were taken (moved out) by the caller.
+        self.columns = cells_of(self.kind, &self.header);
+    }
+
     /// Reads one cell of data row `r` (0-based) into its column, checking it.
     fn push_cell(&mut self, r: usize, idx: usize, raw: &[u8]) -> Result<(), MeasuredError> {
         let cell = match std::str::from_utf8(raw) {
@@ -475,8 +516,13 @@ impl Table {
         if now.is_nan() {
             return Err(self.row_err(r, idx, "empty cell in a required column"));
         }
-        if r > 0 && !(now > t[r - 1]) {
-            let msg = format!("time does not increase ({now} after {})", t[r - 1]);
+        let before = if r > 0 {
+            Some(t[r - 1])
+        } else {
+            self.time_before
+        };
+        if let Some(before) = before.filter(|&b| !(now > b)) {
+            let msg = format!("time does not increase ({now} after {before})");
             return Err(self.row_err(r, idx, msg));
         }
         let t0 = *first.get_or_insert(now);

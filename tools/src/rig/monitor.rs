@@ -257,7 +257,6 @@ fn check_alive(a: &mut AliveCheck, counter: u8, frame: &'static str) -> Result<(
     Ok(())
 }
 
-/// Lower-case name of a run state (as `hils decode` writes it).
 /// The name of a run mode (`rig`, `self-test`).
 pub fn mode_name(m: hils_rig_core::can::RigMode) -> &'static str {
     match m {
