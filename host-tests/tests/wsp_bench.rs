@@ -403,7 +403,7 @@ fn bad_programmes_are_refused_with_the_cause() {
     let cases = [
         (
             "[[run]]\nname='a'\nspeed_kmh=100.0\ndemand='emergency'\ntrack='none'\n",
-            "no track `none`",
+            "no [tracks.none]",
         ),
         (
             "[tracks.t]\nbase='low'\n[[run]]\nname='a'\nspeed_kmh=100.0\ndemand='brake'\ntrack='t'\n",

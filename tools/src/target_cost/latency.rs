@@ -182,37 +182,43 @@ pub fn measure(step_instructions_max: u32) -> Vec<Path> {
             b.valve_states().venting(0) == Some(true)
         })
     });
-    let us = |s: u64| figures(s as f64 * STEP_US + ADC_LEAD_US + step_us);
+    // A brake input is sampled ADC_LEAD_US before the tick that reads it; a coil edge comes
+    // at any time in the tick before the port read (0-100 us).
     let mut out = Vec::new();
-    let mut push = |path, steps: Option<(u64, u64)>, extra_max_us: f64, includes| {
-        if let Some((lo, hi)) = steps {
-            out.push(Path {
-                path,
-                steps_min: lo,
-                steps_max: hi,
-                us_min: us(lo),
-                us_max: figures(us(hi) + extra_max_us),
-                includes,
-            });
-        }
-    };
+    let mut push =
+        |path, steps: Option<(u64, u64)>, lead_us: (f64, f64), extra_max_us: f64, includes| {
+            if let Some((lo, hi)) = steps {
+                out.push(Path {
+                    path,
+                    steps_min: lo,
+                    steps_max: hi,
+                    us_min: figures(lo as f64 * STEP_US + lead_us.0 + step_us),
+                    us_max: figures(hi as f64 * STEP_US + lead_us.1 + step_us + extra_max_us),
+                    includes,
+                });
+            }
+        };
+    let adc = (ADC_LEAD_US, ADC_LEAD_US);
     push(
         "brake input -> pulse-timer registers",
         pulse,
+        adc,
         1111.0,
         "ADC 50 us before the tick, the step; max + one pulse period at 160 km/h (the new period starts at the timer's update)",
     );
     push(
         "brake input -> RIG_WHEEL_SPEED frame",
         can,
+        adc,
         270.0,
         "ADC 50 us before the tick, the step; max + 0.27 ms on the bus (500 kbit/s, idle)",
     );
     push(
         "valve input -> valve state (telemetry, frames)",
         valve,
+        (0.0, STEP_US),
         0.0,
-        "the port read at the tick's start, the debounce; the frame then follows on its 1 ms schedule",
+        "the coil's edge 0-100 us before the port read, the debounce, the step; the frame then follows on its 1 ms schedule",
     );
     out
 }
