@@ -29,7 +29,8 @@ fn elements<'a>(svg: &'a str, kind: &str) -> Vec<&'a str> {
         .collect()
 }
 
-/// What a plot's key box holds: (data points inside, swatch pieces, label rows).
+/// What a plot's key box holds: (data points inside, swatch pieces, label rows). Swatches
+/// are short lines, points and small filled boxes (a shaded area's).
 fn key_check(svg: &str) -> (usize, usize, usize) {
     let key = elements(svg, "rect")
         .into_iter()
@@ -66,6 +67,16 @@ fn key_check(svg: &str) -> (usize, usize, usize) {
             Some("2") if at => data_inside += 1,
             Some("3") if at => swatches += 1,
             _ => {}
+        }
+    }
+    // A shaded area's swatch (wsp-test's surface zones) is a small filled box of its colour.
+    for r in elements(svg, "rect") {
+        let fill = attr(r, "fill").unwrap_or_default();
+        let (x, y) = (num(r, "x"), num(r, "y"));
+        let (w, h) = (num(r, "width"), num(r, "height"));
+        let filled = fill != "none" && fill != "#FFFFFF";
+        if filled && inside(x, y) && inside(x + w, y + h) && w < x1 - x0 && h < y1 - y0 {
+            swatches += 1;
         }
     }
     let rows = elements(svg, "text")

@@ -63,6 +63,7 @@ fn the_rig_and_wsp_test_judge_a_recording_the_same() {
             "--interface",
             "sim",
             "run",
+            "--arm",
             "--programme",
             p,
             "--report",
