@@ -28,6 +28,7 @@ use hils_rig_core::stack::StackWatch;
 
 use crate::Irqs;
 use crate::can_io::Join;
+use crate::controller_io::ControllerIo;
 use crate::pulse::PulseOut;
 use crate::shared::{
     ADC_RESTARTS, ADC_SEQUENCES, BUILT, LOCAL_CMD, RIG_STATE, STACK_PEAK, START_REQUESTS,
@@ -76,6 +77,10 @@ pub async fn run(spawner: Spawner, p: Peripherals, image: Image) {
     // kept configured for good (dropping it would return the pin to analog).
     core::mem::forget(Output::new(p.PC8, Level::Low, Speed::Low));
 
+    // Valve inputs, EB loop (PB5 low), demand PWM (TIM17 silent), DACs at 0: safe until the
+    // step drives them. The bring-up image keeps DAC2 off (PA6: its pulse-check jumper).
+    let controller = ControllerIo::new(&silent, image == Image::Rig);
+
     let adc = start_adc(p.ADC1, p.DMA1_CH1, (p.PA0, p.PA1, p.PC1, p.PC0));
 
     let join = match image {
@@ -99,6 +104,7 @@ pub async fn run(spawner: Spawner, p: Peripherals, image: Image) {
                     ws2,
                     ws3,
                     ws4,
+                    controller,
                     tick: 0,
                 },
                 watchdog,

@@ -123,7 +123,8 @@ pub fn take_last_fault() -> Option<FaultRecord> {
     })
 }
 
-/// Pulse outputs silent, the output enable off and FDCAN off the bus. Register writes
+/// Pulse outputs silent, the output enable off, the EB loop open, the demand PWM low, the
+/// DACs at code 0 and FDCAN off the bus. Register writes
 /// only: callable from any fault handler and at start, with any peripheral state (writes to
 /// an unclocked peripheral are ignored).
 pub fn enter_safe_state() {
@@ -136,6 +137,7 @@ pub fn enter_safe_state() {
     for (port, pin) in PULSE_PINS.into_iter().chain([OUTPUT_ENABLE_PIN]) {
         crate::pulse::drive_low(port, pin);
     }
+    crate::controller_io::enter_safe_state();
     pac::FDCAN1.cccr().modify(|w| w.set_init(true));
     // PA12 = FDCAN1_TX: high first, then output, so the pin never drives dominant.
     pac::GPIOA.bsrr().write(|w| w.set_bs(CAN_TX_PIN, true));

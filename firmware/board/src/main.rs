@@ -13,6 +13,7 @@
 //! * [`can_io`]: FDCAN1 timing, FIFO transmit with stale frames dropped, filter, bus state.
 //! * [`telemetry`]: defmt-rtt logging with dropped records counted.
 //! * [`pulse`]: the four pulse-train timers (break on lockup) and the output enable.
+//! * [`controller_io`]: valve inputs, EB loop, service demand PWM, air-spring DACs.
 //! * [`fault`]: panic / HardFault / NMI -> safe state -> reset; the safe pins at every
 //!   start, fault resets in a row (hold after three), the stack guard; debugger-halt freeze.
 //! * [`app`]: the rig application (also run by the bring-up image for its step check);
@@ -27,6 +28,7 @@ mod can_io;
 mod ccm;
 mod ceiling;
 mod clock;
+mod controller_io;
 mod fault;
 mod handoff;
 mod pulse;

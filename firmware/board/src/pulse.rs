@@ -52,7 +52,8 @@ pub const OUTPUT_ENABLE_PIN: (pac::gpio::Gpio, usize) =
 
 /// What the reset handler writes to each port (A, B, C) before anything else
 /// (`ccm.rs` `__pre_init`): the MODER bits of the safe pins (mask, value: general-purpose
-/// output) and the BSRR word (pulse pins and output enable low, PA12 high).
+/// output) and the BSRR word (pulse pins, output enable, EB loop PB5 and demand PWM PA7 low,
+/// PA12 high).
 pub const SAFE_PIN_WRITES: [(u32, u32, u32); 3] = [safe_writes(0), safe_writes(1), safe_writes(2)];
 
 const fn safe_writes(port: usize) -> (u32, u32, u32) {
@@ -62,6 +63,8 @@ const fn safe_writes(port: usize) -> (u32, u32, u32) {
         PULSE_PIN_IDS[2],
         PULSE_PIN_IDS[3],
         OUTPUT_ENABLE_PIN_ID,
+        crate::controller_io::EB_LOOP_PIN_ID,
+        crate::controller_io::DEMAND_PWM_PIN_ID,
     ];
     let (mut mask, mut value, mut bsrr) = (0u32, 0u32, 0u32);
     let mut k = 0;
@@ -112,32 +115,20 @@ pub fn set_output_enable(on: bool) {
     });
 }
 
-/// One pulse output: a timer driving channel 1 (its pin in the timer's alternate function).
-pub struct PulseOut<T: GeneralInstance4Channel> {
-    /// Keeps the timer's clock on.
-    _timer: Timer<'static, T>,
-    _pin: PwmPin<'static, T, Ch1>,
+/// Channel 1 of a break-capable timer (TIM1 register layout: TIM1/8/20, and TIM15/16/17
+/// whose registers used here sit where TIM1's do) driven as a [`PulseRegisters`] output.
+pub struct Channel1Out {
     regs: TimAdv,
     /// The registers last written (`pulse::update` decides from them).
     last: PulseRegisters,
 }
 
-impl<T: GeneralInstance4Channel> PulseOut<T> {
-    /// Configures the timer (PWM mode 1 with preload, break on lockup and clock failure,
-    /// channel enabled with MOE = 0, OSSI = 1, OIS1 = 0: the timer drives the output low),
-    /// loads the silent registers, only then switches the pin to the timer's alternate
-    /// function (`pin`, embassy's `PwmPin::new`), and starts the timer. The pin goes from
-    /// the safe GPIO low of the start (`__pre_init`) straight to the timer's driven low: it
-    /// never floats. (With MOE = 0 and OSSI = 0, the reset state, the timer leaves the output
-    /// undriven, RM0440 "Output control bits for complementary OCx and OCxN channels with
-    /// break feature": a pin switched to AF before OSSI is set floats until it is.)
-    pub fn new(
-        timer: Timer<'static, T>,
-        pin: impl FnOnce() -> PwmPin<'static, T, Ch1>,
-        silent: &PulseRegisters,
-    ) -> Self {
-        // SAFETY: the timer's own register block; only TIM1-layout registers it has are used.
-        let regs = unsafe { TimAdv::from_ptr(timer.regs_core().as_ptr()) };
+impl Channel1Out {
+    /// Configures the timer (stopped): PWM mode 1 with preload, break on lockup and clock
+    /// failure, channel enabled with MOE = 0, OSSI = 1, OIS1 = 0 (the timer drives the
+    /// output low). The pin may go to the timer's alternate function after this, then
+    /// [`Channel1Out::start`].
+    pub fn configure(regs: TimAdv, silent: &PulseRegisters) -> Self {
         regs.cr1().modify(|w| {
             w.set_cen(false);
             w.set_arpe(true);
@@ -162,25 +153,21 @@ impl<T: GeneralInstance4Channel> PulseOut<T> {
             w.set_ccp(0, false);
             w.set_cce(0, true);
         });
-        let mut out = Self {
-            _timer: timer,
-            _pin: pin(),
+        Self {
             regs,
             last: *silent,
-        };
-        out.write_now(silent);
-        out.regs.bdtr().modify(|w| w.set_moe(true));
-        out.regs.cr1().modify(|w| w.set_cen(true));
-        out
+        }
     }
 
-    /// Loads `r` at once (PSC, ARR, CCR1, then UG).
-    fn write_now(&mut self, r: &PulseRegisters) {
-        self.write_prescaler(r.psc);
-        self.write_period(r.arr);
-        self.write_compare(r.ccr);
+    /// Loads the silent registers and starts the timer (MOE, CEN).
+    pub fn start(&mut self, silent: &PulseRegisters) {
+        self.write_prescaler(silent.psc);
+        self.write_period(silent.arr);
+        self.write_compare(silent.ccr);
         self.generate_update();
-        self.last = *r;
+        self.last = *silent;
+        self.regs.bdtr().modify(|w| w.set_moe(true));
+        self.regs.cr1().modify(|w| w.set_cen(true));
     }
 
     /// The step's new registers: nothing when unchanged, preloaded under UDIS, or silent at
@@ -199,7 +186,53 @@ impl<T: GeneralInstance4Channel> PulseOut<T> {
     }
 }
 
-impl<T: GeneralInstance4Channel> PulseTimerRegs for PulseOut<T> {
+/// One pulse output: a timer driving channel 1 (its pin in the timer's alternate function).
+pub struct PulseOut<T: GeneralInstance4Channel> {
+    /// Keeps the timer's clock on.
+    _timer: Timer<'static, T>,
+    _pin: PwmPin<'static, T, Ch1>,
+    out: Channel1Out,
+}
+
+impl<T: GeneralInstance4Channel> PulseOut<T> {
+    /// Configures the timer ([`Channel1Out::configure`]), only then switches the pin to the
+    /// timer's alternate function (`pin`, embassy's `PwmPin::new`), and starts the timer with
+    /// the silent registers. The pin goes from the safe GPIO low of the start (`__pre_init`)
+    /// straight to the timer's driven low: it never floats. (With MOE = 0 and OSSI = 0, the
+    /// reset state, the timer leaves the output undriven, RM0440 "Output control bits for
+    /// complementary OCx and OCxN channels with break feature": a pin switched to AF before
+    /// OSSI is set floats until it is.)
+    pub fn new(
+        timer: Timer<'static, T>,
+        pin: impl FnOnce() -> PwmPin<'static, T, Ch1>,
+        silent: &PulseRegisters,
+    ) -> Self {
+        // SAFETY: the timer's own register block; only TIM1-layout registers it has are used.
+        let regs = unsafe { TimAdv::from_ptr(timer.regs_core().as_ptr()) };
+        let out = Channel1Out::configure(regs, silent);
+        let mut out = Self {
+            _timer: timer,
+            _pin: pin(),
+            out,
+        };
+        out.out.start(silent);
+        out
+    }
+
+    /// The step's new registers ([`Channel1Out::write`]).
+    #[inline(always)]
+    pub fn write(&mut self, r: &PulseRegisters) {
+        self.out.write(r);
+    }
+
+    /// The timer's registers (bring-up: break check).
+    #[cfg(feature = "bringup")]
+    pub fn regs(&self) -> TimAdv {
+        self.out.regs()
+    }
+}
+
+impl PulseTimerRegs for Channel1Out {
     #[inline(always)]
     fn set_update_disable(&mut self, disable: bool) {
         self.regs.cr1().modify(|w| w.set_udis(disable));

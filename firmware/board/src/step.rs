@@ -14,13 +14,16 @@ use embassy_stm32::pac;
 use embassy_stm32::peripherals::{ADC1, IWDG, TIM1, TIM8, TIM15, TIM20};
 use embassy_stm32::wdg::IndependentWatchdog;
 use hils_rig_core::can_tx::QueuedFrame;
+use hils_rig_core::controller_io::DrivenOutputs;
 use hils_rig_core::heartbeat::thread_alive;
 use hils_rig_core::hw::{RigIo, TelemetryEvent};
 use hils_rig_core::pulse::PulseRegisters;
 use hils_rig_core::rig::CommandError;
 use hils_rig_core::rig::{BoardHealth, Rig, SimStore};
 use hils_rig_core::sensor::ADC_SEQUENCE_LEN;
+use hils_rig_core::valves::ValveLevels;
 
+use crate::controller_io::ControllerIo;
 use crate::handoff::Handoff;
 use crate::pulse::PulseOut;
 use crate::shared::{
@@ -45,6 +48,8 @@ pub struct BoardIo {
     pub ws2: PulseOut<TIM15>,
     pub ws3: PulseOut<TIM8>,
     pub ws4: PulseOut<TIM20>,
+    /// Valve inputs, EB loop, demand PWM, air-spring DACs.
+    pub controller: ControllerIo,
     /// The tick of the step in progress (stamps the queued frames).
     pub tick: u32,
 }
@@ -81,6 +86,16 @@ impl RigIo for BoardIo {
             2 => self.ws3.write(r),
             _ => self.ws4.write(r),
         }
+    }
+
+    #[unsafe(link_section = ".ccm_text.board_io")]
+    fn valve_levels(&mut self) -> ValveLevels {
+        self.controller.valve_levels()
+    }
+
+    #[unsafe(link_section = ".ccm_text.board_io")]
+    fn set_controller_outputs(&mut self, outputs: &DrivenOutputs) {
+        self.controller.drive(outputs);
     }
 
     #[unsafe(link_section = ".ccm_text.board_io")]

@@ -22,7 +22,8 @@
 //! the output is forced inactive at once (OCxM = force inactive) and the silent registers
 //! are loaded (UG, with UDIS clear: UG does not load them while UDIS is set). Leaving
 //! silence loads the new registers at once (UG) and restores PWM mode 1. Unchanged
-//! registers are not written.
+//! registers are not written; a new duty at the same PSC and ARR (the service demand PWM) writes
+//! CCR alone.
 
 use core::f32::consts::TAU;
 
@@ -129,6 +130,9 @@ pub enum PulseUpdate {
     Keep,
     /// A new frequency: PSC, ARR, CCR written under UDIS, loaded at the running period's end.
     Preload(PulseRegisters),
+    /// The same frequency, a new duty (the service demand PWM): CCR only, loaded at the
+    /// running period's end (one register write).
+    Duty(u32),
     /// Silent at once: output forced inactive, the silent registers loaded (UG).
     SilenceNow(PulseRegisters),
     /// From silent to a frequency: registers loaded at once (UG), PWM mode 1 again.
@@ -143,6 +147,8 @@ pub fn update(last: &PulseRegisters, next: &PulseRegisters) -> PulseUpdate {
         PulseUpdate::SilenceNow(*next)
     } else if last.is_silent() {
         PulseUpdate::Resume(*next)
+    } else if (last.psc, last.arr) == (next.psc, next.arr) {
+        PulseUpdate::Duty(next.ccr)
     } else {
         PulseUpdate::Preload(*next)
     }
@@ -181,6 +187,7 @@ pub fn apply(u: PulseUpdate, t: &mut impl PulseTimerRegs) {
     match u {
         PulseUpdate::Keep => {}
         PulseUpdate::Preload(r) => write(t, &r),
+        PulseUpdate::Duty(ccr) => t.write_compare(ccr),
         PulseUpdate::SilenceNow(r) => {
             t.set_pwm(false);
             write(t, &r);
@@ -391,6 +398,27 @@ mod tests {
         assert_eq!(t.shadow, fast);
         assert_eq!(update(&fast, &fast), PulseUpdate::Keep);
         assert_eq!(update(&fast, &slow), PulseUpdate::Preload(slow));
+    }
+
+    #[test]
+    fn a_new_duty_at_the_same_frequency_is_one_write_loaded_at_the_period_end() {
+        let a = TIMER.registers(500.0);
+        let b = PulseRegisters {
+            ccr: a.ccr / 5,
+            ..a
+        };
+        let u = update(&a, &b);
+        assert_eq!(u, PulseUpdate::Duty(b.ccr));
+        let mut t = Timer::running(a);
+        apply(u, &mut t);
+        assert_eq!((t.writes, t.shadow), (1, a));
+        t.update_event();
+        assert_eq!(t.shadow, b);
+        // A new period is never a duty-only update.
+        assert!(matches!(
+            update(&a, &TIMER.registers(400.0)),
+            PulseUpdate::Preload(_)
+        ));
     }
 
     proptest! {
