@@ -35,7 +35,11 @@ pub struct BenchArgs {
     /// Instead of the plant: time and peak memory of reading this measured file.
     #[arg(long)]
     pub reader: Option<std::path::PathBuf>,
-    /// With --reader: first write a synthetic run log of about this many MB to the file.
+    /// With --reader: the channel map to read the file with.
+    #[arg(long, requires = "reader", value_name = "FILE")]
+    pub map: Option<std::path::PathBuf>,
+    /// With --reader: first write a synthetic run log of about this many MB to the file
+    /// (MDF4 when the file name ends in `.mf4`, else CSV).
     #[arg(long, requires = "reader", value_parser = crate::flags::log_mb)]
     pub write_log_mb: Option<f64>,
 }
@@ -195,7 +199,7 @@ pub fn main(args: BenchArgs) -> Result<()> {
         if let Some(mb) = args.write_log_mb {
             write_log(path, mb)?;
         }
-        return bench_reader(path, args.json);
+        return bench_reader_with(path, args.map.as_deref(), args.json);
     }
     let params = ParamFile::default();
     let f = measure(&params, args.steps.max(1), args.repeat.max(1))?;
@@ -315,10 +319,20 @@ pub struct ReaderFigures {
 
 /// Times reading a measured file and prints the peak memory against its size.
 pub fn bench_reader(path: &std::path::Path, json: bool) -> Result<()> {
+    bench_reader_with(path, None, json)
+}
+
+/// [`bench_reader`] of a file (CSV or MDF4) read through a channel map.
+pub fn bench_reader_with(
+    path: &std::path::Path,
+    map: Option<&std::path::Path>,
+    json: bool,
+) -> Result<()> {
     let file_bytes = std::fs::metadata(path)?.len();
+    let map = crate::measured::load_map(map)?;
     let before = peak_rss_bytes();
     let started = Instant::now();
-    let m = crate::measured::read(path)?;
+    let m = crate::measured::read_with(path, map.as_ref())?;
     let read_s = started.elapsed().as_secs_f64();
     let rows = match &m {
         crate::measured::Measured::Run(r) => r.len(),

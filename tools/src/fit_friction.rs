@@ -24,7 +24,7 @@ use hils_plant::params::FrictionParams;
 use serde::Serialize;
 
 use crate::diagnose::lsq::{self, ParamSpec};
-use crate::measured::{FrictionTest, read_friction_test};
+use crate::measured::{FrictionTest, read_friction_test_with};
 use crate::params_file::params_or_default;
 use crate::plots::{Chart, Series, Style};
 
@@ -37,7 +37,11 @@ pub struct FitFrictionArgs {
     /// Parameter file whose `friction.correction_c` is used (default: the reference values).
     #[arg(long)]
     pub params: Option<PathBuf>,
-    /// Friction-test CSV files (spec measured-data.md, section 2).
+    /// Channel map (TOML): which of the files' channels or columns is which spec column,
+    /// their units, and metadata (docs/mdf4.md). Without it the spec's names are expected.
+    #[arg(long, value_name = "FILE")]
+    pub map: Option<PathBuf>,
+    /// Friction-test files (spec measured-data.md, section 2): CSV or MDF4 (.mf4).
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
 }
@@ -294,9 +298,10 @@ fn identifiability(
 pub fn main(args: FitFrictionArgs) -> Result<()> {
     let params = params_or_default(args.params.as_deref())?;
     let c = params.plant.friction.correction_c;
+    let map = crate::measured::load_map(args.map.as_deref())?;
     let mut tests = Vec::new();
     for f in &args.files {
-        let t = read_friction_test(f)?;
+        let t = read_friction_test_with(f, map.as_ref())?;
         for note in &t.notes {
             println!("{}: {note}", f.display());
         }

@@ -102,6 +102,7 @@ pub(crate) fn from_table(mut table: Table) -> Result<FrictionTest, MeasuredError
             kept_t.push(t[r]);
         }
     }
+    out.notes.extend(std::mem::take(&mut table.notes));
     out.notes.extend(skip_notes(empty, released));
     out.skipped = empty + released;
     if time.is_some() {

@@ -26,14 +26,18 @@
 
 pub mod friction_test;
 pub mod limits;
+pub mod map;
+mod mdf;
 pub mod run_log;
 pub mod table;
+pub mod units;
 
-use std::io::BufReader;
+use std::io::{BufRead, BufReader};
 use std::path::Path;
 
 pub use friction_test::{FrictionTest, RELEASED_SHARE};
 pub use limits::{Limit, MAX_SPAN_S, plausible_range};
+pub use map::ChannelMap;
 pub use run_log::{PerWheelset, RunLog};
 pub use table::{MeasuredError, Metadata, TextColumn, noise_sigma};
 
@@ -49,9 +53,25 @@ pub enum Measured {
 /// Reads a measured file of either kind (decided by its columns: `v_friction_mps` makes a
 /// friction test, `v_ref_mps` a run log), streaming: the file is never held whole.
 pub fn read(path: &Path) -> Result<Measured, MeasuredError> {
+    read_with(path, None)
+}
+
+/// Reads a measured file, CSV or MDF4 (told apart by the file's first bytes), its columns
+/// named and its units converted by the channel `map` (None: the spec's names).
+pub fn read_with(path: &Path, map: Option<&ChannelMap>) -> Result<Measured, MeasuredError> {
     let file =
         std::fs::File::open(path).map_err(|e| file_error(path, format!("cannot read: {e}")))?;
-    from_table(read_table(path, BufReader::with_capacity(1 << 16, file))?)
+    let mut input = BufReader::with_capacity(1 << 16, file);
+    let head = input
+        .fill_buf()
+        .map_err(|e| file_error(path, format!("cannot read: {e}")))?;
+    if crate::mdf4::is_mdf(head) {
+        let file = input.into_inner();
+        let src = crate::mdf4::blocks::FileSource::new(file)
+            .map_err(|e| file_error(path, format!("cannot read: {e}")))?;
+        return from_table(mdf::read_table(path, &src, map)?, map);
+    }
+    from_table(read_table(path, input, map)?, map)
 }
 
 /// Parses the text of a measured file of either kind (`path` names it in messages).
@@ -61,10 +81,30 @@ pub fn parse(path: &Path, text: &str) -> Result<Measured, MeasuredError> {
 
 /// Parses the bytes of a measured file of either kind (`path` names it in messages).
 pub fn parse_bytes(path: &Path, bytes: &[u8]) -> Result<Measured, MeasuredError> {
-    from_table(read_table(path, bytes)?)
+    parse_bytes_with(path, bytes, None)
 }
 
-fn from_table(table: Table) -> Result<Measured, MeasuredError> {
+/// Parses the bytes of a measured file, CSV or MDF4, with a channel map.
+pub fn parse_bytes_with(
+    path: &Path,
+    bytes: &[u8],
+    map: Option<&ChannelMap>,
+) -> Result<Measured, MeasuredError> {
+    if crate::mdf4::is_mdf(bytes) {
+        let src = crate::mdf4::blocks::Memory(bytes);
+        return from_table(mdf::read_table(path, &src, map)?, map);
+    }
+    from_table(read_table(path, bytes, map)?, map)
+}
+
+fn from_table(mut table: Table, map: Option<&ChannelMap>) -> Result<Measured, MeasuredError> {
+    table.metadata.check_repeats(&table.path)?;
+    if let Some(map) = map {
+        let origin = format!("the channel map {}", map.path.display());
+        table
+            .metadata
+            .merge(&table.path, map.metadata_pairs(), &origin)?;
+    }
     match table.kind {
         Kind::Friction => friction_test::from_table(table).map(Measured::Friction),
         Kind::Run => run_log::from_table(table).map(Measured::Run),
@@ -111,9 +151,27 @@ pub fn parse_run_log(path: &Path, text: &str) -> Result<RunLog, MeasuredError> {
     parse(path, text)?.expect(path, Measured::run, NOT_A_RUN_LOG)
 }
 
+/// Reads a run log, CSV or MDF4, through a channel map.
+pub fn read_run_log_with(path: &Path, map: Option<&ChannelMap>) -> Result<RunLog, MeasuredError> {
+    read_with(path, map)?.expect(path, Measured::run, NOT_A_RUN_LOG)
+}
+
 /// Reads a friction test (an error if the file is a run log).
 pub fn read_friction_test(path: &Path) -> Result<FrictionTest, MeasuredError> {
     read(path)?.expect(path, Measured::friction, NOT_A_FRICTION_TEST)
+}
+
+/// Reads a friction test, CSV or MDF4, through a channel map.
+pub fn read_friction_test_with(
+    path: &Path,
+    map: Option<&ChannelMap>,
+) -> Result<FrictionTest, MeasuredError> {
+    read_with(path, map)?.expect(path, Measured::friction, NOT_A_FRICTION_TEST)
+}
+
+/// The channel map of a `--map FILE` flag (None without one).
+pub fn load_map(path: Option<&Path>) -> Result<Option<ChannelMap>, MeasuredError> {
+    path.map(ChannelMap::load).transpose()
 }
 
 /// Parses a friction test's text.

@@ -44,6 +44,10 @@ pub struct WspTestArgs {
     /// The programme's run a `--log` is judged as.
     #[arg(long)]
     pub run: Option<String>,
+    /// Channel map (TOML): which of the files' channels or columns is which spec column,
+    /// their units, and metadata (docs/mdf4.md). Without it the spec's names are expected.
+    #[arg(long, value_name = "FILE")]
+    pub map: Option<PathBuf>,
 }
 
 /// A judged run with its trace (for the report).
@@ -164,7 +168,16 @@ pub fn run_one(run: Run, criteria: &Criteria) -> Result<Outcome> {
 /// metadata, else the first sample; distance integrated from the vehicle speed), and the
 /// run its `# run:` metadata names.
 pub fn trace_of_log(path: &std::path::Path, file: &ParamFile) -> Result<(Trace, Option<String>)> {
-    let log = crate::measured::read_run_log(path).map_err(|e| anyhow!("{e}"))?;
+    trace_of_log_with(path, file, None)
+}
+
+/// [`trace_of_log`] of a log (CSV or MDF4) read through a channel map.
+pub fn trace_of_log_with(
+    path: &std::path::Path,
+    file: &ParamFile,
+    map: Option<&crate::measured::ChannelMap>,
+) -> Result<(Trace, Option<String>)> {
+    let log = crate::measured::read_run_log_with(path, map).map_err(|e| anyhow!("{e}"))?;
     let t_brake = match log.metadata.get("brake_command_s") {
         Some(t) => t
             .parse::<f64>()
@@ -332,7 +345,8 @@ pub fn main(args: WspTestArgs) -> Result<()> {
     let runs = programme.runs(&file)?;
     let criteria = programme.criteria.for_file(&file);
     if let Some(log) = &args.log {
-        let (trace, named) = trace_of_log(log, &file)?;
+        let map = crate::measured::load_map(args.map.as_deref())?;
+        let (trace, named) = trace_of_log_with(log, &file, map.as_ref())?;
         let name = args.run.clone().or(named).ok_or_else(|| {
             anyhow!(
                 "{}: no `# run:` metadata; name the run with --run",
