@@ -43,8 +43,8 @@ pub struct DecodeArgs {
     /// Firmware ELF whose defmt table decodes a raw capture (target/thumbv7em-none-eabihf/release/board).
     #[arg(long)]
     pub elf: Option<PathBuf>,
-    /// Output CSV file; with several runs in the log, `-N` is added before the extension
-    /// unless --run picks one.
+    /// Output file: CSV, or MDF4 when its name ends in `.mf4`; with several runs in the
+    /// log, `-N` is added before the extension unless --run picks one.
     #[arg(short, long)]
     pub out: PathBuf,
     /// Decode only this run of the log (1 = the first).
@@ -401,6 +401,11 @@ impl Run {
     /// Writes the run as a run-log CSV (an error, before anything is written, when a
     /// value is implausible).
     pub fn write_csv<W: Write>(&self, out: W, source: &str) -> Result<()> {
+        self.write_as(runlog::Format::Csv, out, source)
+    }
+
+    /// Writes the run as a run log in `format` (CSV or MDF4; the same columns).
+    pub fn write_as<W: Write>(&self, format: runlog::Format, out: W, source: &str) -> Result<()> {
         let channels = self.channels();
         self.check_plausible(&channels)?;
         let rows = self.records.iter().map(|r| {
@@ -409,7 +414,7 @@ impl Run {
                 .flat_map(|&c| (0..c.width()).map(move |j| self.cell(r, c, j)))
                 .collect()
         });
-        runlog::write_table(out, &self.metadata(source), &self.columns(), rows)
+        runlog::write_table_as(format, out, &self.metadata(source), &self.columns(), rows)
     }
 }
 
@@ -485,7 +490,7 @@ pub fn main(args: DecodeArgs) -> Result<()> {
         }
         // Written whole once it is complete: a run refused half-way leaves no file.
         let mut csv = Vec::new();
-        run.write_csv(&mut csv, &source)
+        run.write_as(runlog::Format::of_path(&path), &mut csv, &source)
             .with_context(|| format!("{}", args.input.display()))?;
         std::fs::write(&path, csv).with_context(|| format!("cannot create {}", path.display()))?;
         let last = run.records.last().map(|r| run.time_s(r)).unwrap_or(0.0);

@@ -10,7 +10,7 @@ use hils_sil::{KMH_PER_MPS, ParamFile};
 
 use crate::params_file::params_or_default;
 use crate::plots::{Chart, Series, Style};
-use crate::runlog::write_run_log;
+use crate::runlog::{Format, write_run_log_as};
 use crate::scenario::{EbOptions, Run, run_eb};
 
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
@@ -86,6 +86,10 @@ pub struct SimulateArgs {
     /// Skip the figures (and the overlay run they need).
     #[arg(long)]
     pub no_plots: bool,
+    /// Run-log format: `csv` (run.csv, spec/measured-data.md) or `mf4` (run.mf4, ASAM MDF
+    /// 4.10: the same columns and names, with units, comments and the run's metadata).
+    #[arg(long, value_enum, default_value = "csv")]
+    pub format: Format,
 }
 
 /// Builds the parameters and options of a run from the arguments.
@@ -164,10 +168,10 @@ pub fn main(args: SimulateArgs) -> Result<()> {
                 .unwrap_or("built-in".into()),
         ),
     ];
-    let csv_path = args.out.join("run.csv");
+    let csv_path = args.out.join(format!("run.{}", args.format.extension()));
     let file = std::fs::File::create(&csv_path)
         .with_context(|| format!("cannot create {}", csv_path.display()))?;
-    write_run_log(file, &metadata, &main_run.samples)?;
+    write_run_log_as(args.format, file, &metadata, &main_run.samples)?;
     let summary_path = args.out.join("summary.json");
     std::fs::write(
         &summary_path,

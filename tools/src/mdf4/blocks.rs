@@ -296,7 +296,10 @@ pub fn xml_properties(xml: &str) -> Result<Vec<(String, String)>, String> {
         .filter(|n| n.has_tag_name("e"))
         .filter_map(|n| {
             let name = n.attribute("name")?;
-            Some((name.trim().to_string(), n.text().unwrap_or("").trim().to_string()))
+            Some((
+                name.trim().to_string(),
+                n.text().unwrap_or("").trim().to_string(),
+            ))
         })
         .collect())
 }

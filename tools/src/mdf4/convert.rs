@@ -11,16 +11,30 @@ use super::blocks::{Block, Blocks};
 pub enum Conversion {
     Identity,
     /// phys = offset + factor * raw.
-    Linear { offset: f64, factor: f64 },
+    Linear {
+        offset: f64,
+        factor: f64,
+    },
     /// phys = (p1 x^2 + p2 x + p3) / (p4 x^2 + p5 x + p6).
     Rational([f64; 6]),
     /// Pairs (raw, phys), raw increasing; `interpolate`: linear between keys, else the
     /// value of the nearest key.
-    Table { keys: Vec<f64>, values: Vec<f64>, interpolate: bool },
+    Table {
+        keys: Vec<f64>,
+        values: Vec<f64>,
+        interpolate: bool,
+    },
     /// Ranges [lo, hi] -> value, with a default.
-    Ranges { ranges: Vec<(f64, f64, f64)>, default: f64 },
+    Ranges {
+        ranges: Vec<(f64, f64, f64)>,
+        default: f64,
+    },
     /// Raw value (or range) -> text, with a default text.
-    Texts { keys: Vec<(f64, f64)>, texts: Vec<String>, default: String },
+    Texts {
+        keys: Vec<(f64, f64)>,
+        texts: Vec<String>,
+        default: String,
+    },
     /// A conversion not read (its CC type, for the message).
     Unsupported(u8),
 }

@@ -105,8 +105,9 @@ fn inflate(blocks: &Blocks, p: &Piece) -> Result<Vec<u8>, String> {
         return Ok(Vec::new());
     };
     let packed = blocks.bytes(addr, len, "DZ data")?;
-    let out = miniz_oxide::inflate::decompress_to_vec_zlib_with_limit(&packed, inflated as usize)
-        .map_err(|e| format!("DZ block at {addr:#x}: deflate data does not unpack ({e:?})"))?;
+    let out =
+        miniz_oxide::inflate::decompress_to_vec_zlib_with_limit(&packed, inflated as usize)
+            .map_err(|e| format!("DZ block at {addr:#x}: deflate data does not unpack ({e:?})"))?;
     if out.len() as u64 != inflated {
         return Err(format!(
             "DZ block at {addr:#x}: unpacks to {} bytes, the block says {inflated}",
@@ -382,10 +383,12 @@ impl<'c> Decoder<'c> {
                 "conversion type {t} (formula, text or bit-field conversion) is not read"
             )));
         }
-        let be_unaligned = matches!(ch.data_type, 1 | 3 | 5)
-            && (ch.bit_offset != 0 || ch.bit_count % 8 != 0);
+        let be_unaligned =
+            matches!(ch.data_type, 1 | 3 | 5) && (ch.bit_offset != 0 || ch.bit_count % 8 != 0);
         if be_unaligned {
-            return Err(err("big-endian value not on byte boundaries: not read".into()));
+            return Err(err(
+                "big-endian value not on byte boundaries: not read".into()
+            ));
         }
         let bytes = (ch.bit_offset as usize + ch.bit_count as usize).div_ceil(8);
         let start = ch.byte_offset as usize;
@@ -429,8 +432,7 @@ impl<'c> Decoder<'c> {
 
     /// Decodes the channel's value of record `rec` (number `index`) into `out`.
     fn push(&self, rec: &[u8], index: u64, out: &mut Values) {
-        let invalid =
-            self.all_invalid || self.invalid.is_some_and(|(b, m)| rec[b] & m != 0);
+        let invalid = self.all_invalid || self.invalid.is_some_and(|(b, m)| rec[b] & m != 0);
         let raw = if self.ch.cn_type == 3 || self.ch.cn_type == 6 {
             Raw::Num(index as f64)
         } else {
@@ -483,7 +485,11 @@ impl<'c> Decoder<'c> {
         let ch = self.ch;
         let v = v >> ch.bit_offset;
         let n = ch.bit_count;
-        let mask = if n >= 128 { u128::MAX } else { (1u128 << n) - 1 };
+        let mask = if n >= 128 {
+            u128::MAX
+        } else {
+            (1u128 << n) - 1
+        };
         let u = v & mask;
         if ch.data_type >= 2 && n > 0 && (u >> (n - 1)) & 1 == 1 {
             (u as i128 - (1i128 << n)) as f64
@@ -499,7 +505,10 @@ enum Raw {
 }
 
 fn le_u128(b: &[u8]) -> u128 {
-    b.iter().take(16).rev().fold(0u128, |v, &x| (v << 8) | x as u128)
+    b.iter()
+        .take(16)
+        .rev()
+        .fold(0u128, |v, &x| (v << 8) | x as u128)
 }
 
 fn be_u128(b: &[u8]) -> u128 {

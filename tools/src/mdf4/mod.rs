@@ -158,7 +158,9 @@ impl<'a> Mdf4<'a> {
                     d + 1
                 ));
             }
-            let cgs = self.blocks.chain(dg.link(1), &[b"CG"], 0, "channel groups")?;
+            let cgs = self
+                .blocks
+                .chain(dg.link(1), &[b"CG"], 0, "channel groups")?;
             if cgs.len() > 1 && rec_id_size == 0 {
                 return Err(format!(
                     "data group {}: {} channel groups without record ids",
@@ -230,10 +232,7 @@ impl<'a> Mdf4<'a> {
 }
 
 /// The HD comment: its `<common_properties>` and its `<TX>` (a TX block: the text).
-fn header_comment(
-    blocks: &Blocks,
-    addr: u64,
-) -> Result<(Vec<(String, String)>, String), String> {
+fn header_comment(blocks: &Blocks, addr: u64) -> Result<(Vec<(String, String)>, String), String> {
     match blocks.text(addr)? {
         None => Ok((Vec::new(), String::new())),
         Some(Text::Plain(s)) => Ok((Vec::new(), s)),

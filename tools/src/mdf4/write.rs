@@ -21,7 +21,10 @@ pub struct Column<'a> {
 pub enum ColumnValues {
     Num(Vec<f64>),
     /// The distinct texts and each record's index into them.
-    Text { texts: Vec<String>, codes: Vec<u32> },
+    Text {
+        texts: Vec<String>,
+        codes: Vec<u32>,
+    },
 }
 
 impl ColumnValues {
@@ -58,7 +61,8 @@ impl Layout {
         self.buf.extend_from_slice(id);
         self.buf.extend_from_slice(&[0; 4]);
         self.buf.extend_from_slice(&(length as u64).to_le_bytes());
-        self.buf.extend_from_slice(&(links.len() as u64).to_le_bytes());
+        self.buf
+            .extend_from_slice(&(links.len() as u64).to_le_bytes());
         for l in links {
             self.buf.extend_from_slice(&l.to_le_bytes());
         }
@@ -201,7 +205,11 @@ pub fn write<W: Write>(
             &cn_data(0, 0, data_type, offset, bits),
         );
     }
-    let (name, unit, com) = (l.tx("t_s"), l.tx("s"), l.tx("time since the start of the log"));
+    let (name, unit, com) = (
+        l.tx("t_s"),
+        l.tx("s"),
+        l.tx("time since the start of the log"),
+    );
     let master = l.block(
         b"CN",
         &[next, 0, name, 0, 0, 0, unit, com],

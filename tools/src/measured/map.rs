@@ -54,7 +54,13 @@ fn spec_channel(name: &str) -> Option<Channel> {
     Channel::find(&rl::ALL, name)
         .or_else(|| {
             Channel::find(
-                &[ft::V_FRICTION, ft::T_DISC, ft::MU, ft::F_CLAMP, ft::F_FRICTION],
+                &[
+                    ft::V_FRICTION,
+                    ft::T_DISC,
+                    ft::MU,
+                    ft::F_CLAMP,
+                    ft::F_FRICTION,
+                ],
                 name,
             )
         })
@@ -106,7 +112,10 @@ impl ChannelMap {
                 v,
                 toml::Value::String(_) | toml::Value::Integer(_) | toml::Value::Float(_)
             ) {
-                return Err(err(k, format!("`[metadata] {k}` must be a text or a number")));
+                return Err(err(
+                    k,
+                    format!("`[metadata] {k}` must be a text or a number"),
+                ));
             }
         }
         Ok(map)
@@ -237,16 +246,16 @@ fn resolve_one(
     let targets = map.map_or(Vec::new(), |m| m.target_of(name));
     let (target, map_unit) = match targets.as_slice() {
         [] => (name.to_string(), None),
-        [t] => (
-            t.to_string(),
-            map.and_then(|m| m.channels[*t].unit.clone()),
-        ),
+        [t] => (t.to_string(), map.and_then(|m| m.channels[*t].unit.clone())),
         many => {
             return Err(MeasuredError {
                 column: name.to_string(),
                 ..file_error(
                     file,
-                    format!("the channel map takes {} from `{name}`: one each", many.join(", ")),
+                    format!(
+                        "the channel map takes {} from `{name}`: one each",
+                        many.join(", ")
+                    ),
                 )
             });
         }
@@ -286,7 +295,11 @@ fn resolve_one(
         ..file_error(file, format!("`{name}` (as `{target}`): {m}"))
     })?;
     Ok(Resolved {
-        unit: if conv.is_identity() { String::new() } else { unit },
+        unit: if conv.is_identity() {
+            String::new()
+        } else {
+            unit
+        },
         ..plain(conv)
     })
 }
@@ -345,7 +358,10 @@ initial_speed_kmh = 120
         .unwrap();
         assert_eq!(r[0].target, "omega1_radps");
         assert!((r[0].to_si.apply(3.6 * 0.43) - 1.0).abs() < 1e-12);
-        assert_eq!((r[1].target.as_str(), r[1].to_si.factor), ("p_cyl1_pa", 1e5));
+        assert_eq!(
+            (r[1].target.as_str(), r[1].to_si.factor),
+            ("p_cyl1_pa", 1e5)
+        );
         assert!((r[2].to_si.apply(36.0) - 10.0).abs() < 1e-12);
         assert_eq!(r[3].target, "Other");
         assert_eq!(
@@ -360,8 +376,13 @@ initial_speed_kmh = 120
     #[test]
     fn bad_maps_and_units_name_the_channel() {
         let map = ChannelMap::parse(Path::new("m.toml"), MAP).unwrap();
-        let e = resolve(Some(&map), Path::new("f.mf4"), &names(&["BC_Pressure_1"]), &[])
-            .unwrap_err();
+        let e = resolve(
+            Some(&map),
+            Path::new("f.mf4"),
+            &names(&["BC_Pressure_1"]),
+            &[],
+        )
+        .unwrap_err();
         assert_eq!(e.column, "WheelSpeed_Axle1");
         assert!(e.to_string().contains("f.mf4"), "{e}");
         let e = resolve(
@@ -373,14 +394,25 @@ initial_speed_kmh = 120
         .unwrap_err();
         assert_eq!(e.column, "BC_Pressure_1");
         assert!(e.message.contains("no unit"), "{e}");
-        let e = resolve(None, Path::new("f.mf4"), &names(&["v_ref_mps"]), &names(&["bar"]))
-            .unwrap_err();
+        let e = resolve(
+            None,
+            Path::new("f.mf4"),
+            &names(&["v_ref_mps"]),
+            &names(&["bar"]),
+        )
+        .unwrap_err();
         assert!(e.message.contains("pressure unit"), "{e}");
-        let e = ChannelMap::parse(Path::new("m.toml"), "[channels.omega9_radps]\nfrom = \"x\"\n")
-            .unwrap_err();
+        let e = ChannelMap::parse(
+            Path::new("m.toml"),
+            "[channels.omega9_radps]\nfrom = \"x\"\n",
+        )
+        .unwrap_err();
         assert_eq!(e.column, "omega9_radps");
-        let e = ChannelMap::parse(Path::new("m.toml"), "[channels.omega1_radps]\nform = \"x\"\n")
-            .unwrap_err();
+        let e = ChannelMap::parse(
+            Path::new("m.toml"),
+            "[channels.omega1_radps]\nform = \"x\"\n",
+        )
+        .unwrap_err();
         assert!(e.to_string().contains("m.toml"), "{e}");
     }
 }

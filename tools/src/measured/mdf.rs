@@ -19,7 +19,7 @@ use std::path::Path;
 
 use super::limits::Limit;
 use super::map::{ChannelMap, Resolved, resolve};
-use super::table::{Cells, Metadata, MeasuredError, Table, TextColumn, file_error};
+use super::table::{Cells, MeasuredError, Metadata, Table, TextColumn, file_error};
 use super::units::{Quantity, to_si};
 use crate::mdf4::blocks::ReadAt;
 use crate::mdf4::data::{ChannelError, Values};
@@ -110,7 +110,9 @@ fn check_unique(
         let groups: Vec<String> = mdf
             .groups
             .iter()
-            .filter(|g| !g.is_vlsd() && g.channels.iter().any(|c| !c.is_master() && c.name == *name))
+            .filter(|g| {
+                !g.is_vlsd() && g.channels.iter().any(|c| !c.is_master() && c.name == *name)
+            })
             .map(Group::label)
             .collect();
         if groups.len() > 1 {
@@ -118,7 +120,10 @@ fn check_unique(
                 column: table.labels[u.column].clone(),
                 ..file_error(
                     &table.path,
-                    format!("channel `{name}` is in {}: which one is meant?", groups.join(" and ")),
+                    format!(
+                        "channel `{name}` is in {}: which one is meant?",
+                        groups.join(" and ")
+                    ),
                 )
             });
         }
@@ -151,7 +156,10 @@ fn fill(
     }
     let Some(master) = (0..data.len()).max_by(|&a, &b| rate(&data[a]).total_cmp(&rate(&data[b])))
     else {
-        return Err(file_error(&table.path, "no channel of the file is a spec column"));
+        return Err(file_error(
+            &table.path,
+            "no channel of the file is a spec column",
+        ));
     };
     let grid = std::mem::take(&mut data[master].time_s);
     let grid_label = mdf.groups[data[master].group].label();
@@ -214,7 +222,10 @@ fn read_group(
         if !unit.is_empty() && unit != "s" {
             let c = to_si(Quantity::Time, unit).map_err(|e| MeasuredError {
                 column: group.channels[m].name.clone(),
-                ..file_error(&table.path, format!("time master of {}: {e}", group.label()))
+                ..file_error(
+                    &table.path,
+                    format!("time master of {}: {e}", group.label()),
+                )
             })?;
             time_s.iter_mut().for_each(|t| *t = c.apply(*t));
         }
@@ -288,9 +299,8 @@ fn place(grid: &[f64], t: &[f64], values: Values, label: &str) -> (Values, Strin
         crate::figures::round_sig(grid_hz, 3)
     );
     if shared > 0 {
-        note += &format!(
-            "; {shared} samples share a grid time with an earlier one and are left out"
-        );
+        note +=
+            &format!("; {shared} samples share a grid time with an earlier one and are left out");
     }
     (out, note)
 }
@@ -302,7 +312,9 @@ fn interpolate_at(t: &[f64], v: &[f64], i: usize, at: f64) -> f64 {
     } else {
         (i.saturating_sub(1), i)
     };
-    if j0 == j1 || t[j1] == t[j0] {
+    // At its own time, or next to an invalid sample: its own value (shifted by at most
+    // half a grid interval).
+    if at == t[i] || j0 == j1 || t[j1] == t[j0] || v[j0].is_nan() || v[j1].is_nan() {
         return v[i];
     }
     v[j0] + (v[j1] - v[j0]) * (at - t[j0]) / (t[j1] - t[j0])
@@ -329,7 +341,10 @@ fn store(table: &mut Table, col: usize, values: Values) -> Result<(), MeasuredEr
         (Cells::Numeric(..), Values::Text(_)) => {
             return Err(MeasuredError {
                 column: table.labels[col].clone(),
-                ..file_error(&table.path, "the channel holds texts; this column needs numbers")
+                ..file_error(
+                    &table.path,
+                    "the channel holds texts; this column needs numbers",
+                )
             });
         }
         (Cells::Text(_), values) => {
@@ -337,7 +352,11 @@ fn store(table: &mut Table, col: usize, values: Values) -> Result<(), MeasuredEr
             match values {
                 Values::Text(v) => v.iter().for_each(|s| text.push(s)),
                 Values::Num(v) => v.iter().for_each(|x| {
-                    text.push(&if x.is_nan() { String::new() } else { format!("{x}") })
+                    text.push(&if x.is_nan() {
+                        String::new()
+                    } else {
+                        format!("{x}")
+                    })
                 }),
             }
             table.columns[col] = Cells::Text(text);

@@ -74,7 +74,9 @@ impl Metadata {
                     column: k.clone(),
                     ..file_error(
                         file,
-                        format!("metadata `{k}` is given twice with different values: `{w}` and `{v}`"),
+                        format!(
+                            "metadata `{k}` is given twice with different values: `{w}` and `{v}`"
+                        ),
                     )
                 });
             }

@@ -123,10 +123,7 @@ pub const ALIASES: [(&str, &str); 20] = [
 /// `uom`'s spelling of a unit text (trimmed; aliases resolved).
 fn canonical(unit: &str) -> &str {
     let u = unit.trim();
-    ALIASES
-        .iter()
-        .find(|(a, _)| *a == u)
-        .map_or(u, |(_, c)| c)
+    ALIASES.iter().find(|(a, _)| *a == u).map_or(u, |(_, c)| c)
 }
 
 /// The SI value of `x` of `unit` in `quantity`, by `uom` (None: not a unit of it).
@@ -153,10 +150,7 @@ fn parse_in(quantity: Quantity, x: f64, unit: &str) -> Option<f64> {
 pub fn to_si(quantity: Quantity, unit: &str) -> Result<ToSi, String> {
     let u = canonical(unit);
     if u.is_empty() && quantity != Quantity::Dimensionless {
-        return Err(format!(
-            "no unit given; {} needs one",
-            quantity.describe()
-        ));
+        return Err(format!("no unit given; {} needs one", quantity.describe()));
     }
     let base = parse_in(quantity, 0.0, u);
     let one = parse_in(quantity, 1.0, u);

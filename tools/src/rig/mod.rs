@@ -128,6 +128,7 @@ pub enum Line {
     /// Record the wheel-speed and status frames as a run log. Alone: until a run ends (or
     /// `--for-s`); in a session: from here to the end of the session.
     Record {
+        /// Run-log file: CSV, or MDF4 when its name ends in `.mf4`.
         #[arg(long)]
         out: PathBuf,
         /// Record at most this long, s (0.001-86400).

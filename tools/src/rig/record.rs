@@ -189,15 +189,26 @@ impl Recorder {
             .collect()
     }
 
-    /// Writes the run log to `path`; `end` says why the recording ended.
+    /// Writes the run log to `path` (MDF4 when its name ends in `.mf4`, else CSV); `end`
+    /// says why the recording ended.
     pub fn write(&self, path: &Path, meta: &RunMeta) -> Result<Written> {
         let file = std::fs::File::create(path)
             .with_context(|| format!("cannot create {}", path.display()))?;
-        self.write_to(file, meta)
+        self.write_to_as(runlog::Format::of_path(path), file, meta)
     }
 
-    /// Writes the run log.
+    /// Writes the run log as CSV.
     pub fn write_to<W: std::io::Write>(&self, out: W, m: &RunMeta) -> Result<Written> {
+        self.write_to_as(runlog::Format::Csv, out, m)
+    }
+
+    /// Writes the run log in `format`.
+    pub fn write_to_as<W: std::io::Write>(
+        &self,
+        format: runlog::Format,
+        out: W,
+        m: &RunMeta,
+    ) -> Result<Written> {
         let r_w = m
             .wheel_radius_m
             .unwrap_or(Params::default().vehicle.wheel_radius);
@@ -214,7 +225,7 @@ impl Recorder {
         written.rows = rows.len();
         let meta = self.metadata(m, t_from, t0, &written);
         let header = runlog::column_names(&channels);
-        runlog::write_table(out, &meta, &header, rows)?;
+        runlog::write_table_as(format, out, &meta, &header, rows)?;
         Ok(written)
     }
 
