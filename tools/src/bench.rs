@@ -197,6 +197,11 @@ const HOST_ISA: &str = if cfg!(all(target_feature = "avx2", target_feature = "fm
 pub fn main(args: BenchArgs) -> Result<()> {
     if let Some(path) = &args.reader {
         if let Some(mb) = args.write_log_mb {
+            crate::outputs::OutFile::check_file(
+                path,
+                "--reader",
+                "the synthetic log is written to a file and then read",
+            )?;
             write_log(path, mb)?;
         }
         return bench_reader_with(path, args.map.as_deref(), args.json);
@@ -237,8 +242,11 @@ pub fn main(args: BenchArgs) -> Result<()> {
 /// formatted like `hils decode`'s f32 cells): CSV streaming (small memory), or MDF4 when
 /// the file name ends in `.mf4` (through the one run-log writer).
 pub fn write_log(path: &std::path::Path, mb: f64) -> Result<()> {
-    use std::io::Write;
-    let file = std::fs::File::create(path)?;
+    crate::outputs::write_atomic(path, |w| write_log_to(w, path, mb))
+}
+
+/// The synthetic run log of [`write_log`], in the format of `path`'s extension.
+fn write_log_to(w: &mut dyn std::io::Write, path: &std::path::Path, mb: f64) -> Result<()> {
     let meta = vec![
         ("source", format!("hils bench --write-log-mb {mb}")),
         ("rail", "dry".to_string()),
@@ -250,9 +258,8 @@ pub fn write_log(path: &std::path::Path, mb: f64) -> Result<()> {
         // Bytes per record: 8 per number, 4 for the command's code.
         let per_row = 8 * (header.len() as u64 - 1) + 4;
         let rows = (0..target.div_ceil(per_row)).map(synthetic_row);
-        return crate::runlog::write_table_as(format, file, &meta, &header, rows);
+        return crate::runlog::write_table_as(format, w, &meta, &header, rows);
     }
-    let mut w = std::io::BufWriter::new(file);
     for (k, v) in &meta {
         writeln!(w, "# {k}: {v}")?;
     }
@@ -264,7 +271,6 @@ pub fn write_log(path: &std::path::Path, mb: f64) -> Result<()> {
         written += line.len() as u64;
         k += 1;
     }
-    w.flush()?;
     Ok(())
 }
 

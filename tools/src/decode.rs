@@ -33,6 +33,7 @@ use hils_sil::Cmd;
 use hils_sil::record::Channel;
 use hils_sil::record::run_log::{self, *};
 
+use crate::outputs::OutFile;
 use crate::runlog;
 
 /// Arguments of `hils decode`.
@@ -43,8 +44,9 @@ pub struct DecodeArgs {
     /// Firmware ELF whose defmt table decodes a raw capture (target/thumbv7em-none-eabihf/release/board).
     #[arg(long)]
     pub elf: Option<PathBuf>,
-    /// Output file: CSV, or MDF4 when its name ends in `.mf4`; with several runs in the
-    /// log, `-N` is added before the extension unless --run picks one.
+    /// Output file: CSV, or MDF4 when its name ends in `.mf4` (`-`: standard output, one
+    /// run); with several runs in the log, `-N` is added before the extension unless --run
+    /// picks one.
     #[arg(short, long)]
     pub out: PathBuf,
     /// Decode only this run of the log (1 = the first).
@@ -443,6 +445,7 @@ pub fn read_log(input: &Path, elf: Option<&Path>) -> Result<LogText> {
 }
 
 pub fn main(args: DecodeArgs) -> Result<()> {
+    let out = OutFile::check(&args.out, "-o")?;
     let log = read_log(&args.input, args.elf.as_deref())?;
     if log.malformed_frames > 0 {
         eprintln!(
@@ -468,39 +471,28 @@ pub fn main(args: DecodeArgs) -> Result<()> {
         }
         None => runs.iter().enumerate().map(|(i, r)| (i + 1, r)).collect(),
     };
+    let outputs = run_outputs(&out, &args.out, &chosen)?;
     let source = args.input.display().to_string();
-    for (k, run) in &chosen {
-        let path = if chosen.len() == 1 {
-            args.out.clone()
-        } else {
-            let stem = args
-                .out
-                .file_stem()
-                .and_then(|s| s.to_str())
-                .unwrap_or("run");
-            let ext = args
-                .out
-                .extension()
-                .and_then(|s| s.to_str())
-                .unwrap_or("csv");
-            args.out.with_file_name(format!("{stem}-{k}.{ext}"))
-        };
+    for ((k, run), out) in chosen.iter().zip(&outputs) {
         if run.records.is_empty() {
             bail!("run {k} (line {}): no telemetry records", run.line);
         }
-        // Written whole once it is complete: a run refused half-way leaves no file.
+        // Written whole once it is complete (atomically): a run refused half-way leaves no
+        // file.
         let mut csv = Vec::new();
-        run.write_as(runlog::Format::of_path(&path), &mut csv, &source)
+        // The format by the name's extension (`-`, standard output: CSV).
+        let format = runlog::Format::of_path(&args.out);
+        run.write_as(format, &mut csv, &source)
             .with_context(|| format!("{}", args.input.display()))?;
-        std::fs::write(&path, csv).with_context(|| format!("cannot create {}", path.display()))?;
+        out.write(csv)?;
         let last = run.records.last().map(|r| run.time_s(r)).unwrap_or(0.0);
-        println!(
+        crate::say!(
             "run {k}: {} records, 0 to {last:.3} s, {} missing, {} corrupt, end: {} -> {}",
             run.records.len(),
             run.missing_records,
             run.corrupt_records,
             run.end.map(|(_, s)| state_text(s)).unwrap_or("none"),
-            path.display()
+            out.describe()
         );
         if run.corrupt_records > 0 {
             eprintln!(
@@ -516,4 +508,24 @@ pub fn main(args: DecodeArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The output of each chosen run, checked before any is written: `-o` itself for one run;
+/// for several, `-N` before the extension of `-o` (standard output takes one run only).
+fn run_outputs(out: &OutFile, path: &Path, chosen: &[(usize, &Run)]) -> Result<Vec<OutFile>> {
+    if chosen.len() == 1 {
+        return Ok(vec![out.clone()]);
+    }
+    if *out == OutFile::Stdout {
+        bail!(
+            "-o -: the log holds {} runs and standard output takes one: pick it with --run N",
+            chosen.len()
+        );
+    }
+    let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("run");
+    let ext = path.extension().and_then(|s| s.to_str()).unwrap_or("csv");
+    chosen
+        .iter()
+        .map(|(k, _)| OutFile::check(&path.with_file_name(format!("{stem}-{k}.{ext}")), "-o"))
+        .collect()
 }

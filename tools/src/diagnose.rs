@@ -62,6 +62,7 @@ use anyhow::Result;
 use clap::Args;
 use hils_plant::Params;
 
+use crate::figures::list_text;
 use crate::measured::{RunLog, read_run_log_with};
 use crate::params_file::load_params;
 pub use json::{Finding, Gain, Report, Slides, Tried};
@@ -144,33 +145,35 @@ pub fn read_logs_with(files: &[PathBuf], map: Option<&std::path::Path>) -> Resul
 
 /// `hils diagnose`.
 pub fn main(args: DiagnoseArgs) -> Result<()> {
+    let outputs = args.out.check()?;
     let baseline = load_params(&args.baseline)?;
     let logs = read_logs_with(&args.files, args.map.as_deref())?;
     let name = args.baseline.display().to_string();
     let out = diagnose(&baseline.plant, &name, &logs, args.step_s)?;
     print_summary(&out);
-    args.out.write_json(&out.report)?;
-    args.out.write_report(|dir| report::write(dir, &out))
+    outputs.write_json(&out.report)?;
+    outputs.write_report(|dir| report::write(dir.path(), &out))
 }
 
 fn print_summary(out: &Outcome) {
     let r = &out.report;
     for n in &r.notes {
-        println!("note: {n}");
+        crate::say!("note: {n}");
     }
-    println!(
+    crate::say!(
         "baseline validation error {:.2} x noise ({:.4} m/s on the speeds)",
-        r.gain.baseline, r.gain.speed_rms_mps["baseline"]
+        r.gain.baseline,
+        r.gain.speed_rms_mps["baseline"]
     );
     if !r.discrepancy {
-        println!("no discrepancy: the baseline explains the data within its noise");
+        crate::say!("no discrepancy: the baseline explains the data within its noise");
     } else if r.causes.is_empty() {
-        println!(
+        crate::say!(
             "discrepancy, but no listed effect explains it: {:.0} % stays unexplained",
             r.unexplained_share * 100.0
         );
     } else {
-        println!("causes: {}", r.causes.join(", "));
+        crate::say!("causes: {}", r.causes.join(", "));
         for f in &r.findings {
             let params: Vec<String> = f
                 .params
@@ -180,7 +183,7 @@ fn print_summary(out: &Outcome) {
                     format!("{k} = {v:.5} [{lo:.5}, {hi:.5}]")
                 })
                 .collect();
-            println!(
+            crate::say!(
                 "  {}: {} (gain alone {:.2})",
                 f.effect,
                 params.join(", "),
@@ -188,9 +191,9 @@ fn print_summary(out: &Outcome) {
             );
         }
         for g in &r.confounded {
-            println!("  the data cannot tell apart: {}", g.join(" / "));
+            crate::say!("  the data cannot tell apart: {}", g.join(" / "));
         }
-        println!(
+        crate::say!(
             "extended validation error {:.2} x noise ({:.4} m/s): reduction {:.3}, unexplained share {:.3}",
             r.gain.extended,
             r.gain.speed_rms_mps["extended"],
@@ -198,12 +201,15 @@ fn print_summary(out: &Outcome) {
             r.unexplained_share
         );
     }
-    println!(
-        "slides: measured {:?}, baseline {:?}, extended {:?}",
-        r.slides.measured, r.slides.baseline, r.slides.extended
+    crate::say!(
+        "slides (wheelsets): measured {}, baseline {}, extended {}",
+        list_text(&r.slides.measured),
+        list_text(&r.slides.baseline),
+        list_text(&r.slides.extended)
     );
-    println!(
+    crate::say!(
         "diagnosed in {:.2} s ({} replays)",
-        r.wall_s, out.evaluations
+        r.wall_s,
+        out.evaluations
     );
 }

@@ -31,6 +31,18 @@ pub fn round_sig(x: f64, digits: u32) -> f64 {
     }
 }
 
+/// A list for people: `none`, `2`, `2 and 4`, `1, 2 and 4` (never a Rust debug form).
+pub fn list_text<T: std::fmt::Display>(items: &[T]) -> String {
+    match items {
+        [] => "none".to_string(),
+        [one] => one.to_string(),
+        [init @ .., last] => {
+            let init: Vec<String> = init.iter().map(|x| x.to_string()).collect();
+            format!("{} and {last}", init.join(", "))
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -57,5 +69,13 @@ mod tests {
         assert_eq!(round_sig(0.0, 4), 0.0);
         assert!(round_sig(f64::NAN, 4).is_nan());
         assert_eq!(round_dp(f64::INFINITY, 3), f64::INFINITY);
+    }
+
+    #[test]
+    fn lists_read_as_text() {
+        assert_eq!(list_text::<u8>(&[]), "none");
+        assert_eq!(list_text(&[2]), "2");
+        assert_eq!(list_text(&[2, 4]), "2 and 4");
+        assert_eq!(list_text(&["1", "2", "4"]), "1, 2 and 4");
     }
 }

@@ -296,6 +296,7 @@ fn identifiability(
 
 /// `hils fit-friction`.
 pub fn main(args: FitFrictionArgs) -> Result<()> {
+    let out = args.out.check()?;
     let params = params_or_default(args.params.as_deref())?;
     let c = params.plant.friction.correction_c;
     let map = crate::measured::load_map(args.map.as_deref())?;
@@ -303,7 +304,7 @@ pub fn main(args: FitFrictionArgs) -> Result<()> {
     for f in &args.files {
         let t = read_friction_test_with(f, map.as_ref())?;
         for note in &t.notes {
-            println!("{}: {note}", f.display());
+            crate::say!("{}: {note}", f.display());
         }
         tests.push(t);
     }
@@ -312,9 +313,8 @@ pub fn main(args: FitFrictionArgs) -> Result<()> {
     fit.skipped_rows = tests.iter().map(|t| t.skipped).sum();
     fit.files = args.files.iter().map(|f| f.display().to_string()).collect();
     print_fit(&fit);
-    args.out.write_json(&fit)?;
-    args.out
-        .write_report(|dir| write_report(dir, &fit, &v, &t, &mu))
+    out.write_json(&fit)?;
+    out.write_report(|dir| write_report(dir.path(), &fit, &v, &t, &mu))
 }
 
 /// All files' points together.
@@ -331,18 +331,20 @@ pub fn pooled(tests: &[FrictionTest]) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
 }
 
 fn print_fit(f: &FrictionFit) {
-    println!(
+    crate::say!(
         "Eq (2) fitted to {} points ({} rows skipped), c = {} fixed:",
-        f.points, f.skipped_rows, f.correction_c
+        f.points,
+        f.skipped_rows,
+        f.correction_c
     );
     for (name, value) in NAMES.iter().zip([f.mu_d0, f.n_v, f.m_v, f.n_t, f.m_t]) {
         let [lo, hi] = f.ci95[*name];
-        println!("  {name:6} = {value:10.5}   95 % CI [{lo:.5}, {hi:.5}]");
+        crate::say!("  {name:6} = {value:10.5}   95 % CI [{lo:.5}, {hi:.5}]");
     }
-    println!("  rms error of mu = {:.5}", f.rms);
-    println!("  fit time {:.3} s", f.wall_s);
+    crate::say!("  rms error of mu = {:.5}", f.rms);
+    crate::say!("  fit time {:.3} s", f.wall_s);
     for w in &f.warnings {
-        println!("  warning: {w}");
+        crate::say!("  warning: {w}");
     }
 }
 
@@ -458,6 +460,6 @@ pub fn write_report(
     }
     md += "![mu vs temperature](fig2a_mu_vs_temperature.svg)\n\n![mu vs speed](fig2b_mu_vs_speed.svg)\n";
     files.push(dir.join("report.md"));
-    std::fs::write(files.last().unwrap(), md)?;
+    crate::outputs::write_file(files.last().unwrap(), md)?;
     Ok(files)
 }

@@ -2,9 +2,18 @@
 
 use clap::Parser;
 
-fn main() -> anyhow::Result<()> {
-    host_cpu_check()?;
-    hils::cli::run(hils::cli::Cli::parse())
+/// A user error is printed as its message and causes (`error: ...: ...`), exit code 1:
+/// never with a backtrace, whatever `RUST_BACKTRACE` says (anyhow captures one when it is
+/// set, and `main` returning the error would print it).
+fn main() -> std::process::ExitCode {
+    let result = host_cpu_check().and_then(|()| hils::cli::run(hils::cli::Cli::parse()));
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
 }
 
 /// A build for x86-64-v3 (`.cargo/config.toml`) on a CPU without AVX2/FMA would stop with

@@ -114,14 +114,22 @@ impl Chart {
         self
     }
 
-    /// Draws the chart to an SVG file.
+    /// The chart as SVG text.
+    pub fn svg(&self) -> Result<String> {
+        let mut text = String::new();
+        {
+            let root = SVGBackend::with_string(&mut text, (900, 560)).into_drawing_area();
+            self.draw(&root)
+                .map_err(|e| anyhow!("cannot draw `{}`: {e}", self.title))?;
+            root.present()
+                .map_err(|e| anyhow!("cannot draw `{}`: {e}", self.title))?;
+        }
+        Ok(text)
+    }
+
+    /// Draws the chart to an SVG file (written atomically, `crate::outputs`).
     pub fn save_svg(&self, path: &Path) -> Result<()> {
-        let root = SVGBackend::new(path, (900, 560)).into_drawing_area();
-        self.draw(&root)
-            .map_err(|e| anyhow!("cannot draw {}: {e}", path.display()))?;
-        root.present()
-            .map_err(|e| anyhow!("cannot write {}: {e}", path.display()))?;
-        Ok(())
+        crate::outputs::write_file(path, self.svg()?)
     }
 
     fn draw<DB: DrawingBackend>(

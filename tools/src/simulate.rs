@@ -2,12 +2,13 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use clap::{Args, ValueEnum};
 use hils_plant::contact::Polach;
 use hils_plant::{FrictionModel, Params, Rail};
 use hils_sil::{KMH_PER_MPS, ParamFile};
 
+use crate::outputs::OutDir;
 use crate::params_file::params_or_default;
 use crate::plots::{Chart, Series, Style};
 use crate::runlog::{Format, write_run_log_as};
@@ -131,8 +132,7 @@ fn run(params: &ParamFile, opts: &EbOptions, precision: PrecisionArg) -> Result<
 /// `hils simulate`.
 pub fn main(args: SimulateArgs) -> Result<()> {
     let (params, mut opts) = setup(&args)?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let out = OutDir::check(&args.out, "--out")?;
     opts.progress = true;
     let main_run = run(&params, &opts, args.precision)?;
     let friction = match params.plant.friction.model {
@@ -168,15 +168,11 @@ pub fn main(args: SimulateArgs) -> Result<()> {
                 .unwrap_or("built-in".into()),
         ),
     ];
-    let csv_path = args.out.join(format!("run.{}", args.format.extension()));
-    let file = std::fs::File::create(&csv_path)
-        .with_context(|| format!("cannot create {}", csv_path.display()))?;
-    write_run_log_as(args.format, file, &metadata, &main_run.samples)?;
-    let summary_path = args.out.join("summary.json");
-    std::fs::write(
-        &summary_path,
-        serde_json::to_string_pretty(&main_run.summary)? + "\n",
-    )?;
+    let run_name = format!("run.{}", args.format.extension());
+    let csv_path = out.write_with(&run_name, |w| {
+        write_run_log_as(args.format, w, &metadata, &main_run.samples)
+    })?;
+    let summary_path = out.write_json("summary.json", &main_run.summary)?;
 
     let s = &main_run.summary;
     println!(
@@ -207,7 +203,7 @@ pub fn main(args: SimulateArgs) -> Result<()> {
             FrictionModel::Constant => FrictionModel::Variable,
         };
         let other = run(&other_params, &opts, args.precision)?;
-        let files = draw_figures(&args.out, &params.plant, &main_run, &other)?;
+        let files = draw_figures(&out, &params.plant, &main_run, &other)?;
         for f in files {
             println!("  figure {}", f.display());
         }
@@ -228,7 +224,12 @@ fn label(run: &Run) -> &'static str {
 }
 
 /// Draws the paper's Figs 8A, 8B, 9, 10, 11 for `main` with `other` overlaid.
-pub fn draw_figures(dir: &Path, params: &Params, main: &Run, other: &Run) -> Result<Vec<PathBuf>> {
+pub fn draw_figures(
+    dir: &OutDir,
+    params: &Params,
+    main: &Run,
+    other: &Run,
+) -> Result<Vec<PathBuf>> {
     let (var, con) = match main.friction {
         FrictionModel::Variable => (main, other),
         FrictionModel::Constant => (other, main),
@@ -241,8 +242,8 @@ pub fn draw_figures(dir: &Path, params: &Params, main: &Run, other: &Run) -> Res
         "fig11_adhesion_creepage.svg",
     ]
     .iter()
-    .map(|f| dir.join(f))
-    .collect();
+    .map(|f| dir.file(f))
+    .collect::<Result<_>>()?;
     fig8a(&files[0], params.vehicle.wheel_radius, main)?;
     fig8b(&files[1], main)?;
     fig9(&files[2], params, var)?;

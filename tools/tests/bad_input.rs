@@ -216,3 +216,23 @@ fn decode_refuses_a_non_finite_initial_speed() {
         "{e}"
     );
 }
+
+/// Issue 24 item 19: with `RUST_BACKTRACE=1` in the environment a user error printed a
+/// 40-line backtrace (anyhow captures one). Now it is the message and its causes, exit
+/// code 1, whatever the environment says.
+#[test]
+fn a_user_error_is_a_message_not_a_backtrace() {
+    for backtrace in ["1", "full"] {
+        let out = Command::new(env!("CARGO_BIN_EXE_hils"))
+            .env("RUST_BACKTRACE", backtrace)
+            .env("RUST_LIB_BACKTRACE", backtrace)
+            .args(["fit-friction", "/nonexistent/friction-test.csv"])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(err.contains("/nonexistent/friction-test.csv"), "{err}");
+        assert!(!err.to_lowercase().contains("backtrace"), "{err}");
+        assert!(err.lines().count() <= 3, "{err}");
+    }
+}

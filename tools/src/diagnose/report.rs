@@ -281,7 +281,7 @@ pub fn write(dir: &Path, out: &Outcome) -> Result<Vec<PathBuf>> {
         md += "\n";
     }
     let f = dir.join("report.md");
-    std::fs::write(&f, md).with_context(|| format!("cannot write {}", f.display()))?;
+    crate::outputs::write_file(&f, md)?;
     files.push(f);
     Ok(files)
 }

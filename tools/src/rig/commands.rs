@@ -152,6 +152,9 @@ pub struct Session<T: Transport> {
     pub recorder: Option<Recorder>,
     /// The last start command (run metadata for the recorder).
     pub last_start: Option<Command>,
+    /// The layout of the track of the last start, when this session sent it
+    /// (`start --track FILE`; `crate::wsp::programme::track_layout`).
+    pub last_track_layout: Option<String>,
 }
 
 /// Whether to go on waiting.
@@ -178,6 +181,7 @@ impl<T: Transport> Session<T> {
             started_s,
             recorder: None,
             last_start: None,
+            last_track_layout: None,
         }
     }
 

@@ -433,6 +433,14 @@ pub fn run_line<T: Transport>(
     alone: bool,
 ) -> Result<(), Stop> {
     let commands = commands_of(line)?;
+    if let Line::Start(a) = line {
+        s.last_track_layout = match &a.track {
+            Some(t) => Some(crate::wsp::programme::track_layout(
+                &track::load_track_file(t)?.0,
+            )),
+            None => None,
+        };
+    }
     if !commands.is_empty() {
         for c in commands {
             let o = s.command(c)?;
@@ -519,6 +527,8 @@ pub fn finish<T: Transport>(
             start: s.last_start,
             end: end.to_string(),
             wheel_radius_m: None,
+            track: s.last_track_layout.clone(),
+            demand: None,
         };
         let w = rec.write(&r.out, &meta)?;
         println!(

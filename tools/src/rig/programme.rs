@@ -24,30 +24,23 @@
 //! vehicle and track frames, `start` (rig mode, on the track), the run's brake demand, then
 //! frames until the board leaves `running` (or `--max-run-s`, then `stop`).
 //!
-//! # Air consumption and WSP timer actions on the rig
+//! # Judging
 //!
-//! The board does not see the controller's dump valves (no frame of `hils.dbc` carries
-//! them), but it measures the cylinder pressures (its transducer channels; in the log from
-//! the probe's telemetry). Under a constant brake demand (every programme run) the
-//! controller only lowers a cylinder pressure to relieve a sliding wheelset, so a sample is
-//! counted as venting while its cylinder pressure falls faster than
-//! [`VENT_FALL_PA_PER_S`] (2 bar/s: above the transducer noise of +-2 ADC counts over a
-//! 10 ms telemetry interval, below a dump valve's fall). The vent flags feed the same
-//! formulas as SIL (`crate::wsp::metrics`): free air = sum over vent samples of
-//! V_cyl (p[k-1] - p[k]) / p_atm. WSP timer actions need the valves' hold states too (a
-//! cylinder held low does not fall), which no pressure shows: they are `not_measured` on the
-//! rig, as is the air without measured pressures. A criterion on a metric not measured is
-//! not judged: it is listed as `... (not measured: not judged)` and fails, so a run with one
-//! never passes (nothing is passed that was not measured). The run's log (`NAME.csv`, spec run-log schema) is judged
-//! from its brake command exactly as `hils wsp-test --programme FILE --log NAME.csv` judges
-//! it ([`crate::wsp::trace_of_log`], [`crate::wsp::judge_trace`]); every run of the programme
-//! is also simulated in SIL ([`crate::wsp::run_one`]). `--json` holds one entry per run: the
-//! rig verdict's keys (those of `hils wsp-test --json`) with `on_rig` and `end`, or for a
-//! run not judged its `name`, `passed: false`, `on_rig` and `end` (why). `--report DIR`
-//! writes `report.md` (rig and SIL rows side by side, the `wsp-test` sections and plots of
-//! both: `NAME-rig-*.svg`, `NAME-sil-*.svg`) and the logs. A lost board, a bus-off, a stuck
-//! alive counter or a rejected command ends the programme: the runs so far, the partial
-//! log and the summary are written, and the exit code is non-zero.
+//! Each run's log (`NAME.csv`, the spec's run-log schema with `# run`, `# track`,
+//! `# demand` and `# speed_resolution_kmh`) is judged by the one path of
+//! `hils wsp-test --programme FILE --log NAME.csv` ([`crate::wsp::judge_log`]): the same
+//! recording gets the same verdict from both. The board does not see the controller's dump
+//! valves (no frame of `hils.dbc` carries them) but measures the cylinder pressures: the air
+//! consumption is estimated from their falls and the WSP timer actions (which need the hold
+//! states, shown by no pressure) are not measured, their criterion not judged and the run
+//! not passed (`crate::wsp::log`). Every run of the programme is also simulated in SIL
+//! ([`crate::wsp::run_one`]). `--json` holds one entry per run: the rig verdict's keys
+//! (those of `hils wsp-test --json`) with `on_rig` and `end`, or for a run not judged its
+//! `name`, `passed: false`, `on_rig` and `end` (why). `--report DIR` writes `report.md`
+//! (rig and SIL rows side by side, the `wsp-test` sections and plots of both:
+//! `NAME-rig-*.svg`, `NAME-sil-*.svg`) and the logs. A lost board, a bus-off, a stuck alive
+//! counter or a rejected command ends the programme: the runs so far, the partial log and
+//! the summary are written, and the exit code is non-zero.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -58,7 +51,6 @@ use hils_brake_unit::BrakeDemand;
 use hils_plant::Rail;
 use hils_rig_core::can::{
     BrakeCommand, Command, RigMode, RigState, StartCommand, WHEEL_SPEED_MAX_KMH,
-    WHEEL_SPEED_RESOLUTION_KMH,
 };
 use rayon::prelude::*;
 
@@ -69,9 +61,10 @@ use super::record::{Recorder, RunMeta};
 use super::track;
 use super::transport::Transport;
 use super::{FrictionArg, RigArgs, Stop, open};
+use crate::wsp::log::VENT_FALL_PA_PER_S;
 use crate::wsp::metrics::Verdict;
-use crate::wsp::programme::{Criteria, Programme, Run};
-use crate::wsp::{Outcome, judge_trace, report, trace_of_log};
+use crate::wsp::programme::{Criteria, Programme, Run, demand_text, track_layout};
+use crate::wsp::{Outcome, judge_log, report};
 
 /// Arguments of `hils rig run`.
 #[derive(Args, Debug, Clone)]
@@ -145,27 +138,6 @@ fn board_plan(vehicle: Option<&str>, run: &Run) -> Result<Plan, String> {
     Ok(Plan { setup, demand })
 }
 
-/// Falls of a cylinder pressure faster than this count as venting (module doc), Pa/s.
-pub const VENT_FALL_PA_PER_S: f64 = 2.0e5;
-
-/// Vent flags from the measured cylinder pressures (module doc): sample k vents while
-/// (p[k-1] - p[k]) / dt > [`VENT_FALL_PA_PER_S`]. False when no pressure was measured.
-pub fn vents_from_pressure(trace: &mut crate::wsp::metrics::Trace) -> bool {
-    if trace.p_cyl_pa.iter().any(Vec::is_empty) {
-        return false;
-    }
-    for j in 0..hils_plant::WHEELSETS {
-        let p = &trace.p_cyl_pa[j];
-        let mut vent = vec![false; p.len()];
-        for k in 1..p.len() {
-            let dt = trace.t_s[k] - trace.t_s[k - 1];
-            vent[k] = dt > 0.0 && (p[k - 1] - p[k]) / dt > VENT_FALL_PA_PER_S;
-        }
-        trace.venting[j] = vent;
-    }
-    true
-}
-
 /// Reads a programme with `hils wsp-test`'s parser: its criteria and runs (on the default
 /// parameters with the friction model `friction`), each with the board's plan or why not.
 pub fn load(path: &Path, friction: FrictionArg) -> Result<(Criteria, Vec<BoardRun>)> {
@@ -194,18 +166,7 @@ pub struct RigRun {
     /// `finished`, `stopped`, `fault`, or why the run did not run or ended early.
     pub end: String,
     pub outcome: Option<Outcome>,
-    /// Metrics the log cannot give (their values are 0, not measured).
-    pub not_measured: Vec<&'static str>,
-    /// Metrics estimated from the measured cylinder pressures (module doc).
-    pub estimated: Vec<&'static str>,
 }
-
-/// The metrics that need the dump valves' states.
-const VENT_METRICS: [&str; 2] = ["air_consumption_l", "wsp_timer_actions"];
-/// Of those, what the measured cylinder pressure falls estimate (module doc).
-const PRESSURE_METRICS: [&str; 1] = ["air_consumption_l"];
-/// Of those, what needs the hold states (module doc).
-const HOLD_METRICS: [&str; 1] = ["wsp_timer_actions"];
 
 impl RigRun {
     /// The JSON entry (module doc).
@@ -217,15 +178,6 @@ impl RigRun {
         if let Some(m) = v.as_object_mut() {
             m.insert("on_rig".into(), self.on_rig.into());
             m.insert("end".into(), self.end.clone().into());
-            if !self.not_measured.is_empty() {
-                m.insert("not_measured".into(), self.not_measured.clone().into());
-            }
-            if !self.estimated.is_empty() {
-                m.insert(
-                    "estimated_from_cylinder_pressure".into(),
-                    self.estimated.clone().into(),
-                );
-            }
         }
         v
     }
@@ -305,6 +257,8 @@ fn run_one<T: Transport>(
         start: s.last_start,
         end: end.clone(),
         wheel_radius_m: Some(run.file.plant.vehicle.wheel_radius),
+        track: Some(track_layout(&run.track)),
+        demand: Some(demand_text(run.demand)),
     };
     if let Err(e) = rec.write(log, &meta) {
         end = format!("{end}; log: {e:#}");
@@ -328,8 +282,6 @@ pub fn run_programme<T: Transport>(
             on_rig: false,
             end: String::new(),
             outcome: None,
-            not_measured: Vec::new(),
-            estimated: Vec::new(),
         };
         match (&stopped, plan) {
             (Some(e), _) => rig.end = format!("not run: the programme ended ({e})"),
@@ -340,23 +292,8 @@ pub fn run_programme<T: Transport>(
                 rig.on_rig = true;
                 rig.end = end;
                 stopped = stop;
-                match trace_of_log(&log, &run.file) {
-                    Ok((mut trace, _)) => {
-                        // RIG_STATUS carries the vehicle speed at 0.01 km/h.
-                        trace.speed_resolution_mps =
-                            (WHEEL_SPEED_RESOLUTION_KMH / hils_sil::KMH_PER_MPS as f32) as f64;
-                        if trace.venting.iter().any(Vec::is_empty) {
-                            if vents_from_pressure(&mut trace) {
-                                rig.estimated = PRESSURE_METRICS.to_vec();
-                                rig.not_measured = HOLD_METRICS.to_vec();
-                            } else {
-                                rig.not_measured = VENT_METRICS.to_vec();
-                            }
-                        }
-                        let mut outcome = judge_trace(run.clone(), trace, criteria);
-                        outcome.verdict.not_judged(&rig.not_measured);
-                        rig.outcome = Some(outcome);
-                    }
+                match judge_log(&log, run, criteria) {
+                    Ok(outcome) => rig.outcome = Some(outcome),
                     Err(e) => rig.end = format!("{}; not judged: {e:#}", rig.end),
                 }
             }
@@ -378,21 +315,22 @@ pub fn summary_table(rig: &[RigRun], sil: &[Outcome]) -> String {
                     name: format!("{} (rig)", r.name),
                     ..o.verdict.clone()
                 });
-                if !r.estimated.is_empty() {
+                let v = &o.verdict;
+                if !v.estimated_from_cylinder_pressure.is_empty() {
                     let _ = writeln!(
                         not_judged,
                         "- {} (rig): estimated from the measured cylinder pressure falls (> {} bar/s counts as venting): {}",
                         r.name,
                         VENT_FALL_PA_PER_S / 1e5,
-                        r.estimated.join(", ")
+                        v.estimated_from_cylinder_pressure.join(", ")
                     );
                 }
-                if !r.not_measured.is_empty() {
+                if !v.not_measured.is_empty() {
                     let _ = writeln!(
                         not_judged,
                         "- {} (rig): not measured, not judged (the log has no WSP valve states; a hold shows in no pressure): {}",
                         r.name,
-                        r.not_measured.join(", ")
+                        v.not_measured.join(", ")
                     );
                 }
             }
@@ -424,6 +362,7 @@ fn tagged(mut o: Outcome, suffix: &str) -> Outcome {
 
 /// `hils rig run`.
 pub fn main(rig: &RigArgs, args: &RunArgs) -> Result<()> {
+    let out = args.out.check()?;
     let (criteria, mut runs) = load(&args.programme, args.friction)?;
     if let Some(only) = &args.only {
         runs.retain(|r| r.run.name.contains(only.as_str()));
@@ -453,8 +392,9 @@ pub fn main(rig: &RigArgs, args: &RunArgs) -> Result<()> {
         rig_runs.len()
     );
     let json: Vec<serde_json::Value> = rig_runs.iter().map(RigRun::json).collect();
-    args.out.write_json(&json)?;
-    args.out.write_report(|dir| {
+    out.write_json(&json)?;
+    out.write_report(|dir| {
+        let dir = dir.path();
         let heading = format!(
             "# Rig runs of {}\n\nInterface: {}. Each run's log is `NAME.csv` here (spec run-log schema, `# run: NAME`), judged from its brake command as `hils wsp-test --programme {} --log NAME.csv` judges it; `(SIL)` rows: the same run simulated with the simulated brake unit.\n\n",
             args.programme.display(),

@@ -24,10 +24,13 @@
 
 use std::path::Path;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
+use hils_plant::{FrictionModel, Rail};
 use hils_plant::{Params, Surface, WHEELSETS};
 use hils_rig_core::KMH_PER_MPS;
-use hils_rig_core::can::{Command, DiagFrame, RigState, StartCommand, StatusFrame};
+use hils_rig_core::can::{
+    Command, DiagFrame, RigMode, RigState, StartCommand, StatusFrame, WHEEL_SPEED_RESOLUTION_KMH,
+};
 use hils_rig_core::hw::TelemetryEvent;
 use hils_sil::Cmd;
 use hils_sil::record::Channel;
@@ -64,6 +67,12 @@ pub struct RunMeta {
     /// Wheel radius of the run's vehicle, m, turning the frames' wheel speeds (r omega) into
     /// the log's omega (None: the default vehicle's).
     pub wheel_radius_m: Option<f64>,
+    /// The layout of the track the run started on (`crate::wsp::programme::track_layout`;
+    /// None: not known here).
+    pub track: Option<String>,
+    /// The brake demand of the run as a programme writes it (`emergency`, `service:0.8`,
+    /// `step:7`; None: the `cmd` column says what was sent).
+    pub demand: Option<String>,
 }
 
 /// What was written.
@@ -93,8 +102,8 @@ fn latest<T: Copy>(samples: &[(f64, T)], t: f64) -> Option<T> {
     i.checked_sub(1).map(|k| samples[k].1)
 }
 
-/// Run metadata from a start command.
-fn start_metadata(start: Option<Command>) -> Vec<(&'static str, String)> {
+/// Run metadata from a start command (and the layout of its track, when known).
+fn start_metadata(start: Option<Command>, layout: Option<&str>) -> Vec<(&'static str, String)> {
     let Some(Command::Start(StartCommand {
         rail,
         friction,
@@ -110,20 +119,41 @@ fn start_metadata(start: Option<Command>) -> Vec<(&'static str, String)> {
         )];
     };
     // On a kept track the start's rail is unused: no `rail` (it would pick a contact set).
-    let ground = if track {
-        (
-            "track",
-            "the board's kept track (TrackZone frames); surface under each wheelset: surface1..4"
-                .to_string(),
-        )
-    } else {
-        ("rail", format!("{rail:?}").to_lowercase())
+    // `track` is the layout `hils wsp-test --log` checks against its run's.
+    let ground = match (track, layout) {
+        (true, Some(layout)) => ("track", layout.to_string()),
+        (true, None) => (
+            "track_note",
+            "the board's kept track, its layout not known to this recording".to_string(),
+        ),
+        (false, _) => (
+            "rail",
+            match rail {
+                Rail::Wet => "wet",
+                Rail::Dry => "dry",
+            }
+            .to_string(),
+        ),
     };
     vec![
         ground,
-        ("friction", format!("{friction:?}").to_lowercase()),
+        (
+            "friction",
+            match friction {
+                FrictionModel::Variable => "variable",
+                FrictionModel::Constant => "constant",
+            }
+            .to_string(),
+        ),
         ("initial_speed_kmh", format!("{initial_speed_kmh}")),
-        ("mode", format!("{mode:?}").to_lowercase()),
+        (
+            "mode",
+            match mode {
+                RigMode::Rig => "rig",
+                RigMode::SelfTest => "self-test",
+            }
+            .to_string(),
+        ),
     ]
 }
 
@@ -189,12 +219,16 @@ impl Recorder {
             .collect()
     }
 
-    /// Writes the run log to `path` (MDF4 when its name ends in `.mf4`, else CSV); `end`
-    /// says why the recording ended.
+    /// Writes the run log to `path` (MDF4 when its name ends in `.mf4`, else CSV;
+    /// atomically: complete or not at all); `end` says why the recording ended.
     pub fn write(&self, path: &Path, meta: &RunMeta) -> Result<Written> {
-        let file = std::fs::File::create(path)
-            .with_context(|| format!("cannot create {}", path.display()))?;
-        self.write_to_as(runlog::Format::of_path(path), file, meta)
+        let mut written = None;
+        let format = runlog::Format::of_path(path);
+        crate::outputs::write_atomic(path, |w| {
+            written = Some(self.write_to_as(format, w, meta)?);
+            Ok(())
+        })?;
+        written.ok_or_else(|| anyhow::anyhow!("{}: nothing written", path.display()))
     }
 
     /// Writes the run log as CSV.
@@ -333,11 +367,19 @@ impl Recorder {
         if let Some(run) = &m.run {
             meta.push(("run", run.clone()));
         }
-        meta.extend(start_metadata(m.start));
+        meta.extend(start_metadata(m.start, m.track.as_deref()));
+        if let Some(demand) = &m.demand {
+            meta.push(("demand", demand.clone()));
+        }
         if let Some(t0) = t0 {
             meta.extend(self.command_times(t_from, t0));
         }
         meta.push(("sample_rate_hz", "1000".into()));
+        // The frames' speeds (and so v_ref and the standstill) are in 0.01 km/h steps.
+        meta.push((
+            "speed_resolution_kmh",
+            format!("{WHEEL_SPEED_RESOLUTION_KMH}"),
+        ));
         meta.push((
             "frames",
             format!(

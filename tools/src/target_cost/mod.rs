@@ -36,7 +36,7 @@ pub mod report;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, Result, anyhow, bail};
+use anyhow::{Result, anyhow, bail};
 use clap::Args;
 use hils_plant::FrictionModel;
 use serde::Serialize;
@@ -227,7 +227,7 @@ fn emulate(args: &TargetCostArgs) -> Result<(String, f64, PathBuf)> {
     let text = run_emulator(&args.qemu, &elf, Duration::from_secs(args.timeout_s))?;
     let wall = started.elapsed().as_secs_f64();
     if let Some(path) = &args.save_output {
-        std::fs::write(path, &text).with_context(|| format!("cannot write {}", path.display()))?;
+        crate::outputs::write_file(path, &text)?;
     }
     Ok((text, wall, elf))
 }
@@ -306,6 +306,13 @@ fn friction_cost(out: &EmulatorOutput, friction: FrictionModel) -> Result<Fricti
 
 /// `hils target-cost`.
 pub fn main(args: TargetCostArgs) -> Result<()> {
+    if let Some(path) = &args.save_output {
+        crate::outputs::OutFile::check_file(
+            path,
+            "--save-output",
+            "the emulator's output is saved to a file (the figures go to standard output)",
+        )?;
+    }
     if args.rig {
         let c = rig_cost(&emulate(&args)?.0)?;
         if args.json {

@@ -15,11 +15,18 @@
 //!   speed lost over the integral of min(a_demand, g mu_avail) + resistance.
 //! * **Air consumption**: free air vented by the WSP dump valves, litres at atmospheric
 //!   pressure (isothermal): sum of V_channel (p[k-1] - p[k]) / p_atm while the dump valve
-//!   vents as it acts (else as commanded).
+//!   vents as it acts (else as commanded). Needs the cylinder pressures and the vent states
+//!   (or vent flags estimated from the pressure falls, then listed in
+//!   `estimated_from_cylinder_pressure`).
 //! * **Locks**: a wheelset is locked while its speed is below `lock_speed_ratio` of the
 //!   vehicle speed (v > `min_speed_mps`); longest lock per wheelset, number of locks.
 //! * **WSP timer actions**: continuous WSP action (vent or hold) of the unit's timer or
-//!   longer, one open at the end of the trace included.
+//!   longer, one open at the end of the trace included. Needs the vent and the hold states
+//!   as the valves had them (a hold shows in no pressure).
+//!
+//! A metric the trace cannot give is **not measured**: `null` in the JSON, listed in
+//! `not_measured`, and its criterion is not judged (`... (not measured: not judged)`, not
+//! passed): nothing passes that was not measured.
 //! * **Slide onsets**: first time a wheelset's creepage exceeds the creepage at which the
 //!   adhesion under it peaks (beyond the peak of the curve the wheel slides).
 
@@ -60,6 +67,9 @@ pub struct Trace {
     pub speed_resolution_mps: f64,
     /// Samples of a log whose empty or non-finite cells were interpolated.
     pub filled_samples: usize,
+    /// Whether `venting` was estimated from the cylinder pressure falls (a log without the
+    /// valve states), not logged.
+    pub vents_estimated: bool,
 }
 
 impl Trace {
@@ -73,6 +83,22 @@ impl Trace {
                 x_m: &self.x_m,
                 factor: &self.mu_factor,
             })
+    }
+
+    /// Whether every wheelset's `field` has one value per sample.
+    fn logged<T>(&self, field: &[Vec<T>; 4]) -> bool {
+        field.iter().all(|f| f.len() == self.t_s.len())
+    }
+
+    /// Whether the air consumption can be judged: pressures and vent states (logged or
+    /// estimated) of every wheelset.
+    pub fn air_measured(&self) -> bool {
+        self.logged(&self.p_cyl_pa) && self.logged(&self.venting)
+    }
+
+    /// Whether the WSP timer actions can be judged: the vent and hold states as logged.
+    pub fn timer_measured(&self) -> bool {
+        self.logged(&self.venting) && self.logged(&self.holding) && !self.vents_estimated
     }
 
     /// Whether wheelset `j`'s WSP acts (vent or hold) at sample `k`.
@@ -288,29 +314,33 @@ pub struct Verdict {
     pub allowed_distance_m: f64,
     pub distance_ratio: Option<f64>,
     pub adhesion_utilisation: f64,
-    pub air_consumption_l: f64,
+    /// Free air vented, l (None: not measured).
+    pub air_consumption_l: Option<f64>,
     pub max_lock_s: [f64; 4],
     pub lock_count: [u32; 4],
-    pub wsp_timer_actions: u32,
+    /// WSP timer actions (None: not measured).
+    pub wsp_timer_actions: Option<u32>,
     pub slide_onset_s: [Option<f64>; 4],
     /// Samples of a log whose empty or non-finite cells were interpolated.
     pub filled_samples: usize,
     pub stop_time_s: Option<f64>,
     /// Each criterion and whether it passed.
     pub criteria: Vec<Criterion>,
+    /// Metrics the trace cannot give (JSON keys; their values are null, their criteria not
+    /// judged).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub not_measured: Vec<String>,
+    /// Metrics estimated from the cylinder pressure falls (no valve states logged).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub estimated_from_cylinder_pressure: Vec<String>,
 }
 
-impl Verdict {
-    /// Fails each criterion on a metric of `metrics` (JSON keys, which the criteria are
-    /// named after) as not judged: the metric was not measured, so nothing passes on it.
-    pub fn not_judged(&mut self, metrics: &[&str]) {
-        for c in &mut self.criteria {
-            if metrics.iter().any(|m| c.criterion.starts_with(m)) {
-                c.passed = false;
-                c.criterion += " (not measured: not judged)";
-            }
-        }
-        self.passed = self.criteria.iter().all(|c| c.passed);
+/// The criterion on a metric that may not be measured: judged when it is, else listed as
+/// `... (not measured: not judged)` and not passed.
+fn criterion_on<T>(text: String, value: Option<T>, pass: impl Fn(T) -> bool) -> (String, bool) {
+    match value {
+        Some(v) => (text, pass(v)),
+        None => (format!("{text} (not measured: not judged)"), false),
     }
 }
 
@@ -383,12 +413,10 @@ fn timer_actions_of(trace: &Trace, j: usize, timer_s: f64) -> u32 {
 }
 
 /// Free air vented from wheelset `j`'s channel, litres at atmospheric pressure: pressure
-/// falls while the dump valve vents as it acts (else as commanded).
+/// falls while the dump valve vents as it acts (else as commanded). Only for a trace whose
+/// pressures and vents are logged ([`Trace::air_measured`]).
 fn air_of(trace: &Trace, j: usize, channel_volume_l: f64) -> f64 {
     let p = &trace.p_cyl_pa[j];
-    if p.len() != trace.t_s.len() {
-        return 0.0;
-    }
     let vents = if trace.acting_vent[j].len() == p.len() {
         &trace.acting_vent[j]
     } else {
@@ -440,13 +468,29 @@ pub fn judge(name: &str, trace: &Trace, allowed: &AllowedStop, c: &Criteria) -> 
     let mut max_lock = [0.0f64; 4];
     let mut locks = [0u32; 4];
     let mut onsets = [None; 4];
-    let mut timer = 0u32;
-    let mut air_l = 0.0;
     for j in 0..4 {
         (max_lock[j], locks[j], onsets[j]) = locks_of(trace, j, allowed, c);
-        timer += timer_actions_of(trace, j, c.wsp_timer_s);
-        air_l += air_of(trace, j, c.channel_volume_l);
     }
+    let timer = trace.timer_measured().then(|| {
+        (0..4)
+            .map(|j| timer_actions_of(trace, j, c.wsp_timer_s))
+            .sum()
+    });
+    let air_l = trace
+        .air_measured()
+        .then(|| (0..4).map(|j| air_of(trace, j, c.channel_volume_l)).sum());
+    let mut not_measured = Vec::new();
+    if air_l.is_none() {
+        not_measured.push("air_consumption_l".to_string());
+    }
+    if timer.is_none() {
+        not_measured.push("wsp_timer_actions".to_string());
+    }
+    let estimated = if trace.vents_estimated && air_l.is_some() {
+        vec!["air_consumption_l".to_string()]
+    } else {
+        Vec::new()
+    };
     let utilisation = utilisation_of(trace, allowed, stop, c);
     let ratio = stopping.map(|s| s / allowed_m);
     let criteria: Vec<Criterion> = [
@@ -463,13 +507,15 @@ pub fn judge(name: &str, trace: &Trace, allowed: &AllowedStop, c: &Criteria) -> 
             format!("max_lock_s <= {}", c.max_lock_s),
             max_lock.iter().all(|&l| l <= c.max_lock_s),
         ),
-        (
+        criterion_on(
             format!("wsp_timer_actions <= {}", c.max_wsp_timer_actions),
-            timer <= c.max_wsp_timer_actions,
+            timer,
+            |t| t <= c.max_wsp_timer_actions,
         ),
-        (
+        criterion_on(
             format!("air_consumption_l <= {}", c.max_air_consumption_l),
-            air_l <= c.max_air_consumption_l,
+            air_l,
+            |a| a <= c.max_air_consumption_l,
         ),
     ]
     .into_iter()
@@ -490,5 +536,7 @@ pub fn judge(name: &str, trace: &Trace, allowed: &AllowedStop, c: &Criteria) -> 
         slide_onset_s: onsets,
         stop_time_s: stop.map(|k| trace.t_s[k]),
         criteria,
+        not_measured,
+        estimated_from_cylinder_pressure: estimated,
     }
 }

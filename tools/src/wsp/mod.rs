@@ -4,18 +4,23 @@
 //! each run is judged by the same criteria ([`metrics`]); JSON and a report
 //! ([`report`]) follow.
 
+pub mod log;
 pub mod metrics;
 pub mod programme;
 pub mod report;
 
+pub use log::{
+    MAX_GAP_S, fill_gaps, judge_log, judge_run_log, judge_trace, response_of_log, trace_of_log,
+};
+
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{Result, anyhow, bail};
+use anyhow::{Result, anyhow};
 use clap::Args;
 use hils_brake_unit::{BrakeDemand, Valve};
 use hils_plant::{Surface, WHEELSETS};
-use hils_sil::{ClosedLoop, ParamFile};
+use hils_sil::ClosedLoop;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 
@@ -164,202 +169,34 @@ pub fn run_one(run: Run, criteria: &Criteria) -> Result<Outcome> {
     })
 }
 
-/// A captured rig run log as a trace from the brake command (its `brake_command_s`
-/// metadata, else the first sample; distance integrated from the vehicle speed), and the
-/// run its `# run:` metadata names.
-pub fn trace_of_log(path: &std::path::Path, file: &ParamFile) -> Result<(Trace, Option<String>)> {
-    trace_of_log_with(path, file, None)
-}
-
-/// [`trace_of_log`] of a log (CSV or MDF4) read through a channel map.
-pub fn trace_of_log_with(
-    path: &std::path::Path,
-    file: &ParamFile,
-    map: Option<&crate::measured::ChannelMap>,
-) -> Result<(Trace, Option<String>)> {
-    let log = crate::measured::read_run_log_with(path, map).map_err(|e| anyhow!("{e}"))?;
-    let t_brake = match log.metadata.get("brake_command_s") {
-        Some(t) => t
-            .parse::<f64>()
-            .ok()
-            .filter(|t| t.is_finite())
-            .ok_or_else(|| anyhow!("{}: brake_command_s `{t}` is not a time", path.display()))?,
-        None => log.t_s.first().copied().unwrap_or(0.0),
-    };
-    let k0 = log
-        .t_s
-        .iter()
-        .position(|&t| t >= t_brake)
-        .unwrap_or(log.len());
-    if log.len() < k0 + 2 {
-        bail!(
-            "{}: fewer than two samples from the brake command",
-            path.display()
-        );
-    }
-    let r = file.plant.vehicle.wheel_radius;
-    let t0 = log.t_s[k0];
-    let t_s: Vec<f64> = log.t_s[k0..].iter().map(|t| t - t0).collect();
-    let mut filled = vec![false; t_s.len()];
-    let mut column = |name: &str, y: &[f64]| -> Result<Vec<f64>> {
-        let mut y = y[k0..].to_vec();
-        fill_gaps(&t_s, &mut y, MAX_GAP_S, &mut filled)
-            .map_err(|t| anyhow!("{}: `{name}` has a gap of over {MAX_GAP_S} s at {t:.3} s (from the brake command): not judged", path.display()))?;
-        Ok(y)
-    };
-    let mut trace = Trace {
-        v_mps: column("v_ref", &log.v_ref_mps)?,
-        ..Trace::default()
-    };
-    for j in 0..WHEELSETS {
-        let omega = column(&format!("omega{}", j + 1), &log.omega_radps[j])?;
-        trace.wheel_mps[j] = omega.iter().map(|w| w * r).collect();
-        if let Some(p) = &log.p_cyl_pa[j] {
-            trace.p_cyl_pa[j] = column(&format!("p_cyl{}", j + 1), p)?;
-        }
-        if let Some(w) = &log.wsp[j] {
-            trace.venting[j] = w[k0..].iter().map(|&b| b > 0.5).collect();
-        }
-    }
-    trace.filled_samples = filled.iter().filter(|&&f| f).count();
-    trace.t_s = t_s;
-    let mut x = 0.0;
-    trace.x_m.push(0.0);
-    for k in 1..trace.t_s.len() {
-        x += 0.5 * (trace.v_mps[k] + trace.v_mps[k - 1]) * (trace.t_s[k] - trace.t_s[k - 1]);
-        trace.x_m.push(x);
-    }
-    let run = log.metadata.get("run").map(|s| s.to_string());
-    Ok((trace, run))
-}
-
-/// Longest run of empty or non-finite cells of a log column that is interpolated, s (a
-/// radar dropout; the spec allows empty `v_ref` cells); a longer gap rejects the log.
-pub const MAX_GAP_S: f64 = 0.1;
-
-/// Fills the non-finite samples of `y` (times `t_s`) linearly between their finite
-/// neighbours (the nearest one at either end) and marks them in `filled`; a run longer than
-/// `max_gap_s` (or a column with no finite sample) is refused with the time it starts.
-pub fn fill_gaps(
-    t_s: &[f64],
-    y: &mut [f64],
-    max_gap_s: f64,
-    filled: &mut [bool],
-) -> Result<(), f64> {
-    let n = y.len();
-    let mut k = 0;
-    while k < n {
-        if y[k].is_finite() {
-            k += 1;
-            continue;
-        }
-        let start = k;
-        while k < n && !y[k].is_finite() {
-            k += 1;
-        }
-        let before = start.checked_sub(1);
-        let after = (k < n).then_some(k);
-        let span_start = t_s[before.unwrap_or(start)];
-        let span_end = t_s[after.unwrap_or(k - 1)];
-        if span_end - span_start > max_gap_s || (before.is_none() && after.is_none()) {
-            return Err(t_s[start]);
-        }
-        for i in start..k {
-            y[i] = match (before, after) {
-                (Some(a), Some(b)) => {
-                    let f = (t_s[i] - t_s[a]) / (t_s[b] - t_s[a]);
-                    y[a] + (y[b] - y[a]) * f
-                }
-                (Some(a), None) => y[a],
-                (None, Some(b)) => y[b],
-                (None, None) => unreachable!("refused above"),
-            };
-            filled[i] = true;
-        }
-    }
-    Ok(())
-}
-
-/// The brake response of a log from its cylinder pressures (in the spirit of EN 14531's
-/// equivalent response time): p_final the highest logged pressure; the fastest wheelset's
-/// times to 10 % and 63.2 % of it fit a first-order build-up after a dead time,
-/// tau = (t63 - t10) / (1 - ln(1/0.9)), t_d = t10 - ln(1/0.9) tau. None when the pressures
-/// are not logged or never reach 63.2 %.
-pub fn response_of_log(trace: &Trace) -> Option<(f64, f64)> {
-    let n = trace.t_s.len();
-    let logged: Vec<&Vec<f64>> = trace.p_cyl_pa.iter().filter(|p| p.len() == n).collect();
-    let p_final = logged
-        .iter()
-        .flat_map(|p| p.iter())
-        .fold(0.0f64, |m, &p| m.max(p));
-    if logged.is_empty() || p_final <= 0.0 {
-        return None;
-    }
-    let first = |share: f64| {
-        logged
-            .iter()
-            .filter_map(|p| p.iter().position(|&x| x >= share * p_final))
-            .map(|k| trace.t_s[k])
-            .fold(f64::INFINITY, f64::min)
-    };
-    let (t10, t63) = (first(0.1), first(1.0 - (-1.0f64).exp()));
-    if !(t10.is_finite() && t63.is_finite()) {
-        return None;
-    }
-    let l10 = (1.0f64 / 0.9).ln();
-    let tau = ((t63 - t10) / (1.0 - l10)).max(0.0);
-    Some(((t10 - l10 * tau).max(0.0), tau))
-}
-
-/// Judges a captured run log as `run` of the programme (`hils wsp-test --log` and
-/// `hils rig run`): the same metrics and criteria as a SIL run; the surfaces under the
-/// wheelsets are those of the run's track at the logged distance.
-pub fn judge_trace(run: Run, trace: Trace, criteria: &Criteria) -> Outcome {
-    let adhesion = AvailableAdhesion::new(&run.file.plant, &run.sets);
-    let mut allowed = allowed_stop(&run, &adhesion, &trace);
-    if let Some((dead_time_s, build_up_s)) = response_of_log(&trace) {
-        (allowed.dead_time_s, allowed.build_up_s) = (dead_time_s, build_up_s);
-    }
-    let verdict = judge(&run.name, &trace, &allowed, criteria);
-    let offsets = wheelset_offsets(&run.file.plant);
-    let surfaces = trace
-        .x_m
-        .iter()
-        .map(|&x| offsets.map(|o| run.track.surface_at(x + o)))
-        .collect();
-    Outcome {
-        run,
-        trace,
-        surfaces,
-        verdict,
-    }
-}
-
 fn print_table(verdicts: &[&Verdict]) {
-    println!("{}", report::table(verdicts));
+    crate::say!("{}", report::table(verdicts));
 }
 
 pub fn main(args: WspTestArgs) -> Result<()> {
+    let out = args.out.check()?;
     let file = params_or_default(args.params.as_deref())?;
     let programme = Programme::load(&args.programme)?;
     let runs = programme.runs(&file)?;
     let criteria = programme.criteria.for_file(&file);
     if let Some(log) = &args.log {
         let map = crate::measured::load_map(args.map.as_deref())?;
-        let (trace, named) = trace_of_log_with(log, &file, map.as_ref())?;
+        let log =
+            crate::measured::read_run_log_with(log, map.as_ref()).map_err(|e| anyhow!("{e}"))?;
+        let named = log.metadata.get("run").map(str::to_string);
         let name = args.run.clone().or(named).ok_or_else(|| {
             anyhow!(
                 "{}: no `# run:` metadata; name the run with --run",
-                log.display()
+                log.path.display()
             )
         })?;
         let run = runs
             .into_iter()
             .find(|r| r.name == name)
             .ok_or_else(|| anyhow!("the programme has no run `{name}`"))?;
-        let verdict = judge_trace(run, trace, &criteria).verdict;
+        let verdict = judge_run_log(&log, &run, &criteria)?.verdict;
         print_table(&[&verdict]);
-        return args.out.write_json(&[&verdict]);
+        return out.write_json(&[&verdict]);
     }
     let started = Instant::now();
     let bar = ProgressBar::new(runs.len() as u64).with_style(
@@ -379,13 +216,14 @@ pub fn main(args: WspTestArgs) -> Result<()> {
     let verdicts: Vec<&Verdict> = outcomes.iter().map(|o| &o.verdict).collect();
     print_table(&verdicts);
     let passed = verdicts.iter().filter(|v| v.passed).count();
-    println!(
+    crate::say!(
         "{passed}/{} runs passed; programme time {elapsed:.1} s on {} threads",
         verdicts.len(),
         rayon::current_num_threads()
     );
-    args.out.write_json(&verdicts)?;
-    args.out.write_report(|dir| {
+    out.write_json(&verdicts)?;
+    out.write_report(|dir| {
+        let dir = dir.path();
         report::write(dir, &outcomes, &criteria)?;
         Ok(vec![dir.join("report.md")])
     })

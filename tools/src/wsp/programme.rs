@@ -175,6 +175,28 @@ pub fn parse_demand(text: &str) -> Result<BrakeDemand> {
     })
 }
 
+/// The demand as the programme writes it: `emergency`, `service:<m/s^2>`, `step:<n>`
+/// (what [`parse_demand`] reads; `release` for no brake).
+pub fn demand_text(demand: BrakeDemand) -> String {
+    match demand {
+        BrakeDemand::Emergency => "emergency".into(),
+        BrakeDemand::Service { deceleration_mps2 } => format!("service:{deceleration_mps2}"),
+        BrakeDemand::ServiceStep { step } => format!("step:{step}"),
+        BrakeDemand::Release => "release".into(),
+    }
+}
+
+/// A track in one line: the base surface, then each zone, `low; dry from 120 to 220 m`
+/// (a uniform track is its surface's name). A run log's `# track:` metadata (written by
+/// `hils rig`) says its track so, and `hils wsp-test --log` compares it with the run's.
+pub fn track_layout(track: &Track) -> String {
+    let mut s = track.base().name().to_string();
+    for z in track.zones() {
+        s += &format!("; {} from {} to {} m", z.surface.name(), z.start_m, z.end_m);
+    }
+    s
+}
+
 fn apply_vehicle(file: &mut ParamFile, name: &str, keys: &BTreeMap<String, f64>) -> Result<()> {
     let v = &mut file.plant.vehicle;
     for (key, &value) in keys {

@@ -17,7 +17,7 @@ fn opt(x: Option<f64>, decimals: usize) -> String {
     x.map_or("-".into(), |x| format!("{x:.decimals$}"))
 }
 
-/// The summary table (Markdown).
+/// The summary table (Markdown); `-`: not measured (or no stop).
 pub fn table(verdicts: &[&Verdict]) -> String {
     let mut s = String::from(
         "| run | passed | stop m | allowed m | ratio | utilisation | air l | max lock s | locks | timer |\n\
@@ -27,17 +27,18 @@ pub fn table(verdicts: &[&Verdict]) -> String {
         let lock = v.max_lock_s.iter().copied().fold(0.0, f64::max);
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {:.1} | {} | {:.2} | {:.1} | {:.2} | {} | {} |",
+            "| {} | {} | {} | {:.1} | {} | {:.2} | {} | {:.2} | {} | {} |",
             v.name,
             if v.passed { "yes" } else { "NO" },
             opt(v.stopping_distance_m, 1),
             v.allowed_distance_m,
             opt(v.distance_ratio, 2),
             v.adhesion_utilisation,
-            v.air_consumption_l,
+            opt(v.air_consumption_l, 1),
             lock,
             v.lock_count.iter().sum::<u32>(),
             v.wsp_timer_actions
+                .map_or("-".to_string(), |t| t.to_string())
         );
     }
     s
@@ -179,6 +180,5 @@ pub fn write_with(
             let _ = writeln!(md, "![{kind}]({}-{kind}.svg)", o.run.name);
         }
     }
-    std::fs::write(dir.join("report.md"), md)
-        .with_context(|| format!("cannot write {}", dir.join("report.md").display()))
+    crate::outputs::write_file(&dir.join("report.md"), md)
 }

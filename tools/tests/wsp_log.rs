@@ -1,0 +1,191 @@
+//! `hils wsp-test --log` (issue 24 item 5): a log is judged only as the run it is (speed,
+//! track, demand), by the one judging path `hils rig run` uses, and a metric the log does
+//! not measure is not measured, its criterion not judged.
+
+mod common;
+
+use std::path::Path;
+
+use common::*;
+
+fn default_programme() -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../programmes/wsp-low-adhesion.toml")
+}
+
+/// The paper's 150 km/h wet EB judged as `low-eb-120` passed with a utilisation of 2.11.
+/// Now it is refused, naming the speed and the track.
+#[test]
+fn a_log_of_another_run_is_refused_naming_what_differs() {
+    let dir = temp_dir("wsp-log-other");
+    hils_ok(&dir, args!["simulate", "--no-plots", "--out", "paper"]);
+    let json = dir.join("out.json");
+    let err = hils_err(
+        &dir,
+        args![
+            "wsp-test",
+            "--programme",
+            default_programme().to_str().unwrap(),
+            "--log",
+            "paper/run.csv",
+            "--run",
+            "low-eb-120",
+            "--json",
+            json.to_str().unwrap()
+        ],
+    );
+    assert!(err.contains("not run `low-eb-120`"), "{err}");
+    assert!(err.contains("speed") && err.contains("150"), "{err}");
+    assert!(err.contains("track") && err.contains("wet"), "{err}");
+    assert!(!json.exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The same recording judged by `hils rig run` and by `hils wsp-test --log` gave a 1,004 m
+/// stop and 547 l on the rig, but no stop, 0.0 l and a passed WSP timer from wsp-test. Now
+/// both take the one path: the same verdict, key for key; the air is estimated from the
+/// pressure falls, the WSP timer (no valve states logged) is null, not measured, its
+/// criterion not judged.
+#[test]
+fn the_rig_and_wsp_test_judge_a_recording_the_same() {
+    let dir = temp_dir("wsp-log-same");
+    let programme = dir.join("p.toml");
+    std::fs::write(
+        &programme,
+        short_programme(&run_table("low-eb-60", 60.0, "emergency", "low")),
+    )
+    .unwrap();
+    let p = programme.to_str().unwrap();
+    hils_ok(
+        &dir,
+        args![
+            "rig",
+            "--interface",
+            "sim",
+            "run",
+            "--programme",
+            p,
+            "--report",
+            "rig",
+            "--json",
+            "rig.json"
+        ],
+    );
+    hils_ok(
+        &dir,
+        args![
+            "wsp-test",
+            "--programme",
+            p,
+            "--log",
+            "rig/low-eb-60.csv",
+            "--json",
+            "wsp.json"
+        ],
+    );
+    let read = |f: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(dir.join(f)).unwrap()).unwrap()
+    };
+    let (rig, wsp) = (read("rig.json")[0].clone(), read("wsp.json")[0].clone());
+    for (key, value) in wsp.as_object().unwrap() {
+        assert_eq!(&rig[key], value, "{key}: rig {rig}\nwsp-test {wsp}");
+    }
+    assert!(
+        wsp["stopping_distance_m"].as_f64().unwrap() > 100.0,
+        "{wsp}"
+    );
+    assert!(wsp["air_consumption_l"].as_f64().unwrap() > 1.0, "{wsp}");
+    assert_eq!(
+        wsp["estimated_from_cylinder_pressure"],
+        serde_json::json!(["air_consumption_l"])
+    );
+    assert!(wsp["wsp_timer_actions"].is_null(), "{wsp}");
+    assert_eq!(
+        wsp["not_measured"],
+        serde_json::json!(["wsp_timer_actions"])
+    );
+    assert_eq!(wsp["passed"], false);
+    // The same recording without its track or with another demand is not that run.
+    let log = std::fs::read_to_string(dir.join("rig/low-eb-60.csv")).unwrap();
+    for (edit, cause) in [
+        (log.replace("# track: low\n", ""), "names neither its track"),
+        (
+            log.replace("# demand: emergency", "# demand: service:0.8"),
+            "demand",
+        ),
+        (log.replace("# track: low", "# track: very_low"), "track"),
+    ] {
+        std::fs::write(dir.join("edited.csv"), edit).unwrap();
+        let err = hils_err(
+            &dir,
+            args!["wsp-test", "--programme", p, "--log", "edited.csv"],
+        );
+        assert!(err.contains(cause), "{cause}: {err}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A simulated log has the vent flags (`wsp1..4`) and the pressures, not the hold states:
+/// its air is measured, its WSP timer is not (it was "passed" with 0).
+#[test]
+fn a_metric_the_log_does_not_measure_is_not_judged() {
+    let dir = temp_dir("wsp-log-measured");
+    std::fs::write(
+        dir.join("p.toml"),
+        short_programme(&run_table("dry-eb-40", 40.0, "emergency", "dry")),
+    )
+    .unwrap();
+    hils_ok(
+        &dir,
+        args![
+            "simulate",
+            "--no-plots",
+            "--speed-kmh",
+            "40",
+            "--rail",
+            "dry",
+            "--out",
+            "sim"
+        ],
+    );
+    hils_ok(
+        &dir,
+        args![
+            "wsp-test",
+            "--programme",
+            "p.toml",
+            "--log",
+            "sim/run.csv",
+            "--run",
+            "dry-eb-40",
+            "--json",
+            "v.json"
+        ],
+    );
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("v.json")).unwrap()).unwrap();
+    let v = &v[0];
+    assert!(v["air_consumption_l"].as_f64().is_some(), "{v}");
+    assert!(v["wsp_timer_actions"].is_null(), "{v}");
+    assert_eq!(v["passed"], false, "{v}");
+    let timer = v["criteria"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| {
+            c["criterion"]
+                .as_str()
+                .unwrap()
+                .starts_with("wsp_timer_actions")
+        })
+        .unwrap()
+        .clone();
+    assert_eq!(timer["passed"], false);
+    assert!(
+        timer["criterion"]
+            .as_str()
+            .unwrap()
+            .ends_with("(not measured: not judged)"),
+        "{timer}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
