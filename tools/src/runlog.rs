@@ -146,13 +146,23 @@ fn write_mf4<W: Write>(
         for (i, (cell, col)) in row.iter().zip(cols.iter_mut()).enumerate() {
             match col {
                 Collected::Num(v) if cell.is_empty() => v.push(f64::NAN),
-                Collected::Num(v) => v.push(cell.parse().map_err(|_| {
-                    anyhow::anyhow!(
-                        "row {}, column `{}`: `{cell}` is not a number",
-                        r + 1,
-                        header[i]
-                    )
-                })?),
+                Collected::Num(v) => match cell.parse() {
+                    Ok(x) => v.push(x),
+                    // A column of texts the schema does not list as such: kept as texts.
+                    Err(_) if i > 0 => {
+                        let mut t = crate::measured::TextColumn::default();
+                        for x in v.iter() {
+                            t.push(&if x.is_nan() {
+                                String::new()
+                            } else {
+                                format!("{x}")
+                            });
+                        }
+                        t.push(cell);
+                        *col = Collected::Text(t);
+                    }
+                    Err(_) => anyhow::bail!("row {}: time `{cell}` is not a number", r + 1),
+                },
                 Collected::Text(t) => t.push(cell),
             }
         }

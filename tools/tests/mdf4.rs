@@ -298,3 +298,44 @@ fn conflicting_repeated_metadata_is_an_error_naming_the_key() {
     );
     assert!(hils::measured::parse_run_log(Path::new("c.csv"), &repeated).is_ok());
 }
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(300))]
+    /// Damaged recordings (bytes overwritten anywhere, the file cut anywhere): never a
+    /// panic; a file that still reads has time finite and increasing, every channel as long
+    /// as the time and every value empty or within its column's plausible range.
+    #[test]
+    fn damaged_mdf4_never_panics(
+        edits in proptest::collection::vec((0usize..13_448, proptest::prelude::any::<u8>()), 1..8),
+        cut in 64usize..13_448,
+    ) {
+        let mut bytes = std::fs::read(data("canape_sorted.mf4")).unwrap();
+        for (at, b) in edits {
+            if at < bytes.len() {
+                bytes[at] = b;
+            }
+        }
+        let m = map("canape_sorted");
+        for b in [&bytes[..], &bytes[..cut.min(bytes.len())]] {
+            if let Ok(hils::measured::Measured::Run(r)) =
+                hils::measured::parse_bytes_with(Path::new("damaged.mf4"), b, Some(&m))
+            {
+                let n = r.t_s.len();
+                assert!(r.t_s.windows(2).all(|w| w[1] > w[0]));
+                let limit = |name: &str| hils::measured::plausible_range(name).unwrap();
+                for (j, w) in r.omega_radps.iter().enumerate() {
+                    assert_eq!(w.len(), n);
+                    let range = limit(&format!("omega{}_radps", j + 1));
+                    assert!(w.iter().all(|x| x.is_nan() || range.contains(x)));
+                }
+                for (j, p) in r.p_cyl_pa.iter().enumerate() {
+                    if let Some(p) = p {
+                        assert_eq!(p.len(), n);
+                        let range = limit(&format!("p_cyl{}_pa", j + 1));
+                        assert!(p.iter().all(|x| x.is_nan() || range.contains(x)));
+                    }
+                }
+            }
+        }
+    }
+}

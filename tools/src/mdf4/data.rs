@@ -123,7 +123,10 @@ fn inflate(blocks: &Blocks, p: &Piece) -> Result<Vec<u8>, String> {
 /// Undoes MDF4's transposition: the first `rows * columns` bytes were stored column by
 /// column (`columns` = record length); the rest as it was.
 pub fn untranspose(data: &[u8], columns: usize) -> Vec<u8> {
-    let rows = data.len() / columns;
+    let rows = data.len() / columns.max(1);
+    if rows == 0 {
+        return data.to_vec();
+    }
     let n = rows * columns;
     let mut out = vec![0u8; data.len()];
     for c in 0..columns {
@@ -255,7 +258,10 @@ impl Mdf4<'_> {
             .iter()
             .map(|&i| Decoder::new(group, &group.channels[i]))
             .collect::<Result<Vec<_>, _>>()?;
-        let mut out: Vec<Values> = decoders.iter().map(Decoder::empty).collect();
+        // Room for the group's records (its count, bounded by what the file can hold).
+        let record = (group.data_bytes + group.inval_bytes).max(1) as u64;
+        let room = group.cycle_count.min(self.blocks.src.size() / record) as usize;
+        let mut out: Vec<Values> = decoders.iter().map(|d| d.empty(room)).collect();
         let sizes = self.record_sizes(group.dg);
         let mut stream =
             Stream::new(&self.blocks, group.data_addr).map_err(|e| group_err(group, e))?;
@@ -390,6 +396,13 @@ impl<'c> Decoder<'c> {
                 "big-endian value not on byte boundaries: not read".into()
             ));
         }
+        // The format's bit offset is 0-7; floats and strings start on a byte.
+        if ch.bit_offset > 7 || (ch.data_type >= 4 && ch.bit_offset != 0) {
+            return Err(err(format!(
+                "bit offset {} for data type {}: not a valid channel",
+                ch.bit_offset, ch.data_type
+            )));
+        }
         let bytes = (ch.bit_offset as usize + ch.bit_count as usize).div_ceil(8);
         let start = ch.byte_offset as usize;
         let virtual_ch = ch.cn_type == 3 || ch.cn_type == 6;
@@ -422,11 +435,11 @@ impl<'c> Decoder<'c> {
         })
     }
 
-    fn empty(&self) -> Values {
+    fn empty(&self, room: usize) -> Values {
         if self.text {
             Values::Text(Vec::new())
         } else {
-            Values::Num(Vec::new())
+            Values::Num(Vec::with_capacity(room))
         }
     }
 

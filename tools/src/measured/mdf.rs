@@ -230,6 +230,21 @@ fn read_group(
             time_s.iter_mut().for_each(|t| *t = c.apply(*t));
         }
     }
+    if let Some(k) = (1..time_s.len()).find(|&k| !(time_s[k] > time_s[k - 1])) {
+        return Err(MeasuredError {
+            column: "t_s".into(),
+            ..file_error(
+                &table.path,
+                format!(
+                    "{}: its time does not increase at record {} ({} after {})",
+                    group.label(),
+                    k + 1,
+                    time_s[k],
+                    time_s[k - 1]
+                ),
+            )
+        });
+    }
     Ok(GroupData {
         group: g,
         time_s,
@@ -323,20 +338,18 @@ fn interpolate_at(t: &[f64], v: &[f64], i: usize, at: f64) -> f64 {
 /// Converts a channel's values to SI, checks each into column `col` of the table.
 fn store(table: &mut Table, col: usize, values: Values) -> Result<(), MeasuredError> {
     match (&table.columns[col], values) {
-        (Cells::Numeric(_, limit), Values::Num(v)) => {
+        (Cells::Numeric(_, limit), Values::Num(mut v)) => {
             let limit: Limit = *limit;
             let conv = table.to_si[col];
-            let mut out = Vec::with_capacity(v.len());
-            for (r, x) in v.into_iter().enumerate() {
-                if x.is_nan() {
-                    out.push(x);
-                    continue;
+            // Converted in place (one copy of the column).
+            for (r, x) in v.iter_mut().enumerate() {
+                if !x.is_nan() {
+                    *x = conv.apply(*x);
+                    table.check_value(r, col, *x, limit)?;
                 }
-                let x = conv.apply(x);
-                table.check_value(r, col, x, limit)?;
-                out.push(x);
             }
-            table.columns[col] = Cells::Numeric(out, limit);
+            v.shrink_to_fit();
+            table.columns[col] = Cells::Numeric(v, limit);
         }
         (Cells::Numeric(..), Values::Text(_)) => {
             return Err(MeasuredError {

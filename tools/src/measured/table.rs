@@ -181,7 +181,7 @@ impl TextColumn {
     pub fn is_empty(&self) -> bool {
         self.codes.is_empty()
     }
-    pub(crate) fn push(&mut self, text: &str) {
+    pub fn push(&mut self, text: &str) {
         let code = match self.values.iter().position(|v| v == text) {
             Some(c) => c,
             None => {
