@@ -138,8 +138,10 @@ fn write_mf4<W: Write>(
     let mut cols: Vec<Collected> = channels
         .iter()
         .map(|c| match c {
-            Some(c) if !TEXT_CHANNELS.contains(c) => Collected::Num(Vec::new()),
-            _ => Collected::Text(Default::default()),
+            // Texts where the schema has texts; numbers elsewhere (a column of another
+            // writer's that turns out to hold texts becomes a text column below).
+            Some(c) if TEXT_CHANNELS.contains(c) => Collected::Text(Default::default()),
+            _ => Collected::Num(Vec::new()),
         })
         .collect();
     for (r, row) in rows.into_iter().enumerate() {

@@ -5,6 +5,10 @@
 use super::blocks::{Blocks, HEADER_BYTES};
 use super::convert::Phys;
 use super::{ChannelInfo, Group, Mdf4};
+use crate::measured::TextColumn;
+
+/// Most distinct texts a text channel may hold (as the CSV reader's text columns).
+const MAX_DISTINCT_TEXTS: usize = 1024;
 
 /// Bytes read from a DT block at a time.
 const CHUNK_BYTES: u64 = 1 << 20;
@@ -207,11 +211,12 @@ impl<'b, 'a> Stream<'b, 'a> {
     }
 }
 
-/// Decoded values of one channel: numbers (NaN where invalid) or texts.
+/// Decoded values of one channel: numbers (NaN where invalid) or texts (interned: each
+/// distinct text once).
 #[derive(Clone, Debug, PartialEq)]
 pub enum Values {
     Num(Vec<f64>),
-    Text(Vec<String>),
+    Text(TextColumn),
 }
 
 impl Values {
@@ -291,6 +296,17 @@ impl Mdf4<'_> {
             }
             for (d, o) in decoders.iter().zip(out.iter_mut()) {
                 d.push(rec, index, o);
+                if let Values::Text(t) = o {
+                    if t.values.len() > MAX_DISTINCT_TEXTS {
+                        return Err(ChannelError {
+                            channel: d.ch.name.clone(),
+                            message: format!(
+                                "more than {MAX_DISTINCT_TEXTS} distinct texts: not a command \
+                                 or state channel"
+                            ),
+                        });
+                    }
+                }
             }
             index += 1;
         }
@@ -437,7 +453,7 @@ impl<'c> Decoder<'c> {
 
     fn empty(&self, room: usize) -> Values {
         if self.text {
-            Values::Text(Vec::new())
+            Values::Text(TextColumn::default())
         } else {
             Values::Num(Vec::with_capacity(room))
         }
@@ -457,8 +473,8 @@ impl<'c> Decoder<'c> {
         };
         match (out, phys) {
             (Values::Num(v), Phys::Num(x)) => v.push(x),
-            (Values::Text(v), Phys::Text(s)) => v.push(s),
-            (Values::Text(v), Phys::Num(x)) => v.push(if x.is_nan() {
+            (Values::Text(v), Phys::Text(s)) => v.push(&s),
+            (Values::Text(v), Phys::Num(x)) => v.push(&if x.is_nan() {
                 String::new()
             } else {
                 format!("{x}")

@@ -286,13 +286,21 @@ fn place(grid: &[f64], t: &[f64], values: Values, label: &str) -> (Values, Strin
             Values::Num(out)
         }
         Values::Text(v) => {
-            let mut out = vec![String::new(); n];
+            let mut texts = v.values.clone();
+            let empty = texts.iter().position(|t| t.is_empty()).unwrap_or_else(|| {
+                texts.push(String::new());
+                texts.len() - 1
+            });
+            let mut codes = vec![empty as u32; n];
             for (i, slot) in slot_of.iter().enumerate() {
                 if let Some(k) = *slot {
-                    out[k] = v[i].clone();
+                    codes[k] = v.codes[i];
                 }
             }
-            Values::Text(out)
+            Values::Text(TextColumn {
+                values: texts,
+                codes,
+            })
         }
     };
     let own_hz = if t.len() > 1 {
@@ -360,10 +368,11 @@ fn store(table: &mut Table, col: usize, values: Values) -> Result<(), MeasuredEr
                 )
             });
         }
+        (Cells::Text(_), Values::Text(t)) => table.columns[col] = Cells::Text(t),
         (Cells::Text(_), values) => {
             let mut text = TextColumn::default();
             match values {
-                Values::Text(v) => v.iter().for_each(|s| text.push(s)),
+                Values::Text(_) => {}
                 Values::Num(v) => v.iter().for_each(|x| {
                     text.push(&if x.is_nan() {
                         String::new()
