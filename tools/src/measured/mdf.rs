@@ -8,9 +8,10 @@
 //!   on that grid at the grid time nearest each of its own samples (its value there
 //!   interpolated between its own two samples around that time, so no timing shifts);
 //!   the grid times between its samples stay empty: "not measured at this sample", as an
-//!   empty CSV cell, counted in `missing` and said in the notes. Nothing is invented
-//!   beyond a channel's own samples and nothing is smoothed in; where a tool holds a
-//!   value between samples (the replay's brake inputs), it says so itself.
+//!   empty CSV cell, counted in `missing` and said in the notes. A sample with no grid
+//!   time within half a grid interval (outside the grid's times, in a gap) is left out.
+//!   Nothing is invented beyond a channel's own samples and nothing is smoothed in; where
+//!   a tool holds a value between samples (the replay's brake inputs), it says so itself.
 //! * Every value is checked as a CSV cell is: finite or empty, within its column's limits,
 //!   time strictly increasing; an error names the file, the channel (file name and spec
 //!   column) and the sample.
@@ -258,14 +259,13 @@ fn read_group(
 fn place(grid: &[f64], t: &[f64], values: Values, label: &str) -> (Values, String) {
     let n = grid.len();
     let mut slot_of = Vec::with_capacity(t.len());
-    let mut shared = 0usize;
+    let (mut shared, mut outside) = (0usize, 0usize);
     let mut last_slot = None;
     for &ti in t {
-        let k = grid.partition_point(|&g| g < ti);
-        let k = match (k.checked_sub(1), grid.get(k)) {
-            (Some(a), Some(&b)) if ti - grid[a] <= b - ti => a,
-            (Some(a), None) => a,
-            _ => k.min(n.saturating_sub(1)),
+        let Some(k) = nearest_grid_time(grid, ti) else {
+            outside += 1;
+            slot_of.push(None);
+            continue;
         };
         if last_slot == Some(k) {
             shared += 1;
@@ -325,7 +325,34 @@ fn place(grid: &[f64], t: &[f64], values: Values, label: &str) -> (Values, Strin
         note +=
             &format!("; {shared} samples share a grid time with an earlier one and are left out");
     }
+    if outside > 0 {
+        note += &format!(
+            "; {outside} samples lie outside the master grid's times (before its start, after \
+             its end or in a gap of it) and are left out"
+        );
+    }
     (out, note)
+}
+
+/// The grid time nearest `ti`, if within half the grid's local interval (the shorter of
+/// the two around it): a sample before the grid's start, after its end or in a gap of it
+/// has none (its value is not moved to a grid time it was not measured near).
+fn nearest_grid_time(grid: &[f64], ti: f64) -> Option<usize> {
+    let n = grid.len();
+    let k = grid.partition_point(|&g| g < ti);
+    let k = match (k.checked_sub(1), grid.get(k)) {
+        (Some(a), Some(&b)) if ti - grid[a] <= b - ti => a,
+        (Some(a), None) => a,
+        _ => k.min(n.checked_sub(1)?),
+    };
+    let before = k.checked_sub(1).map(|a| grid[k] - grid[a]);
+    let after = grid.get(k + 1).map(|b| b - grid[k]);
+    let interval = match (before, after) {
+        (Some(x), Some(y)) => x.min(y),
+        (Some(x), None) | (None, Some(x)) => x,
+        (None, None) => 0.0,
+    };
+    ((ti - grid[k]).abs() <= 0.5 * interval).then_some(k)
 }
 
 /// Channel value at `at` near own sample `i`: linear between the own samples around it.
@@ -386,4 +413,48 @@ fn store(table: &mut Table, col: usize, values: Values) -> Result<(), MeasuredEr
         (Cells::Ignored, _) => {}
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn placed(grid: &[f64], t: &[f64], v: &[f64]) -> (Vec<f64>, String) {
+        match place(grid, t, Values::Num(v.to_vec()), "x") {
+            (Values::Num(out), note) => (out, note),
+            _ => unreachable!(),
+        }
+    }
+
+    /// A slow channel that starts before and ends after the master grid: its samples
+    /// outside the grid's times are left out (said in the note), never extrapolated to the
+    /// grid's ends, and its own samples at grid times keep their values.
+    #[test]
+    fn samples_outside_the_grid_are_left_out_not_extrapolated() {
+        let grid: Vec<f64> = (0..=1000).map(|k| 1.0 + k as f64 * 1e-3).collect();
+        let t = [0.0, 0.5, 1.0, 1.5, 2.0, 2.5];
+        let v = [0.0, 7.0, 10.0, 15.0, 20.0, 40.0];
+        let (out, note) = placed(&grid, &t, &v);
+        let filled: Vec<(usize, f64)> = out
+            .iter()
+            .enumerate()
+            .filter(|(_, x)| !x.is_nan())
+            .map(|(k, &x)| (k, x))
+            .collect();
+        assert_eq!(filled, vec![(0, 10.0), (500, 15.0), (1000, 20.0)]);
+        assert!(note.contains("3 samples"), "{note}");
+    }
+
+    /// A master grid with a gap (the fast group paused): a slow sample in the gap has no
+    /// grid time near it and is left out, not put at the gap's edge.
+    #[test]
+    fn samples_in_a_gap_of_the_grid_are_left_out() {
+        let mut grid: Vec<f64> = (0..=100).map(|k| k as f64 * 1e-3).collect();
+        grid.extend((0..=100).map(|k| 5.0 + k as f64 * 1e-3));
+        let t = [0.05, 2.5, 5.05];
+        let v = [1.0, 2.0, 3.0];
+        let (out, _) = placed(&grid, &t, &v);
+        let filled: Vec<f64> = out.iter().copied().filter(|x| !x.is_nan()).collect();
+        assert_eq!(filled, vec![1.0, 3.0]);
+    }
 }
