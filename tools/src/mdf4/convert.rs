@@ -65,6 +65,7 @@ impl Conversion {
                 values,
                 interpolate,
             } => table(keys, values, *interpolate, x),
+            Conversion::Ranges { .. } if x.is_nan() => x,
             Conversion::Ranges { ranges, default } => ranges
                 .iter()
                 .find(|(lo, hi, _)| x >= *lo && x <= *hi)

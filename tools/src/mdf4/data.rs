@@ -462,14 +462,18 @@ impl<'c> Decoder<'c> {
     /// Decodes the channel's value of record `rec` (number `index`) into `out`.
     fn push(&self, rec: &[u8], index: u64, out: &mut Values) {
         let invalid = self.all_invalid || self.invalid.is_some_and(|(b, m)| rec[b] & m != 0);
-        let raw = if self.ch.cn_type == 3 || self.ch.cn_type == 6 {
-            Raw::Num(index as f64)
+        // Not measured: empty, never a conversion's default value or text.
+        let phys = if invalid && self.text {
+            Phys::Text(String::new())
+        } else if invalid {
+            Phys::Num(f64::NAN)
+        } else if self.ch.cn_type == 3 || self.ch.cn_type == 6 {
+            self.ch.conversion.apply(index as f64)
         } else {
-            self.raw(&rec[self.start..self.start + self.bytes])
-        };
-        let phys = match raw {
-            Raw::Num(x) => self.ch.conversion.apply(if invalid { f64::NAN } else { x }),
-            Raw::Text(s) => Phys::Text(if invalid { String::new() } else { s }),
+            match self.raw(&rec[self.start..self.start + self.bytes]) {
+                Raw::Num(x) => self.ch.conversion.apply(x),
+                Raw::Text(s) => Phys::Text(s),
+            }
         };
         match (out, phys) {
             (Values::Num(v), Phys::Num(x)) => v.push(x),
@@ -561,7 +565,74 @@ fn utf16(b: &[u8], little: bool) -> String {
 
 #[cfg(test)]
 mod tests {
+    use super::super::convert::Conversion;
     use super::*;
+
+    fn channel(conversion: Conversion) -> ChannelInfo {
+        ChannelInfo {
+            name: "x".into(),
+            unit: String::new(),
+            comment: String::new(),
+            cn_type: 0,
+            sync_type: 0,
+            data_type: 0,
+            bit_offset: 0,
+            byte_offset: 0,
+            bit_count: 8,
+            flags: 2,
+            inval_bit_pos: 0,
+            conversion,
+        }
+    }
+
+    fn group() -> Group {
+        Group {
+            dg: 0,
+            cg: 0,
+            data_addr: 0,
+            rec_id_size: 0,
+            record_id: 0,
+            cycle_count: 2,
+            flags: 0,
+            data_bytes: 1,
+            inval_bytes: 1,
+            acq_name: String::new(),
+            comment: String::new(),
+            channels: Vec::new(),
+        }
+    }
+
+    /// An invalid sample is not measured: empty, whatever its conversion's default (a
+    /// range table's default value, a text table's default text) would make of it.
+    #[test]
+    fn invalid_samples_stay_empty_through_every_conversion() {
+        let ranges = Conversion::Ranges {
+            ranges: vec![(0.0, 10.0, 1.0)],
+            default: -1.0,
+        };
+        let texts = Conversion::Texts {
+            keys: vec![(0.0, 0.0)],
+            texts: vec!["REL".into()],
+            default: "?".into(),
+        };
+        let g = group();
+        let (cr, ct) = (channel(ranges), channel(texts));
+        let (dr, dt) = (
+            Decoder::new(&g, &cr).unwrap(),
+            Decoder::new(&g, &ct).unwrap(),
+        );
+        let (mut vr, mut vt) = (dr.empty(2), dt.empty(2));
+        for rec in [[5u8, 0], [5u8, 1]] {
+            dr.push(&rec, 0, &mut vr);
+            dt.push(&rec, 0, &mut vt);
+        }
+        let Values::Num(v) = vr else { panic!() };
+        assert_eq!(v[0], 1.0);
+        assert!(v[1].is_nan(), "invalid sample read as {}", v[1]);
+        let Values::Text(t) = vt else { panic!() };
+        let text = |i: usize| t.values[t.codes[i] as usize].clone();
+        assert_eq!((text(0), text(1)), ("?".to_string(), String::new()));
+    }
 
     #[test]
     fn untranspose_restores_records() {
