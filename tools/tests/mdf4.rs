@@ -172,6 +172,28 @@ fn bad_mdf4_input_is_named_never_a_panic() {
         let e = err_of(&p, Some(&m));
         assert!(e.to_string().contains(&format!("cut{cut}.mf4")), "{e}");
     }
+    // Not an MDF file under an MDF name (random bytes, a text): said so, not read as CSV.
+    let random: Vec<u8> = (0..3000u32)
+        .map(|i| (i.wrapping_mul(2654435761) >> 13) as u8)
+        .collect();
+    for (name, bytes) in [
+        ("random.mf4", random),
+        ("text.MF4", b"t_s,x\n0,1\n".to_vec()),
+    ] {
+        let p = dir.join(name);
+        std::fs::write(&p, &bytes).unwrap();
+        let e = err_of(&p, Some(&m));
+        assert!(e.to_string().contains(name), "{e}");
+        assert!(e.message.contains("not an MDF file"), "{e}");
+    }
+    // MDF 3: refused by its version.
+    let mut mdf3 = good.clone();
+    mdf3[8..16].copy_from_slice(b"3.30    ");
+    mdf3[28..30].copy_from_slice(&330u16.to_le_bytes());
+    let p = dir.join("old.mf4");
+    std::fs::write(&p, &mdf3).unwrap();
+    let e = err_of(&p, Some(&m));
+    assert!(e.message.contains("MDF version 3.30"), "{e}");
     // Every 8-byte word that holds an address of a block, pointed past the end.
     let mut bad_pointers = 0;
     for at in (64..good.len() - 8).step_by(8) {

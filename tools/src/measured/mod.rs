@@ -65,6 +65,7 @@ pub fn read_with(path: &Path, map: Option<&ChannelMap>) -> Result<Measured, Meas
     let head = input
         .fill_buf()
         .map_err(|e| file_error(path, format!("cannot read: {e}")))?;
+    not_mdf_under_an_mdf_name(path, head)?;
     if crate::mdf4::is_mdf(head) {
         let file = input.into_inner();
         let src = crate::mdf4::blocks::FileSource::new(file)
@@ -90,11 +91,36 @@ pub fn parse_bytes_with(
     bytes: &[u8],
     map: Option<&ChannelMap>,
 ) -> Result<Measured, MeasuredError> {
+    not_mdf_under_an_mdf_name(path, bytes)?;
     if crate::mdf4::is_mdf(bytes) {
         let src = crate::mdf4::blocks::Memory(bytes);
         return from_table(mdf::read_table(path, &src, map)?, map);
     }
     from_table(read_table(path, bytes, map)?, map)
+}
+
+/// A file named as an MDF file (`.mf4`, `.mdf`) whose first bytes are not an MDF
+/// identification: an error saying so (it is not read as a CSV).
+fn not_mdf_under_an_mdf_name(path: &Path, head: &[u8]) -> Result<(), MeasuredError> {
+    let mdf_name = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("mf4") || e.eq_ignore_ascii_case("mdf"));
+    if mdf_name && !crate::mdf4::is_mdf(head) {
+        let shown: String = head
+            .iter()
+            .take(8)
+            .map(|&b| if b.is_ascii_graphic() { b as char } else { '.' })
+            .collect();
+        return Err(file_error(
+            path,
+            format!(
+                "not an MDF file: it starts with `{shown}`, an MDF file with `MDF     ` (a \
+                 damaged file, or another format under an MDF name)"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 fn from_table(mut table: Table, map: Option<&ChannelMap>) -> Result<Measured, MeasuredError> {
