@@ -291,6 +291,14 @@ unit = "bar"
     let e = hils::measured::parse_bytes_with(Path::new("export.csv"), text.as_bytes(), Some(&m))
         .unwrap_err();
     assert_eq!(e.column, "rail");
+    assert!(
+        e.message.contains("`wet`") && e.message.contains("`dry`") && e.message.contains("m.toml"),
+        "{e}"
+    );
+    assert!(
+        !e.message.contains("  "),
+        "a run of blanks in the message: {e}"
+    );
     let wet = format!("{map_text}[metadata]\nrail = \"WET\"\n");
     let m = ChannelMap::parse(Path::new("m.toml"), &wet).unwrap();
     assert!(

@@ -288,18 +288,50 @@ pub fn xml_tx(xml: &str) -> Option<String> {
 }
 
 /// The `<e name="key">value</e>` properties of an MD block's `common_properties`, in
-/// order (an error when the XML does not parse).
+/// order (an error when the XML does not parse). A property inside `<tree name="..">` or
+/// `<list name="..">` sections is keyed by their path (`Vehicle/name`), so that two
+/// sections' equal names are two keys.
 pub fn xml_properties(xml: &str) -> Result<Vec<(String, String)>, String> {
     let doc = roxmltree::Document::parse(xml).map_err(|e| format!("comment XML: {e}"))?;
     Ok(doc
         .descendants()
         .filter(|n| n.has_tag_name("e"))
         .filter_map(|n| {
-            let name = n.attribute("name")?;
+            let name = n.attribute("name")?.trim();
+            let mut sections: Vec<&str> = n
+                .ancestors()
+                .skip(1)
+                .filter(|a| a.has_tag_name("tree") || a.has_tag_name("list"))
+                .filter_map(|a| a.attribute("name"))
+                .map(str::trim)
+                .collect();
+            sections.reverse();
+            sections.push(name);
             Some((
-                name.trim().to_string(),
+                sections.join("/"),
                 n.text().unwrap_or("").trim().to_string(),
             ))
         })
         .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Properties in nested trees (a tool's device or vehicle sections) are keyed by their
+    /// tree path: two trees' `name` are two keys, not one key given twice.
+    #[test]
+    fn nested_properties_are_keyed_by_their_tree() {
+        let xml = r#"<HDcomment><TX>t</TX><common_properties><e name="rail">wet</e>
+            <tree name="Vehicle"><e name="name">A</e><tree name="Bogie"><e name="name">B1</e></tree></tree>
+            <tree name="Driver"><e name="name">B</e></tree></common_properties></HDcomment>"#;
+        let p = xml_properties(xml).unwrap();
+        let keys: Vec<&str> = p.iter().map(|(k, _)| k.as_str()).collect();
+        assert_eq!(
+            keys,
+            ["rail", "Vehicle/name", "Vehicle/Bogie/name", "Driver/name"]
+        );
+        assert_eq!(p[0].1, "wet");
+    }
 }

@@ -101,7 +101,8 @@ impl Metadata {
                         ..file_error(
                             file,
                             format!(
-                                "metadata `{k}`: the file says `{w}`, {origin} says `{v}`;                                  remove one (neither wins)"
+                                "metadata `{k}`: the file says `{w}`, {origin} says `{v}`; \
+                                 remove one (neither wins)"
                             ),
                         )
                     });
