@@ -85,6 +85,17 @@ impl Conversion {
     }
 }
 
+/// An MDF4 conversion type (`cc_type`) for messages.
+pub fn type_name(cc_type: u8) -> &'static str {
+    match cc_type {
+        3 => "an algebraic formula",
+        9 => "a text-to-value table",
+        10 => "a text-to-text table",
+        11 => "a bit-field text table",
+        _ => "a conversion of an unknown type",
+    }
+}
+
 /// A value-to-value table (keys increasing, as the format requires).
 fn table(keys: &[f64], values: &[f64], interpolate: bool, x: f64) -> f64 {
     if keys.is_empty() || x.is_nan() {

@@ -359,6 +359,23 @@ impl Mdf4<'_> {
     }
 }
 
+/// An MDF4 data type (`cn_data_type`) for messages.
+fn data_type_name(data_type: u8) -> &'static str {
+    match data_type {
+        0 | 1 => "unsigned integer",
+        2 | 3 => "signed integer",
+        4 | 5 => "float",
+        6 => "Latin-1 string",
+        7 => "UTF-8 string",
+        8 | 9 => "UTF-16 string",
+        10 => "byte array",
+        11 | 12 => "MIME sample or stream",
+        13 | 14 => "CANopen date or time",
+        15 | 16 => "complex number",
+        _ => "value of an unknown data type",
+    }
+}
+
 /// A little-endian unsigned integer of up to 8 bytes.
 fn le(b: &[u8]) -> u64 {
     b.iter().rev().fold(0u64, |v, &x| (v << 8) | x as u64)
@@ -388,21 +405,25 @@ impl<'c> Decoder<'c> {
             6..=9 => ch.bit_count % 8 == 0 && ch.bit_count > 0,
             _ => false,
         };
-        if ch.cn_type == 1 || !supported {
+        if ch.cn_type == 1 {
             return Err(err(format!(
-                "data type {} of {} bits{} is not read by this reader",
-                ch.data_type,
+                "a variable-length {} (VLSD signal data) is not read by this reader: store it \
+                 as fixed-length, or as numbers with a value-to-text conversion",
+                data_type_name(ch.data_type)
+            )));
+        }
+        if !supported {
+            return Err(err(format!(
+                "a {} of {} bits (MDF4 data type {}) is not read by this reader",
+                data_type_name(ch.data_type),
                 ch.bit_count,
-                if ch.cn_type == 1 {
-                    " (variable-length signal data)"
-                } else {
-                    ""
-                }
+                ch.data_type
             )));
         }
         if let super::convert::Conversion::Unsupported(t) = ch.conversion {
             return Err(err(format!(
-                "conversion type {t} (formula, text or bit-field conversion) is not read"
+                "its conversion, {} (MDF4 conversion type {t}), is not read by this reader",
+                super::convert::type_name(t)
             )));
         }
         let be_unaligned =
@@ -632,6 +653,36 @@ mod tests {
         let Values::Text(t) = vt else { panic!() };
         let text = |i: usize| t.values[t.codes[i] as usize].clone();
         assert_eq!((text(0), text(1)), ("?".to_string(), String::new()));
+    }
+
+    /// What is not read is named in words: the data type, the conversion.
+    #[test]
+    fn unread_channels_are_named_in_words() {
+        let g = group();
+        let message = |ch: ChannelInfo| match Decoder::new(&g, &ch) {
+            Err(e) => e.message,
+            Ok(_) => panic!("read"),
+        };
+        let bytes = ChannelInfo {
+            data_type: 10,
+            bit_count: 24,
+            ..channel(Conversion::Identity)
+        };
+        assert!(message(bytes).contains("a byte array of 24 bits"));
+        let half = ChannelInfo {
+            data_type: 4,
+            bit_count: 16,
+            ..channel(Conversion::Identity)
+        };
+        assert!(message(half).contains("a float of 16 bits"));
+        let vlsd = ChannelInfo {
+            cn_type: 1,
+            data_type: 7,
+            bit_count: 64,
+            ..channel(Conversion::Identity)
+        };
+        assert!(message(vlsd).contains("variable-length UTF-8 string"));
+        assert!(message(channel(Conversion::Unsupported(3))).contains("algebraic formula"));
     }
 
     #[test]
