@@ -373,6 +373,29 @@ initial_speed_kmh = 120
         );
     }
 
+    /// Flags and texts (valves, command) carry no quantity: a logger's label for "no unit"
+    /// (`[-]`, `bool`, `state`) is read as none; a unit of a quantity (bar) is refused.
+    #[test]
+    fn flags_and_texts_take_unit_labels_but_not_units_of_a_quantity() {
+        let r = resolve(
+            None,
+            Path::new("f.mf4"),
+            &names(&["wsp1", "wsp2", "cmd", "wsp3"]),
+            &names(&["bool", "[-]", "state", "%"]),
+        )
+        .unwrap();
+        assert!(r[..3].iter().all(|x| x.to_si.is_identity()));
+        assert_eq!(r[3].to_si.factor, 0.01);
+        let e = resolve(
+            None,
+            Path::new("f.mf4"),
+            &names(&["wsp1"]),
+            &names(&["bar"]),
+        )
+        .unwrap_err();
+        assert!(e.message.contains("pressure unit"), "{e}");
+    }
+
     #[test]
     fn bad_maps_and_units_name_the_channel() {
         let map = ChannelMap::parse(Path::new("m.toml"), MAP).unwrap();

@@ -165,6 +165,11 @@ pub fn to_si(quantity: Quantity, unit: &str) -> Result<ToSi, String> {
             let other = Quantity::ALL
                 .iter()
                 .find(|&&q| q != quantity && parse_in(q, 1.0, u).is_some());
+            // A flag or a text (valve, command) has no quantity: a logger's label for "no
+            // unit" (`[-]`, `bool`, `state`) is none; a unit of a quantity is refused.
+            if quantity == Quantity::Dimensionless && other.is_none() {
+                return Ok(ToSi::IDENTITY);
+            }
             Err(match other {
                 Some(q) if !u.is_empty() => format!(
                     "unit `{unit}` is {} unit, not {} unit",
