@@ -327,7 +327,7 @@ fn place(grid: &[f64], t: &[f64], values: Values, label: &str) -> (Values, Strin
     }
     if outside > 0 {
         note += &format!(
-            "; {outside} samples lie outside the master grid's times (before its start, after \
+            "; {outside} of them lie outside the master grid's times (before its start, after \
              its end or in a gap of it) and are left out"
         );
     }
@@ -442,7 +442,7 @@ mod tests {
             .map(|(k, &x)| (k, x))
             .collect();
         assert_eq!(filled, vec![(0, 10.0), (500, 15.0), (1000, 20.0)]);
-        assert!(note.contains("3 samples"), "{note}");
+        assert!(note.contains("3 of them lie outside"), "{note}");
     }
 
     /// A master grid with a gap (the fast group paused): a slow sample in the gap has no
