@@ -4,15 +4,16 @@
 //! arbitrary payloads, builds of requested runs (on the kept track and vehicle), and steps
 //! with arbitrary ADC sequences (or none). Invariants: a decoded frame re-encodes to the
 //! same payload; in Idle, Stopped and Fault every pulse train is silent and every wheel
-//! speed (state and sent frame) is "not available"; a kept track has at most 16 zones, each
+//! speed (state and sent frame) is "not available"; unless the rig is armed and runs in
+//! rig mode (the arming gate), the same holds in every state; a kept track has at most 16 zones, each
 //! not empty, in order and disjoint, and makes the plant's track.
 #![no_main]
 
 use embedded_can::{Frame, StandardId};
 use hils_fuzz::Bytes;
 use hils_rig_core::can::{
-    ClassicFrame, CommandFrame, DiagFrame, ID_COMMAND, ID_WHEEL_SPEEDS, Opcode, RigState,
-    StatusFrame, WheelSpeedFrame, checksum,
+    ClassicFrame, CommandFrame, DiagFrame, HealthFrame, ID_COMMAND, ID_WHEEL_SPEEDS, Opcode,
+    RigMode, RigState, StatusFrame, WheelSpeedFrame, checksum,
 };
 use hils_rig_core::hw::{RigIo, TelemetryEvent};
 use hils_rig_core::pulse::PulseRegisters;
@@ -67,7 +68,7 @@ fn decoders(f: &ClassicFrame) {
             }
         )*};
     }
-    round_trip!(WheelSpeedFrame, StatusFrame, DiagFrame, CommandFrame);
+    round_trip!(WheelSpeedFrame, StatusFrame, DiagFrame, HealthFrame, CommandFrame);
 }
 
 /// A sealed command frame of the track, track-zone or vehicle opcode with payload bytes
@@ -98,10 +99,13 @@ fn check_track(rig: &Rig) {
 }
 
 fn check_safe_state(rig: &Rig, io: &FuzzIo) {
-    let safe = matches!(
-        rig.state(),
-        RigState::Idle | RigState::Stopped | RigState::Fault
-    );
+    // Not armed, or a self-test run: no output a controller reads moves (arming gate).
+    let unarmed = !rig.arming().is_armed() || rig.mode() == RigMode::SelfTest;
+    let safe = unarmed
+        || matches!(
+            rig.state(),
+            RigState::Idle | RigState::Stopped | RigState::Fault
+        );
     // `Finished` (at rest) is silent too; its speeds are 0.00 km/h, not "not available".
     if safe || rig.state() == RigState::Finished {
         assert!(

@@ -45,10 +45,40 @@ pub enum Kind {
     /// An effect outside the spec's list: the vehicle-speed sensor (radar) drifts, reading
     /// v + d t. No listed effect can explain it; the diagnosis must not blame one.
     Unlisted,
+    /// One wheelset differs from the other three (issue 27; not a listed effect): the
+    /// diagnosis must name no cause and localise the difference on that wheelset's link.
+    Wheelset(WheelsetDiff),
+}
+
+/// What differs on one wheelset (drawn with the wheelset and the size from the seed).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WheelsetDiff {
+    /// Its pads come from another batch: mu_d 10-15 % above or below the others'
+    /// (the `disc-pad-friction` link of that wheelset).
+    PadLevel,
+    /// Its disc's heated mass differs by 25-60 % (the `disc-thermal` link).
+    DiscMass,
+    /// Its wheels are 1-2.5 % larger or smaller (the `wheel-rail` link).
+    WheelRadius,
+    /// Its caliper drags: a residual clamp force of 1.5-4 kN while released (the
+    /// `pad-force` link).
+    DragCaliper,
+}
+
+impl WheelsetDiff {
+    /// The link of `spec/diagnosis.md` that shows the difference.
+    pub fn link(self) -> &'static str {
+        match self {
+            WheelsetDiff::PadLevel => "disc-pad-friction",
+            WheelsetDiff::DiscMass => "disc-thermal",
+            WheelsetDiff::WheelRadius => "wheel-rail",
+            WheelsetDiff::DragCaliper => "pad-force",
+        }
+    }
 }
 
 /// Every kind, in the order that numbers them (the number seeds a case's draw).
-pub const KINDS: [Kind; 13] = [
+pub const KINDS: [Kind; 17] = [
     Kind::None,
     Kind::Hidden(Effect::FrictionSpeed),
     Kind::Hidden(Effect::FrictionTemperature),
@@ -62,6 +92,10 @@ pub const KINDS: [Kind; 13] = [
     Kind::Hidden(Effect::ActuatorLag),
     Kind::Hidden(Effect::SensorGain),
     Kind::Unlisted,
+    Kind::Wheelset(WheelsetDiff::PadLevel),
+    Kind::Wheelset(WheelsetDiff::DiscMass),
+    Kind::Wheelset(WheelsetDiff::WheelRadius),
+    Kind::Wheelset(WheelsetDiff::DragCaliper),
 ];
 
 impl Kind {
@@ -92,6 +126,9 @@ pub struct Truth {
     pub params: Vec<(String, f64)>,
     /// For sensor-gain: the sensor and wheelset (0-based).
     pub sensor: Option<(Sensor, usize)>,
+    /// For a wheelset that differs: what, which (0-based) and the size (the value of the
+    /// one parameter in `params`).
+    pub wheelset: Option<(WheelsetDiff, usize, f64)>,
 }
 
 /// Which brake inputs are logged.
@@ -233,6 +270,17 @@ fn draw_scenario(rng: &mut StdRng, kind: Kind) -> Scenario {
         Kind::Hidden(Effect::RunningResistance) | Kind::Hidden(Effect::Gradient) => {
             s.coast_s = rng.random_range(1.5..4.0)
         }
+        // One wheelset's pads: forces logged (clamp and tangential) beside the pressures.
+        Kind::Wheelset(WheelsetDiff::PadLevel) => {
+            s.inputs = Inputs::Both;
+            s.log_f_brake = true;
+        }
+        Kind::Wheelset(WheelsetDiff::DiscMass) => s.log_t_disc = true,
+        // A dragging caliper shows on the load cell while the brake is released.
+        Kind::Wheelset(WheelsetDiff::DragCaliper) => {
+            s.inputs = Inputs::Both;
+            s.coast_s = rng.random_range(2.0..4.0);
+        }
         _ => {}
     }
     s
@@ -253,6 +301,7 @@ pub fn case_with(kind: Kind, seed: u64, tweak: impl FnOnce(&mut Scenario)) -> Ca
     let nominal = constant_baseline();
     let mut truth_params = nominal;
     let mut sensor = None;
+    let mut wheelset = None;
     let (causes, params): (Vec<&'static str>, Vec<(String, f64)>) = match kind {
         Kind::None => (vec![], vec![]),
         Kind::Hidden(Effect::FrictionSpeed) => {
@@ -371,6 +420,14 @@ pub fn case_with(kind: Kind, seed: u64, tweak: impl FnOnce(&mut Scenario)) -> Ca
             sensor = Some((which, j));
             (vec!["sensor-gain"], vec![(format!("gain{}", j + 1), g)])
         }
+        // The diagnosis' effects outside the spec's list (one wheelset's pads) are drawn as
+        // `Kind::Wheelset`; hidden as an effect, nothing is hidden.
+        Kind::Hidden(_) => (vec![], vec![]),
+        Kind::Wheelset(diff) => {
+            let (key, size, j) = draw_wheelset_diff(diff, &nominal, &mut rng);
+            wheelset = Some((diff, j, size));
+            (vec![], vec![(key.to_string(), size)])
+        }
     };
     let csv = simulate(
         &truth_params,
@@ -378,7 +435,7 @@ pub fn case_with(kind: Kind, seed: u64, tweak: impl FnOnce(&mut Scenario)) -> Ca
         &scenario,
         kind,
         &params,
-        sensor,
+        (sensor, wheelset),
         &mut rng,
     );
     Case {
@@ -388,6 +445,7 @@ pub fn case_with(kind: Kind, seed: u64, tweak: impl FnOnce(&mut Scenario)) -> Ca
             causes,
             params,
             sensor,
+            wheelset,
         },
         scenario,
         csv,
@@ -395,9 +453,128 @@ pub fn case_with(kind: Kind, seed: u64, tweak: impl FnOnce(&mut Scenario)) -> Ca
     }
 }
 
+/// A wheelset difference drawn from `rng`: its parameter key, value and wheelset (0-based).
+fn draw_wheelset_diff(
+    diff: WheelsetDiff,
+    nominal: &Params,
+    rng: &mut StdRng,
+) -> (&'static str, f64, usize) {
+    let j = rng.random_range(0..WHEELSETS);
+    let sign = if rng.random::<f64>() < 0.5 { -1.0 } else { 1.0 };
+    let (key, size) = match diff {
+        WheelsetDiff::PadLevel => ("mu_scale", 1.0 + sign * rng.random_range(0.10..0.15)),
+        WheelsetDiff::DiscMass => {
+            let f = rng.random_range(1.25..1.6);
+            let m = nominal.thermal.disc_mass;
+            ("disc_mass_kg", if sign > 0.0 { m * f } else { m / f })
+        }
+        WheelsetDiff::WheelRadius => {
+            let r = nominal.vehicle.wheel_radius;
+            ("radius_m", r * (1.0 + sign * rng.random_range(0.01..0.025)))
+        }
+        WheelsetDiff::DragCaliper => ("residual_clamp_n", rng.random_range(1500.0..4000.0)),
+    };
+    (key, size, j)
+}
+
+/// One wheelset's difference acting in a closed loop stepped by hand (the plant keeps one
+/// set of parameters for all four wheelsets, so the difference acts on that wheelset's
+/// brake input and on what is logged of it):
+/// - pad level k: the pad force reaching the plant is k x Eq (1) (the same torque as
+///   mu_d k x mu_d0 for a constant friction); the load cell logs Eq (1);
+/// - wheel radius r_j: the plant's wheel (radius r) gets r / r_j of the torque (the same
+///   rail force T / r_j); the logged angular speed is the plant's r / r_j (rolling at the
+///   same circumferential speed) and the logged tangential force the true torque's;
+///   the wheelset's inertia stays referred to r (a 2.5 % difference moves the vehicle's
+///   deceleration by well under 0.1 %); the brake unit is calibrated for the real wheel;
+/// - dragging caliper F_res: the pad force is max(Eq (1), F_res) (a stuck piston holds the
+///   pads until the pressure force exceeds it); the load cell logs it;
+/// - disc mass m_j: that disc's temperature is integrated beside the plant with Eqs (3)-(6)
+///   at m_j from the plant's brake power (exact for a constant friction, which does not
+///   depend on the disc temperature).
+struct WheelsetTruth {
+    diff: WheelsetDiff,
+    j: usize,
+    size: f64,
+    caliper: hils_plant::brake::Caliper<f64>,
+    thermal: hils_plant::thermal::DiscThermal<f64>,
+    disc_temp: f64,
+    r: f64,
+}
+
+impl WheelsetTruth {
+    fn new(truth: &Params, (diff, j, size): (WheelsetDiff, usize, f64)) -> Self {
+        let mut thermal = truth.thermal;
+        if diff == WheelsetDiff::DiscMass {
+            thermal.disc_mass = size;
+        }
+        WheelsetTruth {
+            diff,
+            j,
+            size,
+            caliper: hils_plant::brake::Caliper::new(&truth.brake),
+            thermal: hils_plant::thermal::DiscThermal::new(&thermal),
+            disc_temp: truth.thermal.ambient_rise,
+            r: truth.vehicle.wheel_radius,
+        }
+    }
+
+    /// The pad force of the wheelset for the unit's cylinder pressure `p`, N.
+    fn clamp(&self, p: f64) -> f64 {
+        let eq1 = self.caliper.clamp_force(p);
+        match self.diff {
+            WheelsetDiff::PadLevel => eq1 * self.size,
+            WheelsetDiff::WheelRadius => eq1 * self.r / self.size,
+            WheelsetDiff::DragCaliper => eq1.max(self.size),
+            WheelsetDiff::DiscMass => eq1,
+        }
+    }
+
+    /// One step of the loop with the difference acting; returns the unit's outputs.
+    fn step(&mut self, sim: &mut ClosedLoop<f64>, dt: f64) -> hils_brake_unit::UnitOutputs<f64> {
+        let u = sim.unit.step(&sim.plant.wheel_speeds());
+        let mut inputs = u
+            .cylinder_pressure_pa
+            .map(hils_plant::BrakeInput::CylinderPressure);
+        inputs[self.j] =
+            hils_plant::BrakeInput::ClampForce(self.clamp(u.cylinder_pressure_pa[self.j]));
+        sim.plant.step(&inputs);
+        let w = sim.plant.outputs().wheelsets[self.j];
+        self.disc_temp += self
+            .thermal
+            .rate(w.brake_power, self.disc_temp, w.omega * self.r)
+            * dt;
+        u
+    }
+
+    /// What is logged of the wheelset (see [`WheelsetTruth`]).
+    fn log(&self, r: &mut RunRecord, u: &hils_brake_unit::UnitOutputs<f64>) {
+        let j = self.j;
+        r.p_cyl_pa = u.cylinder_pressure_pa;
+        r.wsp = u.venting;
+        let eq1 = self.caliper.clamp_force(u.cylinder_pressure_pa[j]);
+        match self.diff {
+            WheelsetDiff::PadLevel => r.f_clamp_n[j] = eq1,
+            WheelsetDiff::WheelRadius => {
+                r.f_clamp_n[j] = eq1;
+                r.f_brake_n[j] *= self.size / self.r;
+                r.omega_radps[j] *= self.r / self.size;
+            }
+            WheelsetDiff::DiscMass => r.t_disc_c[j] = self.disc_temp,
+            WheelsetDiff::DragCaliper => {}
+        }
+    }
+}
+
 /// The truth run: the closed loop sampled at the scenario's rate (uniform or jittered),
 /// with its brake schedule, until the stop rule of `hils_sil` ends it.
-fn run_truth(truth: &Params, nominal: &Params, s: &Scenario, rng: &mut StdRng) -> Vec<RunRecord> {
+fn run_truth(
+    truth: &Params,
+    nominal: &Params,
+    s: &Scenario,
+    rng: &mut StdRng,
+    wheelset: Option<(WheelsetDiff, usize, f64)>,
+) -> Vec<RunRecord> {
     let dt = STEP_S;
     let config = UnitConfig::new(dt);
     let v0 = s.speed_kmh / KMH_PER_MPS;
@@ -423,6 +600,8 @@ fn run_truth(truth: &Params, nominal: &Params, s: &Scenario, rng: &mut StdRng) -
     }
     schedule.push((at, BrakeDemand::Emergency));
     let mut cmd = Cmd::Release;
+    let mut differs = wheelset.map(|w| WheelsetTruth::new(truth, w));
+    let mut unit_out = None;
     loop {
         if let Some(&(when, demand)) = schedule.first() {
             if step >= when {
@@ -434,6 +613,9 @@ fn run_truth(truth: &Params, nominal: &Params, s: &Scenario, rng: &mut StdRng) -
         if step as f64 >= next_sample {
             let mut r = RunRecord::of(&sim, cmd);
             r.t_s = step as f64 * dt;
+            if let (Some(w), Some(u)) = (&differs, &unit_out) {
+                w.log(&mut r, u);
+            }
             rows.push(r);
             let jitter = if s.jitter {
                 rng.random_range(-0.3..0.3)
@@ -443,7 +625,12 @@ fn run_truth(truth: &Params, nominal: &Params, s: &Scenario, rng: &mut StdRng) -
             next_sample = (rows.len() as f64 + jitter) * period_steps;
             next_sample = next_sample.max(step as f64 + 1.0);
         }
-        sim.step();
+        match &mut differs {
+            Some(w) => unit_out = Some(w.step(&mut sim, dt)),
+            None => {
+                sim.step();
+            }
+        }
         let v = sim.plant.vehicle_speed();
         step += 1;
         if rule.observe(step, v) {
@@ -492,10 +679,10 @@ fn simulate(
     s: &Scenario,
     kind: Kind,
     params: &[(String, f64)],
-    sensor: Option<(Sensor, usize)>,
+    (sensor, wheelset): (Option<(Sensor, usize)>, Option<(WheelsetDiff, usize, f64)>),
     rng: &mut StdRng,
 ) -> String {
-    let mut rows = run_truth(truth, nominal, s, rng);
+    let mut rows = run_truth(truth, nominal, s, rng, wheelset);
     if s.field_logger {
         let mut artifacts = StdRng::seed_from_u64(rng.random());
         field_logger(&mut rows, &mut artifacts);

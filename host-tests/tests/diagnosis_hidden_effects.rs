@@ -20,7 +20,7 @@ use std::path::PathBuf;
 use hils::diagnose::effects::Effect;
 use hils::diagnose::{Report, diagnose};
 use hils::measured::parse_run_log;
-use host_tests::generator::{Case, KINDS, Kind, Sensor, case, case_with};
+use host_tests::generator::{Case, KINDS, Kind, Sensor, WheelsetDiff, case, case_with};
 
 /// Diagnoses a generated case.
 fn run(case: &Case) -> Report {
@@ -68,6 +68,9 @@ fn check(case: &Case, r: &Report) -> Vec<String> {
                 .collect::<Vec<_>>()
         )
     };
+    if let Some((diff, j, size)) = t.wheelset {
+        return check_wheelset(r, diff, j, size, describe());
+    }
     if t.kind == Kind::None {
         if r.discrepancy || !r.causes.is_empty() {
             fail.push(format!("null case claims a discrepancy: {}", describe()));
@@ -148,6 +151,77 @@ fn check(case: &Case, r: &Report) -> Vec<String> {
     fail
 }
 
+/// The size of a wheelset's difference in a localisation note (`... is 11.5 % above the
+/// others'`), signed; None when the note gives none.
+fn note_percent(note: &str) -> Option<f64> {
+    let (before, sign) = match (note.find(" % above"), note.find(" % below")) {
+        (Some(i), _) => (&note[..i], 1.0),
+        (_, Some(i)) => (&note[..i], -1.0),
+        _ => return None,
+    };
+    before
+        .split_whitespace()
+        .last()?
+        .parse::<f64>()
+        .ok()
+        .map(|x| sign * x)
+}
+
+/// One wheelset differs (issue 27, not a listed effect): no cause is named, and the link
+/// that shows the difference is unexplained on that wheelset alone, its note naming the
+/// wheelset (and, for the pads, the size of the difference within 3 points); pad-force
+/// stays explained where the pads differ.
+fn check_wheelset(
+    r: &Report,
+    diff: WheelsetDiff,
+    j: usize,
+    size: f64,
+    describe: String,
+) -> Vec<String> {
+    let mut fail = Vec::new();
+    let (ws, link) = (j + 1, diff.link());
+    if !r.discrepancy || !r.causes.is_empty() {
+        fail.push(format!(
+            "want a discrepancy and no listed cause: {describe}"
+        ));
+    }
+    match r
+        .localisation
+        .iter()
+        .find(|l| l.link == link && l.wheelset == Some(ws))
+    {
+        None => fail.push(format!("no {link} entry of wheelset {ws}: {describe}")),
+        Some(l) if l.explained || !l.note.contains(&format!("wheelset {ws}")) => {
+            fail.push(format!(
+                "{link} of wheelset {ws} not reported unexplained by name ({}): {describe}",
+                l.note
+            ))
+        }
+        Some(l) if diff == WheelsetDiff::PadLevel => {
+            let want = (size - 1.0) * 100.0;
+            match note_percent(&l.note) {
+                Some(p) if (p - want).abs() <= 3.0 => {}
+                p => fail.push(format!(
+                    "pad level {p:?} %, truth {want:.1} % ({}): {describe}",
+                    l.note
+                )),
+            }
+        }
+        Some(_) => {}
+    }
+    for l in &r.localisation {
+        let other = l.link == link && l.wheelset != Some(ws);
+        let pads = diff == WheelsetDiff::PadLevel && l.link == "pad-force";
+        if (other || pads) && !l.explained {
+            fail.push(format!(
+                "{} of wheelset {:?} unexplained ({}): {describe}",
+                l.link, l.wheelset, l.note
+            ));
+        }
+    }
+    fail
+}
+
 fn assert_case(kind: Kind, seed: u64) {
     assert_generated(case(kind, seed));
 }
@@ -162,14 +236,20 @@ fn assert_generated(c: Case) {
     let (kind, seed) = (c.truth.kind, c.seed);
     let r = run(&c);
     eprintln!(
-        "{kind:?} seed {seed}: causes {:?} confounded {:?} reduction {:.3} unexplained {:.3} in {:.1} s; truth {:?}; fitted {:?}",
+        "{kind:?} seed {seed}: causes {:?} confounded {:?} reduction {:.3} unexplained {:.3} in {:.1} s; truth {:?} {:?}; fitted {:?}; unexplained links {:?}",
         r.causes,
         r.confounded,
         r.gain.reduction,
         r.unexplained_share,
         r.wall_s,
         c.truth.params,
-        r.findings.iter().map(|f| &f.params).collect::<Vec<_>>()
+        c.truth.wheelset,
+        r.findings.iter().map(|f| &f.params).collect::<Vec<_>>(),
+        r.localisation
+            .iter()
+            .filter(|l| !l.explained)
+            .map(|l| (&l.link, l.wheelset, &l.note))
+            .collect::<Vec<_>>()
     );
     let fail = check(&c, &r);
     assert!(fail.is_empty(), "{}", fail.join("\n"));
@@ -211,6 +291,12 @@ cases! { assert_case;
     sensor_gain_1: Kind::Hidden(Effect::SensorGain), 22;
     sensor_gain_2: Kind::Hidden(Effect::SensorGain), 23;
     unlisted_speed_sensor_drift: Kind::Unlisted, 24;
+    // Issue 27: one wheelset differs from the others (not a listed effect).
+    wheelset_pad_level_1: Kind::Wheelset(WheelsetDiff::PadLevel), 40;
+    wheelset_pad_level_2: Kind::Wheelset(WheelsetDiff::PadLevel), 41;
+    wheelset_disc_mass: Kind::Wheelset(WheelsetDiff::DiscMass), 42;
+    wheelset_wheel_radius: Kind::Wheelset(WheelsetDiff::WheelRadius), 43;
+    wheelset_dragging_caliper: Kind::Wheelset(WheelsetDiff::DragCaliper), 44;
 }
 
 // Held-out seeds (never used while the method was developed), field-logger artifacts.
@@ -233,7 +319,8 @@ fn field_logger_adhesion() {
     assert_field_case(Kind::Hidden(Effect::Adhesion), 107);
 }
 
-/// `HILS_DIAG_CASES=N`: N more seeded cases over every effect (not in plain `cargo test`).
+/// `HILS_DIAG_CASES=N`: N more seeded cases over every effect (not in plain `cargo test`);
+/// `HILS_DIAG_KINDS=Wheelset,Mass` keeps the kinds whose name contains one of the words.
 #[test]
 fn more_cases_behind_flag() {
     let Some(n) = std::env::var("HILS_DIAG_CASES")
@@ -247,9 +334,15 @@ fn more_cases_behind_flag() {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(1000);
+    let words = std::env::var("HILS_DIAG_KINDS").unwrap_or_default();
+    let kinds: Vec<Kind> = KINDS
+        .into_iter()
+        .filter(|k| words.is_empty() || words.split(',').any(|w| format!("{k:?}").contains(w)))
+        .collect();
+    assert!(!kinds.is_empty(), "HILS_DIAG_KINDS={words} matches no kind");
     let mut failures = Vec::new();
     for i in 0..n {
-        let kind = KINDS[i % KINDS.len()];
+        let kind = kinds[i % kinds.len()];
         let seed = first + i as u64;
         let c = case(kind, seed);
         let r = run(&c);

@@ -124,7 +124,7 @@ fn variable_mu_d_is_above_mu_d0_and_dips_in_the_middle() {
 #[test]
 fn axle_loads_during_braking_are_lightest_on_wheelsets_2_and_4() {
     for run in [&runs().variable_f32, &runs().constant_f32] {
-        let q = run.summary.axle_loads_3s_n;
+        let q = run.summary.axle_loads_3s_n.expect("the run reaches 3 s");
         let mut order = [0usize, 1, 2, 3];
         order.sort_by(|&a, &b| q[a].partial_cmp(&q[b]).unwrap());
         let lightest: std::collections::BTreeSet<_> = order[..2].iter().copied().collect();

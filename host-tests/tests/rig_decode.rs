@@ -9,6 +9,7 @@ use std::path::PathBuf;
 use hils::decode::rig_core::hw::TelemetryEvent;
 use hils::decode::rig_core::script;
 use hils::decode::rig_core::telemetry::{RunHeader, TelemetryRecord};
+use hils::decode::rig_core::valves::ValveStates;
 use hils::decode::{Run, defmt_to_text, parse_runs, time_text};
 
 fn fixture_dir() -> PathBuf {
@@ -85,7 +86,7 @@ fn fixture_decodes_to_the_scripted_run_bit_for_bit() {
     // The physics in the frames: from 150 km/h under EB, WSP vents wheelsets 2 and 4 near
     // 4 s (the paper's result) and the speed has fallen by 6 s.
     let vented: Vec<bool> = (0..4)
-        .map(|j| run.records.iter().any(|r| r.wsp & (1 << j) != 0))
+        .map(|j| run.records.iter().any(|r| r.valves & (1 << j) != 0))
         .collect();
     assert_eq!(vented, vec![false, true, false, true]);
     let last = run.records.last().unwrap();
@@ -125,7 +126,16 @@ fn decoded_csv_is_a_run_log_the_diagnosis_reads() {
             assert!(close(log.p_cyl_pa[j].as_ref().unwrap()[k], r.p_cyl[j]));
             assert!(close(log.f_clamp_n[j].as_ref().unwrap()[k], r.f_clamp[j]));
             assert!(close(log.q_n[j].as_ref().unwrap()[k], r.q[j]));
-            assert_eq!(log.wsp[j].as_ref().unwrap()[k], ((r.wsp >> j) & 1) as f64);
+            // Self-test: the simulated unit's valves (dump = vent, hold = vent or hold).
+            let v = ValveStates::of_bits(r.valves);
+            assert_eq!(
+                log.wsp[j].as_ref().unwrap()[k],
+                v.dump(j).unwrap() as u8 as f64
+            );
+            assert_eq!(
+                log.hold[j].as_ref().unwrap()[k],
+                v.hold(j).unwrap() as u8 as f64
+            );
         }
     }
     assert_eq!(log.cmd.as_ref().unwrap()[0], "EB");

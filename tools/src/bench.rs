@@ -42,6 +42,10 @@ pub struct BenchArgs {
     /// (MDF4 when the file name ends in `.mf4`, else CSV).
     #[arg(long, requires = "reader", value_parser = crate::flags::log_mb)]
     pub write_log_mb: Option<f64>,
+    /// With --reader: first write a synthetic friction test of this many points (Eq 2 of
+    /// the reference parameters plus noise, labelled synthetic) to the file.
+    #[arg(long, requires = "reader", conflicts_with = "write_log_mb", value_parser = crate::flags::friction_points)]
+    pub write_friction_points: Option<u64>,
 }
 
 /// Figures printed by `hils bench --json`.
@@ -72,7 +76,7 @@ pub struct BenchFigures {
 }
 
 /// Cylinder pressures of the paper's EB, one per step (closed loop, f32).
-fn recorded_inputs(params: &ParamFile, steps: usize) -> Result<Vec<[f32; 4]>> {
+pub fn recorded_inputs(params: &ParamFile, steps: usize) -> Result<Vec<[f32; 4]>> {
     let rail = params.scenario.paper_eb.rail;
     let mut sim = ClosedLoop::<f32>::from_file(params, rail, PAPER_SPEED_MPS as f32)
         .map_err(|e| anyhow!("{e}"))?;
@@ -85,7 +89,8 @@ fn recorded_inputs(params: &ParamFile, steps: usize) -> Result<Vec<[f32; 4]>> {
         .collect())
 }
 
-fn time_plant<F: Real>(params: &ParamFile, inputs: &[[f32; 4]], repeat: usize) -> Result<f64> {
+/// Plant steps per second on `inputs` (one per step), the best of `repeat` runs.
+pub fn time_plant<F: Real>(params: &ParamFile, inputs: &[[f32; 4]], repeat: usize) -> Result<f64> {
     let inputs: Vec<[BrakeInput<F>; 4]> = inputs
         .iter()
         .map(|p| p.map(|x| BrakeInput::CylinderPressure(F::of(x as f64))))
@@ -204,6 +209,14 @@ pub fn main(args: BenchArgs) -> Result<()> {
             )?;
             write_log(path, mb)?;
         }
+        if let Some(n) = args.write_friction_points {
+            crate::outputs::OutFile::check_file(
+                path,
+                "--reader",
+                "the synthetic friction test is written to a file and then read",
+            )?;
+            crate::outputs::write_atomic(path, |w| write_friction_test(w, n))?;
+        }
         return bench_reader_with(path, args.map.as_deref(), args.json);
     }
     let params = ParamFile::default();
@@ -243,6 +256,48 @@ pub fn main(args: BenchArgs) -> Result<()> {
 /// the file name ends in `.mf4` (through the one run-log writer).
 pub fn write_log(path: &std::path::Path, mb: f64) -> Result<()> {
     crate::outputs::write_atomic(path, |w| write_log_to(w, path, mb))
+}
+
+/// Noise of the synthetic friction test's mu (one standard deviation).
+pub const FRICTION_NOISE: f64 = 0.005;
+
+/// Writes a synthetic friction test of `n` points (spec section 2: `v_friction_mps`,
+/// `t_disc_c`, `mu`), labelled synthetic in its metadata: Eq (2) of the reference
+/// parameters (the plant's `DiscPadFriction`) at friction speeds 1-45 m/s and disc
+/// temperature rises 0-320 degC (uniform), plus Gaussian noise of [`FRICTION_NOISE`]
+/// (Box-Muller on a seeded xorshift: the same `n` gives the same file). Streams: any size.
+pub fn write_friction_test(w: &mut dyn std::io::Write, n: u64) -> Result<()> {
+    let p = hils_plant::Params::default().friction;
+    let eq2 =
+        hils_plant::friction::DiscPadFriction::<f64>::new(&hils_plant::params::FrictionParams {
+            model: hils_plant::FrictionModel::Variable,
+            ..p
+        });
+    writeln!(
+        w,
+        "# source: SYNTHETIC friction test, not measured: `hils bench --reader FILE \
+         --write-friction-points {n}`\n# notes: Eq (2) of the reference parameters \
+         (mu_d0 {}, n_v {}, m_v {}, n_t {}, m_t {}, c {}) plus Gaussian noise, sigma \
+         {FRICTION_NOISE}; speeds 1-45 m/s, temperature rises 0-320 degC, uniform, seeded\n\
+         v_friction_mps,t_disc_c,mu",
+        p.mu_d0, p.n_v, p.m_v, p.n_t, p.m_t, p.correction_c
+    )?;
+    let mut state = 0x2545_F491_4F6C_DD1Du64;
+    let mut uniform = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for _ in 0..n {
+        let v = 1.0 + 44.0 * uniform();
+        let t = 320.0 * uniform();
+        let (u1, u2) = (uniform().max(1e-300), uniform());
+        let noise = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
+        let mu = eq2.mu_d(v, t, 0.0) + FRICTION_NOISE * noise;
+        writeln!(w, "{v:.3},{t:.2},{mu:.5}")?;
+    }
+    Ok(())
 }
 
 /// The synthetic run log of [`write_log`], in the format of `path`'s extension.
@@ -312,7 +367,7 @@ fn synthetic_row(k: u64) -> Vec<String> {
 }
 
 /// The process's peak resident memory, bytes (Linux `VmHWM`; 0 where unknown).
-fn peak_rss_bytes() -> u64 {
+pub fn peak_rss_bytes() -> u64 {
     std::fs::read_to_string("/proc/self/status")
         .ok()
         .and_then(|s| {

@@ -26,9 +26,8 @@ use clap::Args;
 pub use hils_rig_core as rig_core;
 use hils_rig_core::Code;
 use hils_rig_core::can::RigState;
-use hils_rig_core::telemetry::{
-    Line, ParseError, RunHeader, TelemetryRecord, WSP_KNOWN, parse_line,
-};
+use hils_rig_core::telemetry::{Line, ParseError, RunHeader, TelemetryRecord, parse_line};
+use hils_rig_core::valves::ValveStates;
 use hils_sil::Cmd;
 use hils_sil::record::Channel;
 use hils_sil::record::run_log::{self, *};
@@ -232,16 +231,24 @@ impl Run {
     fn has_clamp(&self) -> bool {
         self.self_test() || self.header.pressure_channels & 0x0F != 0x0F
     }
-    fn has_wsp(&self) -> bool {
-        self.records.iter().any(|r| r.wsp & WSP_KNOWN != 0)
+    /// Whether any record knows a dump (`hold`: a hold) valve's state: a valve input wired
+    /// (rig mode) or the simulated unit's valves (self-test).
+    fn has_valves(&self, hold: bool) -> bool {
+        self.records.iter().any(|r| {
+            let v = ValveStates::of_bits(r.valves);
+            (if hold { v.hold_known } else { v.dump_known }) != 0
+        })
     }
 
-    /// The logged channels, in the schema's order.
+    /// The logged channels, in the schema's order: the controller outputs the board drove
+    /// (EB loop, service demand, air springs) in rig mode only (self-test drives none).
     pub fn channels(&self) -> Vec<Channel> {
         let logged = |c: Channel| match c {
             P_CYL => self.has_pressure(),
             F_CLAMP => self.has_clamp(),
-            WSP => self.has_wsp(),
+            WSP => self.has_valves(false),
+            HOLD => self.has_valves(true),
+            EB_LOOP | SERVICE_DEMAND | AIR_SPRING1 | AIR_SPRING2 => !self.self_test(),
             CREEPAGE | ADHESION | X | V_REF_EST => false,
             _ => true,
         };
@@ -316,7 +323,7 @@ impl Run {
         }
         m.push((
             "notes",
-            "p_cyl/f_clamp empty = not measured on that channel; faults = hils_rig_core::rig::Faults bits; sensor_faults = 4 bits per channel; step times from the DWT cycle counter; surface = zone under the wheelset (board telemetry); mu_avail = available adhesion of that surface at v_ref (default vehicle and contact sets, as the board's plant; hils wsp-test's table)".to_string(),
+            "p_cyl/f_clamp empty = not measured on that channel; wsp = dump valve coil, hold = hold valve coil (rig: the valve inputs, empty where not wired; self-test: the simulated unit's valves); eb_loop_closed, service_demand_mps2, air_spring1/2_pa = what the board drove on the controller's lines (rig mode; air springs empty while silent); faults = hils_rig_core::rig::Faults bits; sensor_faults = 4 bits per channel; step times from the DWT cycle counter; surface = zone under the wheelset (board telemetry); mu_avail = available adhesion of that surface at v_ref (default vehicle and contact sets, as the board's plant; hils wsp-test's table)".to_string(),
         ));
         m
     }
@@ -338,8 +345,15 @@ impl Run {
             F_BRAKE => cell(r.f_brake[j]),
             T_DISC => cell(r.t_disc[j]),
             Q => cell(r.q[j]),
-            WSP if r.wsp & WSP_KNOWN == 0 => String::new(),
-            WSP => ((r.wsp >> j) & 1).to_string(),
+            WSP | HOLD => {
+                let v = ValveStates::of_bits(r.valves);
+                let state = if c == WSP { v.dump(j) } else { v.hold(j) };
+                state.map_or(String::new(), |on| (on as u8).to_string())
+            }
+            EB_LOOP => (r.driven & 1).to_string(),
+            SERVICE_DEMAND => cell(r.service_demand),
+            AIR_SPRING1 => cell(r.air_spring[0]),
+            AIR_SPRING2 => cell(r.air_spring[1]),
             A_X => cell(r.a_x),
             CMD => cmd_text(r.cmd).to_string(),
             MU_D => cell(r.mu_d[j]),

@@ -41,18 +41,22 @@
 //!
 //! See docs/diagnosis.md for the user's view.
 
+pub mod admit;
 pub mod analysis;
 pub mod baseline;
 pub mod causes;
 pub mod effects;
+pub mod inputs;
 pub mod json;
 pub mod links;
 pub mod lsq;
 pub mod outcome;
+pub mod plausible;
 pub mod replay;
 pub mod report;
 pub mod search;
 pub mod settle;
+pub mod spikes;
 pub mod verdict;
 
 use std::path::PathBuf;
@@ -103,7 +107,10 @@ pub fn diagnose(
     step_s: f64,
 ) -> Result<Outcome> {
     let started = Instant::now();
+    let admitted = admit::admit(baseline, logs)?;
+    let logs = &admitted.logs[..];
     let (base, mut notes) = baseline::prepare(baseline, logs, step_s)?;
+    notes.splice(0..0, admitted.notes);
     let causes = causes::find(&base, baseline, logs, step_s, started)?;
     let settled = settle::settle(&base, &causes, &mut notes);
     let analysis = analysis::analyse(&base.d.runs, &base.replays);
@@ -151,7 +158,7 @@ pub fn main(args: DiagnoseArgs) -> Result<()> {
     let name = args.baseline.display().to_string();
     let out = diagnose(&baseline.plant, &name, &logs, args.step_s)?;
     print_summary(&out);
-    outputs.write_json(&out.report)?;
+    outputs.write_json(&out.report.rounded())?;
     outputs.write_report(|dir| report::write(dir.path(), &out))
 }
 
@@ -200,6 +207,13 @@ fn print_summary(out: &Outcome) {
             r.gain.reduction,
             r.unexplained_share
         );
+    }
+    for l in r.localisation.iter().filter(|l| !l.explained) {
+        let which = l
+            .wheelset
+            .map(|w| format!(" of wheelset {w}"))
+            .unwrap_or_default();
+        crate::say!("unexplained: {}{which}: {}", l.link, l.note);
     }
     crate::say!(
         "slides (wheelsets): measured {}, baseline {}, extended {}",

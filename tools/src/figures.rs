@@ -6,20 +6,27 @@
 //! times, 1e-4 for ratios, a few significant digits for fitted parameters).
 
 /// `x` rounded to `decimals` decimal places, as the f64 nearest to that decimal, so that JSON
-/// (serde_json's shortest round-trip form) prints exactly the rounded decimal. Non-finite
-/// values are returned unchanged.
+/// (serde_json's shortest round-trip form) prints exactly the rounded decimal. A figure that
+/// rounds to zero is +0 (`0.0`, never `-0.0`: Rust's f64 sum of nothing is -0.0, and so is a
+/// tiny negative rounded). Non-finite values are returned unchanged.
 pub fn round_dp(x: f64, decimals: u32) -> f64 {
     if !x.is_finite() {
         return x;
     }
-    format!("{x:.*}", decimals as usize).parse().unwrap_or(x)
+    // Adding +0 turns -0 into +0 and leaves every other value as it is.
+    format!("{x:.*}", decimals as usize)
+        .parse::<f64>()
+        .map_or(x, |r| r + 0.0)
 }
 
 /// `x` rounded to `digits` significant digits (fitted parameters, ratios of unknown size).
-/// Zero and non-finite values are returned unchanged; `digits` of 0 is taken as 1.
+/// Zero is +0, non-finite values are returned unchanged; `digits` of 0 is taken as 1.
 pub fn round_sig(x: f64, digits: u32) -> f64 {
-    if !x.is_finite() || x == 0.0 {
+    if !x.is_finite() {
         return x;
+    }
+    if x == 0.0 {
+        return 0.0;
     }
     let magnitude = x.abs().log10().floor() as i32;
     let decimals = digits.max(1) as i32 - 1 - magnitude;
@@ -69,6 +76,19 @@ mod tests {
         assert_eq!(round_sig(0.0, 4), 0.0);
         assert!(round_sig(f64::NAN, 4).is_nan());
         assert_eq!(round_dp(f64::INFINITY, 3), f64::INFINITY);
+    }
+
+    #[test]
+    fn zero_is_never_negative() {
+        let nothing: f64 = std::iter::empty::<f64>().sum();
+        for x in [nothing, -0.0, -1e-9, -0.04] {
+            let r = round_dp(x, 1);
+            assert!(r == 0.0 && r.is_sign_positive(), "{x} -> {r}");
+            assert_eq!(serde_json::to_string(&r).unwrap(), "0.0");
+            assert_eq!(format!("{r:.1}"), "0.0");
+        }
+        assert_eq!(round_dp(-0.06, 1), -0.1);
+        assert!(round_sig(-0.0, 3).is_sign_positive());
     }
 
     #[test]

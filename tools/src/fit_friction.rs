@@ -13,6 +13,16 @@
 //! when the points reach speeds and temperatures where the exponentials have decayed; when
 //! they do not, the parameters are strongly correlated, their intervals are wide, and the
 //! command says so (it warns on |correlation| > 0.95).
+//!
+//! # Large files
+//!
+//! The files are read in chunks and their points gathered in bounded memory
+//! ([`gather`]): up to 200,000 points are fitted as they are; beyond, as the count-weighted
+//! means of cells of a fine grid over (speed, temperature), with the intervals and the rms
+//! from every point. 50 M points are read and fitted in a few tens of MB (docs/diagnosis.md,
+//! "Large files"); progress bars show the reading (bytes) and the fit (starts).
+
+pub mod gather;
 
 use std::path::{Path, PathBuf};
 
@@ -24,7 +34,10 @@ use hils_plant::params::FrictionParams;
 use serde::Serialize;
 
 use crate::diagnose::lsq::{self, ParamSpec};
-use crate::measured::{FrictionTest, read_friction_test_with};
+use indicatif::ProgressBar;
+
+use crate::figures::{list_text, round_dp, round_sig};
+use crate::measured::{ChannelMap, FrictionTest, stream_friction_test_with};
 use crate::params_file::params_or_default;
 use crate::plots::{Chart, Series, Style};
 
@@ -69,10 +82,84 @@ pub struct FrictionFit {
     pub warnings: Vec<String>,
     /// Parameter pairs with |correlation| > 0.95.
     pub correlated: Vec<(String, String, f64)>,
+    /// When the points were fitted as cells (more than [`gather::EXACT_POINTS`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cells: Option<CellsUsed>,
     pub wall_s: f64,
 }
 
+/// The cells a large set of points was fitted as ([`gather`]).
+#[derive(Clone, Debug, Serialize)]
+pub struct CellsUsed {
+    pub count: usize,
+    pub width_v_mps: f64,
+    pub width_t_c: f64,
+}
+
 impl FrictionFit {
+    /// The fit with every figure rounded to what it means (JSON and terminal): each parameter
+    /// and its interval to [`FrictionFit::decimals`], rms to 3 significant digits,
+    /// correlations to 1e-3, times to 1 ms.
+    pub fn rounded(&self) -> FrictionFit {
+        let names_values = NAMES
+            .iter()
+            .zip([self.mu_d0, self.n_v, self.m_v, self.n_t, self.m_t]);
+        let x: Vec<f64> = names_values
+            .map(|(name, x)| round_dp(x, self.decimals(name, x)))
+            .collect();
+        FrictionFit {
+            mu_d0: x[0],
+            n_v: x[1],
+            m_v: x[2],
+            n_t: x[3],
+            m_t: x[4],
+            ci95: self
+                .ci95
+                .iter()
+                .map(|(k, [lo, hi])| {
+                    let d = self.decimals(k, 0.5 * (lo + hi));
+                    (k.clone(), [round_dp(*lo, d), round_dp(*hi, d)])
+                })
+                .collect(),
+            rms: round_sig(self.rms, 3),
+            correlated: self
+                .correlated
+                .iter()
+                .map(|(a, b, r)| (a.clone(), b.clone(), round_dp(*r, 3)))
+                .collect(),
+            cells: self.cells.as_ref().map(|c| CellsUsed {
+                count: c.count,
+                width_v_mps: round_sig(c.width_v_mps, 3),
+                width_t_c: round_sig(c.width_t_c, 3),
+            }),
+            wall_s: round_dp(self.wall_s, 3),
+            ..self.clone()
+        }
+    }
+}
+
+impl FrictionFit {
+    /// Decimals of parameter `name` (value `x`) and its interval: 5 significant digits, or
+    /// 2 of the interval's half-width when that is finer (50 M points pin mu_d0 to 3e-6).
+    pub fn decimals(&self, name: &str, x: f64) -> u32 {
+        let decimals_for = |y: f64, digits: i32| digits - 1 - y.abs().log10().floor() as i32;
+        let sig5 = if x.is_finite() && x != 0.0 {
+            decimals_for(x, 5)
+        } else {
+            5
+        };
+        let half = self
+            .ci95
+            .get(name)
+            .map_or(f64::NAN, |[lo, hi]| 0.5 * (hi - lo));
+        let of_interval = if half.is_finite() && half > 0.0 {
+            decimals_for(half, 2)
+        } else {
+            0
+        };
+        sig5.max(of_interval).clamp(0, 12) as u32
+    }
+
     /// The fit as friction parameters (variable model, c as fitted with).
     pub fn params(&self) -> FrictionParams {
         FrictionParams {
@@ -119,10 +206,10 @@ fn check_spread(v: &[f64], t: &[f64]) -> Result<()> {
         d.dedup();
         if d.len() < MIN_DISTINCT {
             bail!(
-                "degenerate data: {} distinct {what} ({:?}); Eq (2) needs at least {MIN_DISTINCT} \
+                "degenerate data: {} distinct {what} ({}); Eq (2) needs at least {MIN_DISTINCT} \
                  to separate its level, amplitude and decay",
                 d.len(),
-                d
+                list_text(&d)
             );
         }
     }
@@ -171,32 +258,96 @@ fn covariance_or_undefined(fit: &lsq::Fit, warnings: &mut Vec<String>) -> (Vec<f
 
 /// Fits Eq (2) to points (v_d m/s, T_d degC, mu) with c fixed.
 pub fn fit_points(v: &[f64], t: &[f64], mu: &[f64], c: f64) -> Result<FrictionFit> {
+    let data = Data {
+        v,
+        t,
+        mu,
+        weight: None,
+        points: mu.len(),
+        ss_within: 0.0,
+    };
+    fit_data(&data, c, &ProgressBar::hidden())
+}
+
+/// Fits Eq (2) to the cells of a large set of points ([`gather`]): each cell's mean point
+/// weighted by its count.
+pub fn fit_cells(cells: &gather::Cells, c: f64, bar: &ProgressBar) -> Result<FrictionFit> {
+    let (v, t, mu, n, ss_within) = cells.means();
+    let weight: Vec<f64> = n.iter().map(|n| n.sqrt()).collect();
+    let data = Data {
+        v: &v,
+        t: &t,
+        mu: &mu,
+        weight: Some(&weight),
+        points: n.iter().sum::<f64>() as usize,
+        ss_within,
+    };
+    let mut fit = fit_data(&data, c, bar)?;
+    fit.cells = Some(CellsUsed {
+        count: v.len(),
+        width_v_mps: cells.width.0,
+        width_t_c: cells.width.1,
+    });
+    Ok(fit)
+}
+
+/// What a fit takes: points (or cell means with the square root of their counts as
+/// weights), the number of points and the sum of squares within the cells.
+struct Data<'a> {
+    v: &'a [f64],
+    t: &'a [f64],
+    mu: &'a [f64],
+    weight: Option<&'a [f64]>,
+    points: usize,
+    ss_within: f64,
+}
+
+/// Fits Eq (2) with c fixed (the best of several starts, `bar` counting them).
+fn fit_data(d: &Data, c: f64, bar: &ProgressBar) -> Result<FrictionFit> {
     let started = std::time::Instant::now();
+    let (v, t, mu) = (d.v, d.t, d.mu);
     let n = mu.len();
-    if n < 6 {
-        bail!("{n} friction points: at least 6 are needed to fit 5 parameters");
+    if d.points < 6 {
+        bail!(
+            "{} friction points: at least 6 are needed to fit 5 parameters",
+            d.points
+        );
     }
     check_spread(v, t)?;
+    let w = |i: usize| d.weight.map_or(1.0, |w| w[i]);
     let model = |x: &[f64]| -> Option<Vec<f64>> {
         let f = DiscPadFriction::<f64>::new(&with(x, c));
-        Some((0..n).map(|i| f.mu_d(v[i], t[i], 0.0) - mu[i]).collect())
+        Some(
+            (0..n)
+                .map(|i| w(i) * (f.mu_d(v[i], t[i], 0.0) - mu[i]))
+                .collect(),
+        )
     };
     let mu_min = mu.iter().cloned().fold(f64::INFINITY, f64::min);
     let v_max = v.iter().cloned().fold(0.0f64, f64::max).max(1.0);
     let t_max = t.iter().cloned().fold(0.0f64, f64::max).max(1.0);
-    let best = best_of_starts(&model, mu_min / c, v_max, t_max);
+    let best = best_of_starts(&model, mu_min / c, v_max, t_max, bar);
     let Some(best) = best else {
         bail!("the fit failed from every start")
     };
     let x = &best.x;
     let mut warnings = Vec::new();
-    let (half, correlation) = covariance_or_undefined(&best, &mut warnings);
+    let (mut half, correlation) = covariance_or_undefined(&best, &mut warnings);
+    // Cells: the residual variance is every point's (within-cell sums of squares added),
+    // over the points' degrees of freedom, not the cells'.
+    let ssr_all = best.ssr + d.ss_within;
+    if d.weight.is_some() && best.ssr > 0.0 && n > 5 {
+        let s2_cells = best.ssr / (n - 5) as f64;
+        let s2_all = ssr_all / (d.points - 5) as f64;
+        let scale = (s2_all / s2_cells).sqrt() * lsq::t975((d.points - 5) as f64)
+            / lsq::t975((n - 5) as f64);
+        half.iter_mut().for_each(|h| *h *= scale);
+    }
     let mut ci95 = std::collections::BTreeMap::new();
     for (i, name) in NAMES.iter().enumerate() {
         ci95.insert(name.to_string(), [x[i] - half[i], x[i] + half[i]]);
     }
     let correlated = identifiability(x, &half, &correlation, v_max, t_max, &mut warnings);
-    let rms = (best.ssr / n as f64).sqrt();
     Ok(FrictionFit {
         mu_d0: x[0],
         n_v: x[1],
@@ -204,13 +355,14 @@ pub fn fit_points(v: &[f64], t: &[f64], mu: &[f64], c: f64) -> Result<FrictionFi
         n_t: x[3],
         m_t: x[4],
         ci95,
-        rms,
+        rms: (ssr_all / d.points as f64).sqrt(),
         correction_c: c,
-        points: n,
+        points: d.points,
         skipped_rows: 0,
         files: Vec::new(),
         warnings,
         correlated,
+        cells: None,
         wall_s: started.elapsed().as_secs_f64(),
     })
 }
@@ -222,7 +374,9 @@ fn best_of_starts(
     mu_d0_start: f64,
     v_max: f64,
     t_max: f64,
+    bar: &ProgressBar,
 ) -> Option<lsq::Fit> {
+    bar.set_length(9);
     let mut best: Option<lsq::Fit> = None;
     for kv in [0.3, 1.0, 3.0] {
         for kt in [0.3, 1.0, 3.0] {
@@ -240,6 +394,7 @@ fn best_of_starts(
                     best = Some(f);
                 }
             }
+            bar.inc(1);
         }
     }
     best
@@ -294,26 +449,104 @@ fn identifiability(
     correlated
 }
 
+/// Files larger than this (bytes, together) show progress bars while read and fitted.
+const PROGRESS_BYTES: u64 = 20_000_000;
+
+/// A progress bar on standard error (shown for long work only: `show`).
+fn progress(show: bool, template: &str) -> ProgressBar {
+    let bar = ProgressBar::with_draw_target(
+        Some(0),
+        if show {
+            indicatif::ProgressDrawTarget::stderr()
+        } else {
+            indicatif::ProgressDrawTarget::hidden()
+        },
+    );
+    if let Ok(style) = indicatif::ProgressStyle::with_template(template) {
+        bar.set_style(style);
+    }
+    bar
+}
+
+/// Reads friction test `f` (CSV in chunks, MDF4 whole) through the channel `map`, adding
+/// its points to `gathered`; `bar` counts the bytes read.
+fn read_into(
+    f: &Path,
+    map: Option<&ChannelMap>,
+    bar: &ProgressBar,
+    gathered: &mut gather::Gathered,
+) -> Result<FrictionTest, crate::measured::MeasuredError> {
+    stream_friction_test_with(
+        f,
+        map,
+        || {
+            let file = std::fs::File::open(f)?;
+            bar.inc_length(file.metadata()?.len());
+            Ok(std::io::BufReader::with_capacity(
+                1 << 16,
+                bar.wrap_read(file),
+            ))
+        },
+        |chunk| {
+            for i in 0..chunk.mu.len() {
+                gathered.add(chunk.v_friction_mps[i], chunk.t_disc_c[i], chunk.mu[i]);
+            }
+            Ok(())
+        },
+    )
+}
+
 /// `hils fit-friction`.
 pub fn main(args: FitFrictionArgs) -> Result<()> {
+    let started = std::time::Instant::now();
     let out = args.out.check()?;
     let params = params_or_default(args.params.as_deref())?;
     let c = params.plant.friction.correction_c;
     let map = crate::measured::load_map(args.map.as_deref())?;
-    let mut tests = Vec::new();
+    let bytes: u64 = args
+        .files
+        .iter()
+        .filter_map(|f| std::fs::metadata(f).ok())
+        .map(|m| m.len())
+        .sum();
+    let show = bytes > PROGRESS_BYTES;
+    let bar = progress(
+        show,
+        "reading {bar:40} {bytes}/{total_bytes}, {elapsed_precise}, about {eta} to go",
+    );
+    let mut gathered = gather::Gathered::default();
+    let mut skipped = 0;
     for f in &args.files {
-        let t = read_friction_test_with(f, map.as_ref())?;
-        for note in &t.notes {
+        let test = read_into(f, map.as_ref(), &bar, &mut gathered)?;
+        for note in &test.notes {
             crate::say!("{}: {note}", f.display());
         }
-        tests.push(t);
+        skipped += test.skipped;
     }
-    let (v, t, mu) = pooled(&tests);
-    let mut fit = fit_points(&v, &t, &mu, c)?;
-    fit.skipped_rows = tests.iter().map(|t| t.skipped).sum();
+    bar.finish_and_clear();
+    let fit_bar = progress(
+        show,
+        "fitting {bar:40} {pos}/{len} starts, {elapsed_precise}",
+    );
+    let mut fit = match &gathered.cells {
+        Some(cells) => fit_cells(cells, c, &fit_bar)?,
+        None => {
+            let (v, t, mu) = gathered.plot_points();
+            fit_points(&v, &t, &mu, c)?
+        }
+    };
+    fit_bar.finish_and_clear();
+    fit.skipped_rows = skipped;
     fit.files = args.files.iter().map(|f| f.display().to_string()).collect();
-    print_fit(&fit);
-    out.write_json(&fit)?;
+    let shown = fit.rounded();
+    print_fit(&shown);
+    crate::say!(
+        "  read and fitted in {:.1} s; peak memory {:.0} MB",
+        started.elapsed().as_secs_f64(),
+        crate::bench::peak_rss_bytes() as f64 / 1e6
+    );
+    out.write_json(&shown)?;
+    let (v, t, mu) = gathered.plot_points();
     out.write_report(|dir| write_report(dir.path(), &fit, &v, &t, &mu))
 }
 
@@ -339,9 +572,19 @@ fn print_fit(f: &FrictionFit) {
     );
     for (name, value) in NAMES.iter().zip([f.mu_d0, f.n_v, f.m_v, f.n_t, f.m_t]) {
         let [lo, hi] = f.ci95[*name];
-        crate::say!("  {name:6} = {value:10.5}   95 % CI [{lo:.5}, {hi:.5}]");
+        let d = f.decimals(name, value).max(5) as usize;
+        crate::say!("  {name:6} = {value:10.d$}   95 % CI [{lo:.d$}, {hi:.d$}]");
     }
     crate::say!("  rms error of mu = {:.5}", f.rms);
+    if let Some(c) = &f.cells {
+        crate::say!(
+            "  fitted as {} cells of {} m/s x {} degC (each cell's mean point weighted by its \
+             count; intervals and rms from all points)",
+            c.count,
+            c.width_v_mps,
+            c.width_t_c
+        );
+    }
     crate::say!("  fit time {:.3} s", f.wall_s);
     for w in &f.warnings {
         crate::say!("  warning: {w}");
@@ -462,4 +705,40 @@ pub fn write_report(
     files.push(dir.join("report.md"));
     crate::outputs::write_file(files.last().unwrap(), md)?;
     Ok(files)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A fit whose parameters are all `x` with intervals of half-width `half`.
+    fn fit_of(x: f64, half: f64) -> FrictionFit {
+        let ci95 = NAMES
+            .iter()
+            .map(|n| (n.to_string(), [x - half, x + half]))
+            .collect();
+        let mut f = fit_points(
+            &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0],
+            &[10.0, 200.0, 30.0, 150.0, 50.0, 250.0, 70.0, 120.0],
+            &[0.45, 0.42, 0.43, 0.41, 0.42, 0.39, 0.41, 0.40],
+            0.98,
+        )
+        .unwrap();
+        (f.mu_d0, f.n_v, f.m_v, f.n_t, f.m_t, f.ci95) = (x, x, x, x, x, ci95);
+        f
+    }
+
+    /// Item 16: 5 significant digits, finer when the interval is (50 M points pin mu_d0 to
+    /// a few 1e-6: rounded to 5 digits its interval read [0.38, 0.38]).
+    #[test]
+    fn parameters_and_intervals_are_rounded_to_what_they_mean() {
+        let wide = fit_of(0.379_961_274, 6.6e-4).rounded();
+        assert_eq!(wide.mu_d0, 0.37996);
+        assert_eq!(wide.ci95["mu_d0"], [0.3793, 0.38062]);
+        let narrow = fit_of(0.380_000_312_7, 3.1e-6).rounded();
+        assert_eq!(narrow.mu_d0, 0.3800003);
+        let [lo, hi] = narrow.ci95["mu_d0"];
+        assert!(lo < narrow.mu_d0 && narrow.mu_d0 < hi, "{lo} {hi}");
+        assert_eq!([lo, hi], [0.3799972, 0.3800034]);
+    }
 }

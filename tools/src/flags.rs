@@ -68,6 +68,9 @@ flags! {
     RUN = count("decode", "--run", 1.0, 1e6), run_index -> usize;
     /// `bench --write-log-mb`.
     LOG_MB = range("bench", "--write-log-mb", 0.001, 10_000.0), log_mb -> f64;
+    /// `bench --write-friction-points`: a synthetic friction test of 6 (five parameters and
+    /// a residual) to a billion points.
+    FRICTION_POINTS = count("bench", "--write-friction-points", 6.0, 1e9), friction_points -> u64;
     /// `hils rig --lost-after-s`: two status periods (10 ms each) up to a minute.
     RIG_LOST_AFTER_S = range("rig status", "--lost-after-s", 0.02, 60.0), rig_lost_after_s -> f64;
     /// `hils rig start --speed-kmh`: 1 km/h up to the top of the wheel-speed frames

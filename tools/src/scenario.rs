@@ -10,6 +10,8 @@ use hils_sil::scenario::{AFTER_STOP_S, MAX_TIME_S};
 use hils_sil::{ClosedLoop, Cmd, EbScenario, KMH_PER_MPS, ParamFile, RunRecord, StopRule};
 use serde::Serialize;
 
+use crate::figures::round_dp;
+
 /// One recorded sample of a run: the run record of `hils_sil` (column names and units of
 /// the run log).
 pub type Sample = RunRecord;
@@ -46,7 +48,9 @@ impl EbOptions {
     }
 }
 
-/// The summary of a run: `summary.json` (keys fixed by the plant issue).
+/// The summary of a run: `summary.json` (keys fixed by the plant issue). A figure of an
+/// instant the run did not reach (it stopped before) is None (`null`): mu_d at 10 s of a
+/// run that stopped at 3.8 s is not reported.
 #[derive(Clone, Debug, Serialize, PartialEq)]
 pub struct Summary {
     pub stop_time_s: Option<f64>,
@@ -54,14 +58,44 @@ pub struct Summary {
     pub slides: Vec<usize>,
     pub slide_onset_s: [Option<f64>; 4],
     pub axle_loads_static_n: [f64; 4],
-    pub axle_loads_3s_n: [f64; 4],
-    pub mu_d_at_s: std::collections::BTreeMap<String, f64>,
+    /// At 3 s (None: the run stopped before).
+    pub axle_loads_3s_n: Option<[f64; 4]>,
+    /// Mean mu_d at 0, 10 and 20 s (None: after the stop).
+    pub mu_d_at_s: std::collections::BTreeMap<String, Option<f64>>,
     pub mu_d_min: f64,
     pub mu_d_end: f64,
     pub peak_disc_temp_rise_c: [f64; 4],
     pub eb_pressure_pa: f64,
     pub steps: u64,
     pub wall_s: f64,
+}
+
+impl Summary {
+    /// The summary with every figure rounded to its resolution (what `summary.json` and
+    /// the terminal show): times 0.1 ms (the plant step), distance 1 mm, loads 0.1 N, mu_d
+    /// 1e-4, temperatures 0.01 degC, pressure 1 Pa, wall time 1 ms.
+    pub fn rounded(&self) -> Summary {
+        let r = |x: f64, dp: u32| round_dp(x, dp);
+        Summary {
+            stop_time_s: self.stop_time_s.map(|t| r(t, 4)),
+            stopping_distance_m: self.stopping_distance_m.map(|x| r(x, 3)),
+            slides: self.slides.clone(),
+            slide_onset_s: self.slide_onset_s.map(|t| t.map(|t| r(t, 4))),
+            axle_loads_static_n: self.axle_loads_static_n.map(|q| r(q, 1)),
+            axle_loads_3s_n: self.axle_loads_3s_n.map(|q| q.map(|q| r(q, 1))),
+            mu_d_at_s: self
+                .mu_d_at_s
+                .iter()
+                .map(|(k, mu)| (k.clone(), mu.map(|mu| r(mu, 4))))
+                .collect(),
+            mu_d_min: r(self.mu_d_min, 4),
+            mu_d_end: r(self.mu_d_end, 4),
+            peak_disc_temp_rise_c: self.peak_disc_temp_rise_c.map(|t| r(t, 2)),
+            eb_pressure_pa: r(self.eb_pressure_pa, 0),
+            steps: self.steps,
+            wall_s: r(self.wall_s, 3),
+        }
+    }
 }
 
 /// A finished run.
@@ -259,9 +293,12 @@ fn summarise<F: Real>(
         .filter(|&j| onsets[j].is_some())
         .map(|j| j + 1)
         .collect();
+    // Only instants within the run (up to the stop, or the last sample without one).
+    let last_s = stop_time.unwrap_or_else(|| samples.last().map_or(0.0, |s| s.t_s));
     let mut mu_at = std::collections::BTreeMap::new();
     for t in [0.0, 10.0, 20.0] {
-        mu_at.insert(format!("{}", t as u32), mean_mu_at(t));
+        let within = t <= last_s + 1e-9;
+        mu_at.insert(format!("{}", t as u32), within.then(|| mean_mu_at(t)));
     }
     Summary {
         stop_time_s: stop_time,
@@ -269,7 +306,7 @@ fn summarise<F: Real>(
         slides,
         slide_onset_s: onsets,
         axle_loads_static_n: static_loads,
-        axle_loads_3s_n: tracker.at_3s.unwrap_or([f64::NAN; WHEELSETS]),
+        axle_loads_3s_n: tracker.at_3s.filter(|_| last_s >= AXLE_LOADS_AT_S),
         mu_d_at_s: mu_at,
         mu_d_min: tracker.mu_d_min,
         mu_d_end,

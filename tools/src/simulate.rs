@@ -8,11 +8,12 @@ use hils_plant::contact::Polach;
 use hils_plant::{FrictionModel, Params, Rail};
 use hils_sil::{KMH_PER_MPS, ParamFile};
 
+use crate::figures::list_text;
 use crate::outputs::OutDir;
 use crate::params_file::params_or_default;
 use crate::plots::{Chart, Series, Style};
 use crate::runlog::{Format, write_run_log_as};
-use crate::scenario::{EbOptions, Run, run_eb};
+use crate::scenario::{EbOptions, Run, Summary, run_eb};
 
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
 pub enum FrictionArg {
@@ -158,7 +159,14 @@ pub fn main(args: SimulateArgs) -> Result<()> {
         ("friction", friction.to_string()),
         ("sample_rate_hz", format!("{}", args.sample_rate_hz)),
         ("plant_step_s", format!("{}", main_run.dt)),
-        ("precision", format!("{:?}", args.precision).to_lowercase()),
+        (
+            "precision",
+            match args.precision {
+                PrecisionArg::F32 => "f32",
+                PrecisionArg::F64 => "f64",
+            }
+            .to_string(),
+        ),
         ("math", hils_plant::math::IMPLEMENTATION.to_string()),
         (
             "params",
@@ -172,28 +180,15 @@ pub fn main(args: SimulateArgs) -> Result<()> {
     let csv_path = out.write_with(&run_name, |w| {
         write_run_log_as(args.format, w, &metadata, &main_run.samples)
     })?;
-    let summary_path = out.write_json("summary.json", &main_run.summary)?;
-
-    let s = &main_run.summary;
-    println!(
-        "{friction} friction, {rail} rail, {:.0} km/h:",
-        opts.initial_speed_mps * KMH_PER_MPS
+    let summary = main_run.summary.rounded();
+    let summary_path = out.write_json("summary.json", &summary)?;
+    print_summary(
+        &summary,
+        friction,
+        rail,
+        opts.initial_speed_mps,
+        opts.max_time_s,
     );
-    match (s.stop_time_s, s.stopping_distance_m) {
-        (Some(t), Some(d)) => println!("  stop after {t:.2} s and {d:.1} m"),
-        _ => println!("  no stop within {} s", opts.max_time_s),
-    }
-    println!(
-        "  WSP acted on wheelsets {:?}; first vents {:?} s",
-        s.slides,
-        s.slide_onset_s
-            .map(|o| o.map(|t| (t * 1000.0).round() / 1000.0))
-    );
-    println!(
-        "  mu_d: {:.4} at 0 s, min {:.4}, {:.4} at the stop; EB pressure {:.0} Pa",
-        s.mu_d_at_s["0"], s.mu_d_min, s.mu_d_end, s.eb_pressure_pa
-    );
-    println!("  {} steps in {:.2} s", s.steps, s.wall_s);
 
     if !args.no_plots {
         // The paper overlays the other friction model (Figs 10, 11).
@@ -214,6 +209,44 @@ pub fn main(args: SimulateArgs) -> Result<()> {
         summary_path.display()
     );
     Ok(())
+}
+
+/// The run's summary for people (figures rounded, no debug forms).
+fn print_summary(s: &Summary, friction: &str, rail: &str, speed_mps: f64, max_time_s: f64) {
+    println!(
+        "{friction} friction, {rail} rail, {:.0} km/h:",
+        speed_mps * KMH_PER_MPS
+    );
+    match (s.stop_time_s, s.stopping_distance_m) {
+        (Some(t), Some(d)) => println!("  stop after {t:.2} s and {d:.1} m"),
+        _ => println!("  no stop within {max_time_s} s"),
+    }
+    let vents: Vec<String> = (0..4)
+        .filter_map(|j| s.slide_onset_s[j].map(|t| format!("{t:.3} s (wheelset {})", j + 1)))
+        .collect();
+    if vents.is_empty() {
+        println!("  WSP acted on no wheelset");
+    } else {
+        println!(
+            "  WSP acted on wheelsets {}; first vents {}",
+            list_text(&s.slides),
+            vents.join(", ")
+        );
+    }
+    let at = |k: &str| match s.mu_d_at_s.get(k).copied().flatten() {
+        Some(mu) => format!("{mu:.4} at {k} s"),
+        None => format!("{k} s not reached"),
+    };
+    println!(
+        "  mu_d: {}, {}, {}, min {:.4}, {:.4} at the stop; EB pressure {:.0} Pa",
+        at("0"),
+        at("10"),
+        at("20"),
+        s.mu_d_min,
+        s.mu_d_end,
+        s.eb_pressure_pa
+    );
+    println!("  {} steps in {:.2} s", s.steps, s.wall_s);
 }
 
 fn label(run: &Run) -> &'static str {
@@ -321,7 +354,6 @@ fn fig9(path: &Path, params: &Params, var: &Run) -> Result<()> {
         Style::Dotted,
         2,
     ));
-    chart.legend_lower_right = true;
     chart.save_svg(path)
 }
 
@@ -419,6 +451,5 @@ fn fig11(path: &Path, params: &Params, rail: Rail, var: &Run, con: &Run) -> Resu
         4,
     ));
     chart.x_range = Some((0.0, 0.25));
-    chart.legend_lower_right = true;
     chart.save_svg(path)
 }

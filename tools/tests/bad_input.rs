@@ -110,6 +110,8 @@ fn fit_friction_on_degenerate_data() {
         e.contains("degenerate") && e.contains("disc temperatures"),
         "{e}"
     );
+    // Item 16: the values in words, not a Rust debug list (`[50.0]`).
+    assert!(e.contains("(50)") && !e.contains('['), "{e}");
     // Near-degenerate and exact sets: whatever the fit, its statistics are meaningful.
     let mut seed = 12345u64;
     let mut rnd = || {
@@ -235,4 +237,157 @@ fn a_user_error_is_a_message_not_a_backtrace() {
         assert!(!err.to_lowercase().contains("backtrace"), "{err}");
         assert!(err.lines().count() <= 3, "{err}");
     }
+}
+
+/// A programme of one run on a low track (`run` replaces its keys), with `extra` tables.
+fn programme_text(criteria: &str, run: &str, extra: &str) -> String {
+    format!("[criteria]\n{criteria}\n[tracks.low]\nbase = \"low\"\n{extra}\n[[run]]\n{run}\n")
+}
+
+const RUN: &str =
+    "name = \"low-eb-120\"\nspeed_kmh = 120.0\ndemand = \"emergency\"\ntrack = \"low\"";
+
+/// Issue 24 item 6: programme values were not range-checked (`demand = "service:100"`,
+/// `step:99` of 7 steps, `max_distance_ratio = -1` or `nan` were accepted). Now every value
+/// of the format is checked when the programme is read, before any run, and the error names
+/// the file and the key.
+#[test]
+fn programme_values_are_range_checked_naming_the_key() {
+    use hils::wsp::programme::Programme;
+    let dir = temp_dir("programme-values");
+    let run_with = |key: &str, value: &str| -> String {
+        RUN.lines()
+            .map(|l| {
+                if l.starts_with(key) {
+                    format!("{key} = {value}")
+                } else {
+                    l.to_string()
+                }
+            })
+            .collect::<Vec<_>>()
+            .join("\n")
+    };
+    let mut cases: Vec<(String, &str)> = Vec::new();
+    for (key, value) in [
+        ("max_distance_ratio", "-1.0"),
+        ("max_distance_ratio", "nan"),
+        ("max_distance_ratio", "inf"),
+        ("max_lock_s", "-0.5"),
+        ("max_wsp_timer_actions", "-1"),
+        ("max_air_consumption_l", "-5.0"),
+        ("lock_speed_ratio", "1.5"),
+        ("cylinder_stroke_m", "0.0"),
+        ("pipe_volume_l", "nan"),
+        ("min_speed_mps", "-1.0"),
+    ] {
+        cases.push((programme_text(&format!("{key} = {value}"), RUN, ""), key));
+    }
+    for (value, cause) in [
+        ("\"service:100\"", "demand"),
+        ("\"service:0\"", "demand"),
+        ("\"service:nan\"", "demand"),
+        ("\"step:99\"", "step 99 of 7"),
+        ("\"step:0\"", "demand"),
+        ("\"brake\"", "demand"),
+    ] {
+        cases.push((programme_text("", &run_with("demand", value), ""), cause));
+    }
+    for value in ["nan", "0.0", "1000.0", "-3.0"] {
+        cases.push((
+            programme_text("", &run_with("speed_kmh", value), ""),
+            "speed_kmh",
+        ));
+    }
+    for (zone, key) in [
+        ("start_m = nan\nend_m = 10.0", "start_m"),
+        ("start_m = 0.0\nend_m = inf", "end_m"),
+        ("start_m = -5000.0\nend_m = 10.0", "start_m"),
+    ] {
+        let extra =
+            format!("[tracks.z]\nbase = \"low\"\n[[tracks.z.zone]]\n{zone}\nsurface = \"dry\"\n");
+        cases.push((programme_text("", RUN, &extra), key));
+    }
+    for (vehicle, key) in [
+        ("carbody_mass = nan", "carbody_mass"),
+        ("carbody_mass = -1.0", "carbody_mass"),
+        ("wheel_radius = 9.0", "wheel_radius"),
+        ("bogie_masss = 1.0", "bogie_masss"),
+    ] {
+        let extra = format!("[vehicles.v]\n{vehicle}\n");
+        let run = format!("{RUN}\nvehicle = \"v\"");
+        cases.push((programme_text("", &run, &extra), key));
+    }
+    cases.push((
+        programme_text("", RUN, "[tracks.s]\nbase = \"low\"\n[tracks.s.sets.low]\nk_a = -1.0\nk_s = 0.1\nmu_0 = 0.08\na_ratio = 0.4\nb_exp = 0.2\n"),
+        "sets.low.k_a",
+    ));
+    for (i, (text, cause)) in cases.iter().enumerate() {
+        let path = dir.join(format!("p{i}.toml"));
+        std::fs::write(&path, text).unwrap();
+        let err = Programme::load(&path)
+            .and_then(|p| p.runs(&hils_sil::ParamFile::default()))
+            .err()
+            .unwrap_or_else(|| panic!("case {i} ({cause}) accepted:\n{text}"));
+        let msg = format!("{err:#}");
+        assert!(msg.contains(cause), "case {i}: {msg}");
+        assert!(msg.contains(&format!("p{i}.toml")), "case {i}: {msg}");
+    }
+    // The programme shipped with the project passes.
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../programmes/wsp-low-adhesion.toml");
+    Programme::load(&shipped)
+        .and_then(|p| p.runs(&hils_sil::ParamFile::default()))
+        .unwrap();
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Issue 24 item 10: run names became file names unchecked: `name = "../../escape"` wrote
+/// outside `--report`, `name = "eb/120"` failed after the run with the report half-written.
+/// Now both are refused when the programme is read, naming `name`, and nothing is written.
+#[test]
+fn run_names_that_are_not_file_names_are_refused_before_any_run() {
+    let dir = temp_dir("run-names");
+    let work = dir.join("a/b");
+    std::fs::create_dir_all(&work).unwrap();
+    for name in ["../../escape", "eb/120", "..", ".hidden", "a b"] {
+        let run = RUN.replace("low-eb-120", name);
+        std::fs::write(work.join("p.toml"), programme_text("", &run, "")).unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_hils"))
+            .current_dir(&work)
+            .args([
+                "wsp-test",
+                "--programme",
+                "p.toml",
+                "--report",
+                "rep",
+                "--json",
+                "out.json",
+            ])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{name}: {err}");
+        assert!(
+            err.contains("`name`") && err.contains("p.toml"),
+            "{name}: {err}"
+        );
+        assert_eq!(tree(&dir), ["a", "a/b", "a/b/p.toml"], "{name}: files made");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Every path under `dir`, relative, sorted.
+fn tree(dir: &Path) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            out.push(p.strip_prefix(dir).unwrap().display().to_string());
+            if p.is_dir() {
+                stack.push(p);
+            }
+        }
+    }
+    out.sort();
+    out
 }

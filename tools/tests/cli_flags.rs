@@ -19,7 +19,7 @@ fn argv(f: &FlagRange, value: &str) -> Vec<String> {
         "rig run" => v.extend(["--programme".into(), "/nonexistent/p.toml".into()]),
         _ => {}
     }
-    if f.flag == "--write-log-mb" {
+    if f.flag == "--write-log-mb" || f.flag == "--write-friction-points" {
         v.extend(["--reader".into(), "/nonexistent/never-written.csv".into()]);
     }
     if f.command == "decode" || f.command == "diagnose" {

@@ -42,9 +42,10 @@ fn a_log_of_another_run_is_refused_naming_what_differs() {
 
 /// The same recording judged by `hils rig run` and by `hils wsp-test --log` gave a 1,004 m
 /// stop and 547 l on the rig, but no stop, 0.0 l and a passed WSP timer from wsp-test. Now
-/// both take the one path: the same verdict, key for key; the air is estimated from the
-/// pressure falls, the WSP timer (no valve states logged) is null, not measured, its
-/// criterion not judged.
+/// both take the one path: the same verdict, key for key. The rig logs the valve states
+/// (issue 21: `wsp1..4`, `hold1..4`), so the air and the WSP timer are measured; the same
+/// recording without them has its air estimated from the pressure falls and its WSP timer
+/// null, not measured, its criterion not judged.
 #[test]
 fn the_rig_and_wsp_test_judge_a_recording_the_same() {
     let dir = temp_dir("wsp-log-same");
@@ -70,22 +71,20 @@ fn the_rig_and_wsp_test_judge_a_recording_the_same() {
             "rig.json"
         ],
     );
-    hils_ok(
-        &dir,
-        args![
-            "wsp-test",
-            "--programme",
-            p,
-            "--log",
-            "rig/low-eb-60.csv",
-            "--json",
-            "wsp.json"
-        ],
-    );
-    let read = |f: &str| -> serde_json::Value {
-        serde_json::from_str(&std::fs::read_to_string(dir.join(f)).unwrap()).unwrap()
+    let judge = |log: &str, json: &str| -> serde_json::Value {
+        hils_ok(
+            &dir,
+            args!["wsp-test", "--programme", p, "--log", log, "--json", json],
+        );
+        let text = std::fs::read_to_string(dir.join(json)).unwrap();
+        serde_json::from_str::<serde_json::Value>(&text).unwrap()[0].clone()
     };
-    let (rig, wsp) = (read("rig.json")[0].clone(), read("wsp.json")[0].clone());
+    let rig = serde_json::from_str::<serde_json::Value>(
+        &std::fs::read_to_string(dir.join("rig.json")).unwrap(),
+    )
+    .unwrap()[0]
+        .clone();
+    let wsp = judge("rig/low-eb-60.csv", "wsp.json");
     for (key, value) in wsp.as_object().unwrap() {
         assert_eq!(&rig[key], value, "{key}: rig {rig}\nwsp-test {wsp}");
     }
@@ -93,17 +92,37 @@ fn the_rig_and_wsp_test_judge_a_recording_the_same() {
         wsp["stopping_distance_m"].as_f64().unwrap() > 100.0,
         "{wsp}"
     );
+    // The WSP acted on the low rail: measured air from the vent states, a measured timer.
     assert!(wsp["air_consumption_l"].as_f64().unwrap() > 1.0, "{wsp}");
+    assert!(
+        wsp.get("estimated_from_cylinder_pressure").is_none(),
+        "{wsp}"
+    );
+    assert!(wsp.get("not_measured").is_none(), "{wsp}");
+    assert_eq!(wsp["wsp_timer_actions"], 0, "{wsp}");
+    assert_eq!(wsp["passed"], true, "{wsp}");
+    // Without the valve columns: the air estimated, the timer not measured, not passed.
+    let log = std::fs::read_to_string(dir.join("rig/low-eb-60.csv")).unwrap();
+    std::fs::write(dir.join("no-valves.csv"), without_valve_columns(&log)).unwrap();
+    let bare = judge("no-valves.csv", "bare.json");
     assert_eq!(
-        wsp["estimated_from_cylinder_pressure"],
+        bare["estimated_from_cylinder_pressure"],
         serde_json::json!(["air_consumption_l"])
     );
-    assert!(wsp["wsp_timer_actions"].is_null(), "{wsp}");
+    let (air, estimate) = (
+        wsp["air_consumption_l"].as_f64().unwrap(),
+        bare["air_consumption_l"].as_f64().unwrap(),
+    );
+    assert!(
+        (estimate - air).abs() <= 0.25 * air,
+        "{estimate} l vs {air} l"
+    );
+    assert!(bare["wsp_timer_actions"].is_null(), "{bare}");
     assert_eq!(
-        wsp["not_measured"],
+        bare["not_measured"],
         serde_json::json!(["wsp_timer_actions"])
     );
-    assert_eq!(wsp["passed"], false);
+    assert_eq!(bare["passed"], false);
     // The same recording without its track or with another demand is not that run.
     let log = std::fs::read_to_string(dir.join("rig/low-eb-60.csv")).unwrap();
     for (edit, cause) in [
@@ -122,6 +141,33 @@ fn the_rig_and_wsp_test_judge_a_recording_the_same() {
         assert!(err.contains(cause), "{cause}: {err}");
     }
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// `log` without its valve-state columns (`wsp1..4`, `hold1..4`), comment lines kept.
+fn without_valve_columns(log: &str) -> String {
+    let mut keep: Vec<bool> = Vec::new();
+    let mut out = String::new();
+    for line in log.lines() {
+        if line.starts_with('#') {
+            out += line;
+        } else {
+            let cells: Vec<&str> = line.split(',').collect();
+            if keep.is_empty() {
+                keep = cells
+                    .iter()
+                    .map(|c| !(c.starts_with("wsp") || c.starts_with("hold")))
+                    .collect();
+                assert_eq!(keep.iter().filter(|k| !**k).count(), 8, "{line}");
+            }
+            let kept: Vec<&str> = (cells.iter().zip(&keep))
+                .filter(|(_, k)| **k)
+                .map(|(c, _)| *c)
+                .collect();
+            out += &kept.join(",");
+        }
+        out.push('\n');
+    }
+    out
 }
 
 /// A simulated log has the vent flags (`wsp1..4`) and the pressures, not the hold states:

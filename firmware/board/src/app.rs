@@ -1,6 +1,7 @@
 //! The rig application: peripherals configured in thread mode, the rig handed to the step,
-//! the tasks spawned (among them the builder of each run's simulation), then the step clock
-//! started.
+//! the tasks spawned (among them the builder of each run's simulation, the ADC watch and the
+//! health task), then the step clock started. The bring-up image runs it too, with CAN in
+//! internal loopback, to time the application's own step in TIM3 (`bringup::step_time`).
 
 use defmt::{info, unwrap};
 use embassy_executor::Spawner;
@@ -8,22 +9,30 @@ use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, Exten, RingBufferedAdc, Sam
 use embassy_stm32::can::CanConfigurator;
 use embassy_stm32::gpio::{Input, Level, Output, OutputType, Pull, Speed};
 use embassy_stm32::interrupt::{self, InterruptExt};
+use embassy_stm32::pac;
 use embassy_stm32::peripherals::{ADC1, DMA1_CH1, PA0, PA1, PC0, PC1, TIM3};
 use embassy_stm32::timer::low_level::Timer;
 use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::triggers;
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Peri, Peripherals};
-use embassy_time::Timer as Delay;
+use embassy_time::{Duration, Instant, Ticker, Timer as Delay};
 use hils_plant::FrictionModel;
 use hils_rig_core::Code;
+use hils_rig_core::adc_watch::{self, AdcAction, AdcConverter, AdcRing, AdcWatch};
 use hils_rig_core::can::{Command, RigState};
+use hils_rig_core::reset_loop::HEALTHY_RUN_TICKS;
 use hils_rig_core::rig::{Rig, RigConfig};
 use hils_rig_core::sensor::ADC_SEQUENCE_LEN;
+use hils_rig_core::stack::StackWatch;
 
 use crate::Irqs;
+use crate::can_io::Join;
 use crate::pulse::PulseOut;
-use crate::shared::{BUILT, LOCAL_CMD, RIG_STATE, START_REQUESTS};
+use crate::shared::{
+    ADC_RESTARTS, ADC_SEQUENCES, BUILT, LOCAL_CMD, RIG_STATE, STACK_PEAK, START_REQUESTS,
+    STEP_TICKS,
+};
 use crate::sim_store::{BoardSim, lent_store};
 use crate::step::{
     BoardIo, REAL_TIME, RealTime, WATCHDOG_TIMEOUT_US, Watchdog, configure_step_timer,
@@ -32,30 +41,49 @@ use crate::step::{
 /// ADC ring buffer: four sequences.
 const ADC_RING: usize = 4 * ADC_SEQUENCE_LEN;
 
-pub async fn run(spawner: Spawner, p: Peripherals) {
+/// Which image runs the application.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Image {
+    /// The rig: CAN on the controller's bus, the button, `selftest-autostart`.
+    Rig,
+    /// The bring-up image's step check: CAN in internal loopback (off the bus), the
+    /// self-test paper scenario started at once, no button.
+    Bringup,
+}
+
+pub async fn run(spawner: Spawner, p: Peripherals, image: Image) {
     let rig_config = RigConfig::nucleo_g474re();
     let silent = rig_config.pulse_timer.silent();
 
     // Wheelsets 1-4: a timer and its channel-1 pin each (push-pull), silent until the
-    // first step (each timer and pin is its own type, hence a macro).
+    // first step; the pin goes to the timer only once the timer drives it low (`PulseOut::new`).
+    // Each timer and pin is its own type, hence a macro.
     macro_rules! pulse_out {
         ($timer:expr, $pin:expr) => {
             PulseOut::new(
                 Timer::new($timer),
-                PwmPin::new($pin, OutputType::PushPull),
+                || PwmPin::new($pin, OutputType::PushPull),
                 &silent,
             )
         };
     }
     let ws1 = pulse_out!(p.TIM1, p.PA8);
-    let ws2 = pulse_out!(p.TIM4, p.PB6);
+    let ws2 = pulse_out!(p.TIM15, p.PB14);
     let ws3 = pulse_out!(p.TIM8, p.PC6);
     let ws4 = pulse_out!(p.TIM20, p.PB2);
 
+    // The interface stage's output enable: an output, low (the step drives it from here);
+    // kept configured for good (dropping it would return the pin to analog).
+    core::mem::forget(Output::new(p.PC8, Level::Low, Speed::Low));
+
     let adc = start_adc(p.ADC1, p.DMA1_CH1, (p.PA0, p.PA1, p.PC1, p.PC0));
 
-    let (tx, rx, props) =
-        crate::can_io::start(CanConfigurator::new(p.FDCAN1, p.PA11, p.PA12, Irqs));
+    let join = match image {
+        Image::Rig => Join::Bus,
+        Image::Bringup => Join::Loopback,
+    };
+    let (tx, props) =
+        crate::can_io::start(CanConfigurator::new(p.FDCAN1, p.PA11, p.PA12, Irqs), join);
 
     // The rig is built here, in thread mode, and handed to the step.
     let watchdog = Watchdog::new(IndependentWatchdog::new(p.IWDG, WATCHDOG_TIMEOUT_US));
@@ -80,13 +108,15 @@ pub async fn run(spawner: Spawner, p: Peripherals) {
     );
 
     spawner.spawn(unwrap!(crate::can_io::can_tx_task(tx)));
-    spawner.spawn(unwrap!(crate::can_io::can_rx_task(rx)));
     spawner.spawn(unwrap!(crate::can_io::bus_task(props)));
     spawner.spawn(unwrap!(crate::telemetry::telemetry_task()));
     spawner.spawn(unwrap!(crate::telemetry::step_events_task()));
     spawner.spawn(unwrap!(sim_builder_task()));
-    spawner.spawn(unwrap!(adc_restart_task()));
-    spawner.spawn(unwrap!(button_task(Input::new(p.PC13, Pull::Down))));
+    spawner.spawn(unwrap!(adc_watch_task()));
+    spawner.spawn(unwrap!(health_task()));
+    if image == Image::Rig {
+        spawner.spawn(unwrap!(button_task(Input::new(p.PC13, Pull::Down))));
+    }
     spawner.spawn(unwrap!(led_task(Output::new(
         p.PA5,
         Level::Low,
@@ -95,11 +125,11 @@ pub async fn run(spawner: Spawner, p: Peripherals) {
 
     start_step_timer(p.TIM3);
     info!(
-        "10 kHz step running, watchdog {=u32} us; press B1 for the self-test paper scenario",
+        "10 kHz step running, watchdog {=u32} us; outputs to the controller disarmed (RIG_COMMAND Arm); B1: self-test paper scenario (never drives them)",
         WATCHDOG_TIMEOUT_US
     );
 
-    if cfg!(feature = "selftest-autostart") {
+    if image == Image::Bringup || cfg!(feature = "selftest-autostart") {
         LOCAL_CMD
             .send(Command::paper_self_test(FrictionModel::Variable))
             .await;
@@ -177,25 +207,139 @@ async fn sim_builder_task() {
     }
 }
 
-/// Restarts the ADC ring when the step found its DMA stopped (the step only reports it
-/// as stale ticks: embassy's restart is set-up work that does not belong in the step).
+/// ADC1 as `adc_watch::stop` drives it (RM0440 ADC: ADSTP, ADSTART, DR, ISR), in thread
+/// mode with the step running.
+struct BoardAdc;
+
+/// Reads of ADSTART before a stop counts as failed (ADSTP ends within a conversion, < 1 us;
+/// thread mode, the step is not masked).
+const ADC_STOP_READS: u32 = 10_000;
+
+impl AdcConverter for BoardAdc {
+    fn stop_conversions(&mut self) -> bool {
+        let adc = pac::ADC1;
+        if adc.cr().read().adstart() {
+            adc.cr()
+                .modify(|w| w.set_adstp(pac::adc::vals::Adstp::STOP));
+        }
+        (0..ADC_STOP_READS).any(|_| !adc.cr().read().adstart())
+    }
+    fn discard_pending_conversion(&mut self) {
+        let adc = pac::ADC1;
+        // Reading DR clears EOC and with it the DMA request of that conversion.
+        let _ = adc.dr().read();
+        // rc_w1: only the bits written 1 clear.
+        adc.isr().write(|w| {
+            w.set_eoc(true);
+            w.set_eos(true);
+        });
+    }
+    fn clear_overrun(&mut self) {
+        pac::ADC1.isr().write(|w| w.set_ovr(true));
+    }
+}
+
+/// The DMA ring as `adc_watch::realign` drives it (RM0440 DMA: CCR.EN, CNDTR, IFCR; ADC
+/// ADSTART), under the step's ceiling: register writes only, no wait. The channel is idle
+/// when EN is cleared (the ADC is stopped and its DR consumed by `adc_watch::stop`: no
+/// request, no transfer in progress), so CNDTR takes the new count.
+struct BoardAdcRing<'a>(&'a mut RingBufferedAdc<'static, ADC1>);
+
+impl AdcRing for BoardAdcRing<'_> {
+    fn rewind_dma(&mut self) {
+        let ch = pac::DMA1.ch(0);
+        ch.cr().modify(|w| w.set_en(false));
+        ch.ndtr().write(|w| w.set_ndt(ADC_RING as u16));
+        pac::DMA1.ifcr().write(|w| {
+            w.set_gif(0, true);
+            w.set_tcif(0, true);
+            w.set_htif(0, true);
+            w.set_teif(0, true);
+        });
+        ch.cr().modify(|w| w.set_en(true));
+    }
+    fn reset_reader(&mut self) {
+        self.0.clear();
+    }
+    fn start_conversions(&mut self) {
+        pac::ADC1.cr().modify(|w| w.set_adstart(true));
+    }
+}
+
+/// Watches the ADC ring's progress every ms and restarts it, aligned, when it stalls
+/// (`hils_rig_core::adc_watch`: no fresh sequence for 2 ms while the step runs, or an ADC
+/// overrun); the stop runs in thread mode, the realignment is a few register writes under
+/// the step's ceiling.
 #[embassy_executor::task]
-async fn adc_restart_task() {
-    let mut restarts = 0u32;
+async fn adc_watch_task() {
+    use core::sync::atomic::Ordering::Relaxed;
+    let mut watch = AdcWatch::new();
+    let mut ticker = Ticker::every(Duration::from_millis(1));
     loop {
-        Delay::after_millis(1).await;
-        if crate::shared::ADC_STOPPED.swap(false, core::sync::atomic::Ordering::Relaxed) {
-            // SAFETY: thread mode; `start` is a few register writes.
-            let done = unsafe { REAL_TIME.with_step_masked(|rt| rt.io.adc.start()) };
-            if done.is_some() {
-                restarts += 1;
-                defmt::warn!("ADC ring stopped: restarted ({=u32} so far)", restarts);
+        ticker.next().await;
+        let overrun = pac::ADC1.isr().read().ovr();
+        let now_ms = Instant::now().as_millis() as u32;
+        let action = watch.poll(
+            ADC_SEQUENCES.load(Relaxed),
+            STEP_TICKS.load(Relaxed),
+            overrun,
+            now_ms,
+        );
+        if action == AdcAction::Restart {
+            // The stop and its bounded wait run with the step unmasked; only the realignment
+            // (a few register writes, no wait) masks it.
+            let done = adc_watch::stop(&mut BoardAdc);
+            if done.is_ok() {
+                // SAFETY: thread mode; register writes only.
+                unsafe {
+                    REAL_TIME.with_step_masked(|rt| {
+                        adc_watch::realign(&mut BoardAdcRing(&mut rt.io.adc))
+                    })
+                };
             }
+            ADC_RESTARTS.store(watch.restarts, Relaxed);
+            defmt::warn!(
+                "ADC ring stalled (overrun {=bool}): restart {}, {=u32} so far",
+                overrun,
+                done,
+                watch.restarts
+            );
         }
     }
 }
 
-/// B1 starts the self-test paper scenario; each press alternates the friction law.
+/// Every 100 ms: the stack's high-water mark from its paint (`RIG_HEALTH` `StackPeak`,
+/// warned above 3/4 of the stack), and once the board has run 10 s, the count of fault
+/// resets in a row starts again (`hils_rig_core::reset_loop`).
+#[embassy_executor::task]
+async fn health_task() {
+    use core::sync::atomic::Ordering::Relaxed;
+    let (bottom, top) = crate::fault::stack_span();
+    let mut watch = StackWatch::new(((top - bottom) / 4) as usize);
+    let mut warned = false;
+    let mut healthy = false;
+    let mut ticker = Ticker::every(Duration::from_millis(100));
+    loop {
+        ticker.next().await;
+        // SAFETY: word reads inside the stack region (`stack.x`); a word another context is
+        // writing reads as a scrubbed word, which it is.
+        let peak =
+            watch.scan(|i| unsafe { core::ptr::read_volatile((bottom as *const u32).add(i)) });
+        STACK_PEAK.store(peak, Relaxed);
+        if !warned && peak > watch.size_bytes() / 4 * 3 {
+            warned = true;
+            defmt::warn!("stack: {=u32} of {=u32} B used", peak, watch.size_bytes());
+        }
+        if !healthy && STEP_TICKS.load(Relaxed) >= HEALTHY_RUN_TICKS {
+            healthy = true;
+            crate::fault::ran_healthy();
+        }
+    }
+}
+
+/// B1 starts the self-test paper scenario; each press alternates the friction law. A
+/// self-test run never drives the outputs a controller reads, and its start disarms the
+/// rig (`hils_rig_core::arming`).
 #[embassy_executor::task]
 async fn button_task(button: Input<'static>) {
     let mut variable = true;

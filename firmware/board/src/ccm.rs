@@ -24,12 +24,57 @@ unsafe extern "C" {
 // may itself live in CCM), runs before the copy. Word copy; the section is 8-byte aligned
 // and padded (ccm.x), so every word of it is written before it is fetched (CCM SRAM
 // parity, when enabled by the SRAM_PE option bit, is computed on write).
+// A core-only reset (a debugger's VECTRESET) keeps SYSCFG_SWPR, which only a system reset
+// clears: the pages are write-protected and hold the image already, so the copy is skipped
+// (it would fault on them before RAM is initialised). After a system reset SYSCFG is not
+// clocked and SWPR reads 0.
+// First of all, the safe pins (`crate::pulse::SAFE_PIN_WRITES`; docs/rig.md "Lines in
+// reset"): GPIOA-C clocked (RCC_AHB2ENR, RM0440: 0x4002_104C, GPIOAEN..GPIOCEN bits 0-2,
+// read back so the clock is on before the ports are written), then per port (GPIOA
+// 0x4800_0000, GPIOB +0x400, GPIOC +0x800) BSRR (+0x18) first, then MODER (+0x00) to
+// general-purpose output: the pin never drives a level other than the safe one.
 core::arch::global_asm!(
     ".section .text.__pre_init, \"ax\"",
     ".global __pre_init",
     ".type __pre_init, %function",
     ".thumb_func",
     "__pre_init:",
+    "    ldr r0, =0x4002104C",
+    "    ldr r1, [r0]",
+    "    orr r1, r1, #7",
+    "    str r1, [r0]",
+    "    ldr r1, [r0]",
+    "    dsb",
+    "    ldr r0, =0x48000000",
+    "    ldr r1, ={bsrr_a}",
+    "    str r1, [r0, #0x18]",
+    "    ldr r1, [r0]",
+    "    ldr r2, ={mask_a}",
+    "    bic r1, r1, r2",
+    "    ldr r2, ={value_a}",
+    "    orr r1, r1, r2",
+    "    str r1, [r0]",
+    "    ldr r0, =0x48000400",
+    "    ldr r1, ={bsrr_b}",
+    "    str r1, [r0, #0x18]",
+    "    ldr r1, [r0]",
+    "    ldr r2, ={mask_b}",
+    "    bic r1, r1, r2",
+    "    ldr r2, ={value_b}",
+    "    orr r1, r1, r2",
+    "    str r1, [r0]",
+    "    ldr r0, =0x48000800",
+    "    ldr r1, ={bsrr_c}",
+    "    str r1, [r0, #0x18]",
+    "    ldr r1, [r0]",
+    "    ldr r2, ={mask_c}",
+    "    bic r1, r1, r2",
+    "    ldr r2, ={value_c}",
+    "    orr r1, r1, r2",
+    "    str r1, [r0]",
+    "    ldr r0, =0x40010020", // SYSCFG_SWPR (RM0440: SYSCFG base 0x4001_0000 + 0x20)
+    "    ldr r0, [r0]",
+    "    cbnz r0, 1f",
     "    ldr r0, =__sccm_text",
     "    ldr r1, =__eccm_text",
     "    ldr r2, =__siccm_text",
@@ -40,6 +85,15 @@ core::arch::global_asm!(
     "    b 0b",
     "1:  bx lr",
     ".ltorg",
+    mask_a = const crate::pulse::SAFE_PIN_WRITES[0].0,
+    value_a = const crate::pulse::SAFE_PIN_WRITES[0].1,
+    bsrr_a = const crate::pulse::SAFE_PIN_WRITES[0].2,
+    mask_b = const crate::pulse::SAFE_PIN_WRITES[1].0,
+    value_b = const crate::pulse::SAFE_PIN_WRITES[1].1,
+    bsrr_b = const crate::pulse::SAFE_PIN_WRITES[1].2,
+    mask_c = const crate::pulse::SAFE_PIN_WRITES[2].0,
+    value_c = const crate::pulse::SAFE_PIN_WRITES[2].1,
+    bsrr_c = const crate::pulse::SAFE_PIN_WRITES[2].2,
 );
 
 /// CCM SRAM pages are 1 KiB (SYSCFG_SWPR: one write-protection bit per page, 32 pages).

@@ -111,6 +111,23 @@ pub enum ResetCause {
     Unknown,
 }
 
+impl ResetCause {
+    /// The cause as the count of fault resets in a row sees it (`hils_rig_core::reset_loop`):
+    /// a software reset is a fault handler's when it recorded a fault, else a debugger's.
+    pub fn for_reset_loop(self, fault_recorded: bool) -> hils_rig_core::reset_loop::ResetCause {
+        use hils_rig_core::reset_loop::ResetCause as Loop;
+        match self {
+            ResetCause::IndependentWatchdog | ResetCause::WindowWatchdog => Loop::Watchdog,
+            ResetCause::Software if fault_recorded => Loop::FaultHandler,
+            ResetCause::Software | ResetCause::Unknown => Loop::Debugger,
+            ResetCause::Pin => Loop::Pin,
+            ResetCause::PowerOnOrBrownOut | ResetCause::LowPower | ResetCause::OptionByteLoad => {
+                Loop::PowerOn
+            }
+        }
+    }
+}
+
 pub fn take_reset_cause() -> ResetCause {
     let csr = pac::RCC.csr().read();
     // In priority order: a watchdog or software reset also pulls the reset pin.

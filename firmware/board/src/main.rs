@@ -12,17 +12,16 @@
 //! * [`step`]: TIM3's 10 kHz update interrupt running `Rig::step`, the watchdog feed.
 //! * [`can_io`]: FDCAN1 timing, FIFO transmit with stale frames dropped, filter, bus state.
 //! * [`telemetry`]: defmt-rtt logging with dropped records counted.
-//! * [`pulse`]: the four pulse-train timers.
-//! * [`fault`]: panic / HardFault / NMI -> safe state -> reset; debugger-halt freeze.
-//! * [`app`]: the rig application; `bringup` (feature): the first-flash self-test.
+//! * [`pulse`]: the four pulse-train timers (break on lockup) and the output enable.
+//! * [`fault`]: panic / HardFault / NMI -> safe state -> reset; the safe pins at every
+//!   start, fault resets in a row (hold after three), the stack guard; debugger-halt freeze.
+//! * [`app`]: the rig application (also run by the bring-up image for its step check);
+//!   `bringup` (feature): the first-flash self-test.
 #![no_std]
 #![no_main]
 // A binary: `missing_docs` (denied by the workspace) is for the no_std library crates.
 #![allow(missing_docs)]
-// The bring-up image uses the configuration code but not the application's tasks.
-#![cfg_attr(feature = "bringup", allow(dead_code))]
 
-#[cfg(not(feature = "bringup"))]
 mod app;
 mod can_io;
 mod ccm;
@@ -32,7 +31,6 @@ mod fault;
 mod handoff;
 mod pulse;
 mod shared;
-#[cfg(not(feature = "bringup"))]
 mod sim_store;
 mod step;
 mod telemetry;
@@ -44,21 +42,39 @@ use defmt::{error, info, warn};
 use defmt_rtt as _;
 use embassy_executor::Spawner;
 use embassy_stm32::{bind_interrupts, can, dma, peripherals};
+use hils_rig_core::reset_loop::Boot;
 
 bind_interrupts!(pub struct Irqs {
-    // Ours first: it must see IR.BO before embassy's handler acknowledges it.
-    FDCAN1_IT0 => can_io::BusOffCounter, can::IT0InterruptHandler<peripherals::FDCAN1>;
+    // Called in this order: ours first (it must see IR.BO before embassy's handler
+    // acknowledges it), the RX FIFO 0 drain last (after embassy's handler clears RF0N).
+    FDCAN1_IT0 => can_io::It0, can::IT0InterruptHandler<peripherals::FDCAN1>, can_io::It0Drain;
     FDCAN1_IT1 => can::IT1InterruptHandler<peripherals::FDCAN1>;
     DMA1_CHANNEL1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
 });
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
+    // The safe pins again (`__pre_init` drove them first, ccm.rs), before the crystal's
+    // start (up to 100 ms); the stack guarded before anything deep runs.
+    fault::safe_pins_at_start();
+    fault::guard_stack();
     let reset = clock::take_reset_cause();
     let last_fault = fault::take_last_fault();
+    if let Some(f) = last_fault {
+        warn!("the previous run ended in a fault: {}", f);
+    }
+    if !embassy_stm32::pac::FLASH.optr().read().dbank() {
+        warn!(
+            "FLASH_OPTR.DBANK = 0 (single bank): the image is built for the factory dual-bank layout (embassy-stm32 feature dual-bank)"
+        );
+    }
+    let boot = fault::note_boot(reset.for_reset_loop(last_fault.is_some()));
+    if let Boot::Hold { fault_resets } = boot {
+        fault::hold(fault_resets);
+    }
     if clock::start_hse().is_err() {
-        // Nothing is configured yet: every pin is in its reset state (no pulses, CAN
-        // transceiver input floating recessive). Stay so.
+        // Only the safe pins are configured (pulses low, output enable off, PA12 high =
+        // CAN recessive). Stay so.
         error!(
             "HSE 24 MHz did not start within 100 ms: crystal X3 missing or its solder bridges open (UM2505, HSE); the board stays in reset state"
         );
@@ -71,14 +87,16 @@ async fn main(spawner: Spawner) {
     clock::enable_flash_accelerator();
     clock::enable_css();
     ccm::write_protect();
+    fault::break_on_lockup();
     fault::freeze_on_debug_halt();
 
     let (ccm_at, ccm_len) = ccm::code_span();
     info!(
-        "rig interface board: STM32G474RE at {=u32} Hz from HSE {=u32} Hz; reset: {}; step code {=u32} B in CCM SRAM at {=u32:#x}",
+        "rig interface board: STM32G474RE at {=u32} Hz from HSE {=u32} Hz; reset: {} ({=u32} fault resets in a row); step code {=u32} B in CCM SRAM at {=u32:#x}",
         clock::SYSCLK_HZ,
         clock::HSE_HZ,
         reset,
+        boot.fault_resets(),
         ccm_len,
         ccm_at
     );
@@ -88,9 +106,6 @@ async fn main(spawner: Spawner) {
         "CCM step code differs from its flash image at {=u32:#x}",
         ccm::load_address()
     );
-    if let Some(f) = last_fault {
-        warn!("the previous run ended in a fault: {}", f);
-    }
 
     // DWT cycle counter for step timing.
     let mut cp = defmt::unwrap!(cortex_m::Peripherals::take());
@@ -98,8 +113,7 @@ async fn main(spawner: Spawner) {
     cp.DWT.enable_cycle_counter();
 
     #[cfg(feature = "bringup")]
-    bringup::run(p).await;
+    bringup::run(spawner, p).await;
     #[cfg(not(feature = "bringup"))]
-    app::run(spawner, p).await;
-    let _ = spawner;
+    app::run(spawner, p, app::Image::Rig).await;
 }

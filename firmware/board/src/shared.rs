@@ -10,11 +10,9 @@ use hils_rig_core::can::Command;
 use hils_rig_core::can_tx::QueuedFrame;
 use hils_rig_core::hw::TelemetryEvent;
 use hils_rig_core::rig::CommandError;
-#[cfg(not(feature = "bringup"))]
 use hils_rig_core::rig::{Built, StartRequest};
 
 use crate::ceiling::StepChannel;
-#[cfg(not(feature = "bringup"))]
 use crate::handoff::Handoff;
 
 /// Frames from the step to the CAN transmit task, with the tick they were made at.
@@ -23,13 +21,10 @@ pub static CAN_TX: StepChannel<QueuedFrame<Frame>, 32> = StepChannel::new();
 pub static CAN_RX: StepChannel<Frame, 8> = StepChannel::new();
 /// Local commands (user button, autostart), for the step.
 pub static LOCAL_CMD: StepChannel<Command, 2> = StepChannel::new();
-/// Runs the step requested, for the builder task (thread mode). Not in the bring-up image
-/// (it builds its one run in thread mode before timing it).
-#[cfg(not(feature = "bringup"))]
+/// Runs the step requested, for the builder task (thread mode).
 pub static START_REQUESTS: StepChannel<StartRequest, 1> = StepChannel::new();
 /// The builder's word that it built a run in the rig's store (`crate::sim_store`), or why
 /// not: a few bytes, the simulation itself is not moved.
-#[cfg(not(feature = "bringup"))]
 pub static BUILT: Handoff<Built<()>, 1> = Handoff::new();
 /// Telemetry events from the step to the logging task.
 pub static TELEMETRY: StepChannel<TelemetryEvent, 16> = StepChannel::new();
@@ -49,8 +44,14 @@ pub static TELEMETRY_DROPS: AtomicU32 = AtomicU32::new(0);
 /// Thread mode's heartbeat: the step tick at the bus task's last 10 ms poll. The step
 /// feeds the watchdog only while it is fresh (`hils_rig_core::heartbeat`).
 pub static THREAD_HEARTBEAT: AtomicU32 = AtomicU32::new(0);
-/// The step found the ADC's DMA stopped (it does not restart it: the ADC task does).
-pub static ADC_STOPPED: AtomicBool = AtomicBool::new(false);
+/// Fresh ADC sequences the step took (wrapping; the ADC task watches it for progress).
+pub static ADC_SEQUENCES: AtomicU32 = AtomicU32::new(0);
+/// ADC ring restarts after a stall (the ADC task).
+pub static ADC_RESTARTS: AtomicU32 = AtomicU32::new(0);
+/// `RIG_COMMAND` frames lost: Rx FIFO 0 full (FDCAN RF0L) or the step's queue full.
+pub static RX_LOST: AtomicU32 = AtomicU32::new(0);
+/// The stack's high-water mark, bytes (the health task).
+pub static STACK_PEAK: AtomicU32 = AtomicU32::new(0);
 
 /// Something the step reports to the log.
 #[derive(Clone, Copy, Debug, defmt::Format)]

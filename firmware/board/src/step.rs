@@ -4,7 +4,6 @@
 
 use core::sync::atomic::Ordering;
 
-#[cfg(not(feature = "bringup"))]
 use crate::sim_store::BoardSim;
 use cortex_m::peripheral::DWT;
 use cortex_m_rt::interrupt;
@@ -12,24 +11,23 @@ use embassy_stm32::adc::RingBufferedAdc;
 use embassy_stm32::can::Frame;
 use embassy_stm32::interrupt::{self};
 use embassy_stm32::pac;
-use embassy_stm32::peripherals::{ADC1, IWDG, TIM1, TIM4, TIM8, TIM20};
+use embassy_stm32::peripherals::{ADC1, IWDG, TIM1, TIM8, TIM15, TIM20};
 use embassy_stm32::wdg::IndependentWatchdog;
 use hils_rig_core::can_tx::QueuedFrame;
 use hils_rig_core::heartbeat::thread_alive;
 use hils_rig_core::hw::{RigIo, TelemetryEvent};
 use hils_rig_core::pulse::PulseRegisters;
-#[cfg(not(feature = "bringup"))]
 use hils_rig_core::rig::CommandError;
-use hils_rig_core::rig::{Rig, SimStore};
+use hils_rig_core::rig::{BoardHealth, Rig, SimStore};
 use hils_rig_core::sensor::ADC_SEQUENCE_LEN;
 
 use crate::handoff::Handoff;
 use crate::pulse::PulseOut;
 use crate::shared::{
-    ADC_STOPPED, BUS_CLEAR, BUS_STATE, CAN_RX, CAN_TX, CAN_TX_DROPS, LOCAL_CMD, RIG_STATE,
-    STEP_EVENTS, STEP_TICKS, StepEvent, TELEMETRY, TELEMETRY_DROPS, THREAD_HEARTBEAT,
+    ADC_RESTARTS, ADC_SEQUENCES, BUS_CLEAR, BUS_STATE, CAN_RX, CAN_TX, CAN_TX_DROPS, LOCAL_CMD,
+    RIG_STATE, RX_LOST, STACK_PEAK, STEP_EVENTS, STEP_TICKS, StepEvent, TELEMETRY, TELEMETRY_DROPS,
+    THREAD_HEARTBEAT,
 };
-#[cfg(not(feature = "bringup"))]
 use crate::shared::{BUILT, START_REQUESTS};
 
 /// CPU and timer clock, Hz.
@@ -44,7 +42,7 @@ pub struct BoardIo {
     pub adc: RingBufferedAdc<'static, ADC1>,
     pub adc_buf: [u16; ADC_SEQUENCE_LEN],
     pub ws1: PulseOut<TIM1>,
-    pub ws2: PulseOut<TIM4>,
+    pub ws2: PulseOut<TIM15>,
     pub ws3: PulseOut<TIM8>,
     pub ws4: PulseOut<TIM20>,
     /// The tick of the step in progress (stamps the queued frames).
@@ -57,14 +55,22 @@ impl RigIo for BoardIo {
     #[unsafe(link_section = ".ccm_text.board_io")]
     fn adc_sequence(&mut self) -> Option<[u16; ADC_SEQUENCE_LEN]> {
         // embassy's `read_latest` restarts a stopped ring (DMA and ADC set-up) itself: not
-        // in the step. A stopped ring (DMA1 channel 1 CCR.EN clear: a transfer error, or
-        // stopped) is a stale tick here, and the ADC task restarts it in thread mode.
+        // in the step. A stopped ring (DMA1 channel 1 CCR.EN clear: only a DMA transfer
+        // error, whose interrupt then panics into the safe state) is a stale tick. The
+        // stall that keeps EN set (an ADC overrun) shows as no fresh sequence: the ADC
+        // task watches ADC_SEQUENCES and restarts the ring (`hils_rig_core::adc_watch`).
         if !pac::DMA1.ch(0).cr().read().en() {
-            ADC_STOPPED.store(true, Ordering::Relaxed);
             return None;
         }
         let n = self.adc.read_latest(&mut self.adc_buf);
-        (n == ADC_SEQUENCE_LEN).then_some(self.adc_buf)
+        if n != ADC_SEQUENCE_LEN {
+            return None;
+        }
+        ADC_SEQUENCES.store(
+            ADC_SEQUENCES.load(Ordering::Relaxed).wrapping_add(1),
+            Ordering::Relaxed,
+        );
+        Some(self.adc_buf)
     }
 
     #[unsafe(link_section = ".ccm_text.board_io")]
@@ -119,10 +125,7 @@ impl Watchdog {
 }
 
 /// The step's rig: its simulation in the static store the builder fills in place.
-#[cfg(not(feature = "bringup"))]
 pub type StepRig = Rig<BoardSim>;
-#[cfg(feature = "bringup")]
-pub type StepRig = Rig;
 
 /// Everything the step owns.
 pub struct RealTime {
@@ -136,8 +139,7 @@ pub struct RealTime {
 /// The step's state, built in `main` and handed over once.
 pub static REAL_TIME: Handoff<RealTime, 1> = Handoff::new();
 
-/// The rig's step, one function for the interrupt and the bring-up timing (so both run
-/// the same code from the same memory).
+/// The rig's step (a function of its own: `size.sh` checks its frame and placement).
 #[unsafe(link_section = ".ccm_text.rig_step")]
 #[inline(never)]
 pub fn rig_step<S: SimStore, IO: RigIo>(rig: &mut Rig<S>, io: &mut IO) {
@@ -167,7 +169,6 @@ fn step_tick() {
         return;
     };
     take_commands(&mut rt.rig);
-    #[cfg(not(feature = "bringup"))]
     hand_over_runs(&mut rt.rig);
     if rt.rig.take_bus_clear() {
         BUS_CLEAR.store(true, Ordering::Relaxed);
@@ -181,8 +182,17 @@ fn step_tick() {
     rt.rig
         .note_downstream_drops(drops.0 != rt.seen_drops.0, drops.1 != rt.seen_drops.1);
     rt.seen_drops = drops;
+    rt.rig.set_board_health(BoardHealth {
+        stack_peak_bytes: STACK_PEAK.load(Ordering::Relaxed),
+        stack_size_bytes: crate::fault::stack_bytes(),
+        rx_lost: RX_LOST.load(Ordering::Relaxed),
+        adc_restarts: ADC_RESTARTS.load(Ordering::Relaxed),
+        fault_resets: crate::fault::FAULT_RESETS.load(Ordering::Relaxed),
+    });
     rt.io.tick = tick;
     rig_step(&mut rt.rig, &mut rt.io);
+    // The interface stage's output enable follows the arming gate, as every output does.
+    crate::pulse::set_output_enable(rt.rig.controller_outputs_live());
     RIG_STATE.store(rt.rig.state() as u8, Ordering::Relaxed);
     let exit = DWT::cycle_count();
     let tick_pending = pac::TIM3.sr().read().uif();
@@ -195,7 +205,6 @@ fn step_tick() {
 /// Passes a start request to the builder (lending it the rig's simulation store) and
 /// starts the run the builder built there, if it was built for the pending request: no
 /// simulation is moved in the step.
-#[cfg(not(feature = "bringup"))]
 #[inline(always)]
 fn hand_over_runs(rig: &mut StepRig) {
     if let Some(req) = rig.take_start_request()

@@ -6,7 +6,9 @@ use hils_plant::{Real, WHEELSETS};
 
 use crate::ep::{EpConstants, EpValve};
 pub use crate::params::BrakeUnitParams;
-use crate::wsp::{ReferenceSpeed, Valve, WspChannel, WspConstants, WspTuning};
+use crate::wsp::{
+    ChannelInputs, Pneumatics, ReferenceSpeed, Valve, WspChannel, WspConstants, WspTuning,
+};
 
 /// Brake demand given to the unit (also the rig's brake command, `hils_rig_core::can`).
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
@@ -119,18 +121,58 @@ pub fn eb_pressure(p: &Params, eb_deceleration_mps2: f64) -> f64 {
 /// Most service brake steps.
 pub const MAX_SERVICE_STEPS: usize = 20;
 
-/// Demand pressure of each service step n (n / steps of the full service deceleration, in
-/// proportion to the EB pressure, limited to EB and the supply), n = 0..=MAX_SERVICE_STEPS.
+/// Cylinder pressure of a service brake for deceleration `decel_mps2` (m/s^2), Pa: the
+/// brake force (pad clamp force, Eq 1) in proportion to EB's, so that the deceleration is
+/// in proportion too; the pressure is the clamp force's ([`hils_plant::brake::
+/// pressure_for_clamp_force`]: the retaining spring's K_r / A_c plus the rest in
+/// proportion). 0 for no deceleration; limited to EB and the supply. (Before issue 25 the
+/// pressure itself was in proportion to EB's: with the spring's 44 kPa left out, a 0.6 m/s^2
+/// service brake gave 0.49 m/s^2.)
+pub fn service_pressure(params: &Params, u: &BrakeUnitParams, decel_mps2: f64) -> f64 {
+    if !(decel_mps2 > 0.0) {
+        return 0.0;
+    }
+    let eb = eb_pressure(params, u.eb_deceleration_mps2);
+    let spring = params.brake.retaining_spring_force / params.brake.piston_area;
+    let share = (decel_mps2 / u.eb_deceleration_mps2).min(1.0);
+    (spring + (eb - spring).max(0.0) * share).min(eb)
+}
+
+/// Deceleration of service step `step` (0: none; above the last: the last), m/s^2:
+/// step / steps of the full service deceleration, limited to EB's.
+pub fn service_step_deceleration(u: &BrakeUnitParams, step: u8) -> f64 {
+    let steps = u.service_steps.clamp(1, MAX_SERVICE_STEPS as u8);
+    (u.full_service_deceleration_mps2 * step.min(steps) as f64 / steps as f64)
+        .min(u.eb_deceleration_mps2)
+}
+
+/// Cylinder pressure a demand asks for, Pa (f64: the bench's reference uses the same
+/// mapping as the unit). A service deceleration that is not finite reads as 0.
+pub fn demand_pressure(params: &Params, u: &BrakeUnitParams, demand: BrakeDemand) -> f64 {
+    match demand {
+        BrakeDemand::Release => 0.0,
+        BrakeDemand::Emergency => eb_pressure(params, u.eb_deceleration_mps2),
+        BrakeDemand::Service { deceleration_mps2 } => {
+            let d = deceleration_mps2 as f64;
+            service_pressure(params, u, if d.is_finite() { d } else { 0.0 })
+        }
+        BrakeDemand::ServiceStep { step } => {
+            service_pressure(params, u, service_step_deceleration(u, step))
+        }
+    }
+}
+
+/// Demand pressure of each service step n (n = 0..=MAX_SERVICE_STEPS).
 fn service_step_pressures<F: Real>(
     params: &Params,
     u: &BrakeUnitParams,
 ) -> [F; MAX_SERVICE_STEPS + 1] {
-    let eb = eb_pressure(params, u.eb_deceleration_mps2);
-    let steps = u.service_steps.clamp(1, MAX_SERVICE_STEPS as u8) as f64;
     core::array::from_fn(|n| {
-        let decel = (u.full_service_deceleration_mps2 * (n as f64).min(steps) / steps)
-            .min(u.eb_deceleration_mps2);
-        F::of((eb * decel / u.eb_deceleration_mps2).min(params.brake.supply_pressure))
+        F::of(demand_pressure(
+            params,
+            u,
+            BrakeDemand::ServiceStep { step: n as u8 },
+        ))
     })
 }
 
@@ -163,7 +205,6 @@ pub struct BrakeUnit<F: Real> {
     vent_gain: F,
     eb_pressure: F,
     eb_deceleration: F,
-    supply_pressure: F,
     wsp_enabled: bool,
     wsp_k: WspConstants<F>,
     ep_k: Option<EpConstants<F>>,
@@ -171,13 +212,8 @@ pub struct BrakeUnit<F: Real> {
     /// Demand pressure of each service step (index 0: release; the last repeats).
     service_step_pressure: [F; MAX_SERVICE_STEPS + 1],
     service_steps: u8,
-    /// Pulsed reapply: plant steps of a pulse's fill and of a whole pulse (0: off).
-    pulse_fill_steps: u32,
-    pulse_steps: u32,
-    /// Per wheelset: Some(steps into the reapply) while reapplying after a WSP action.
-    reapply: [Option<u32>; WHEELSETS],
-    /// A pulsed reapply ends at this share of the demand (then the relay fills on).
-    reapply_until: F,
+    /// Cylinder pressure at which the pads start to clamp, K_r / A_c, Pa.
+    spring_pressure: F,
     reference: ReferenceSpeed<F>,
     channels: [WspChannel<F>; WHEELSETS],
     cylinders: [Cylinder<F>; WHEELSETS],
@@ -246,19 +282,15 @@ impl<F: Real> BrakeUnit<F> {
             vent_gain: F::of(1.0 - hils_plant::math::exp_f64(-dt / u.vent_time_constant_s)),
             eb_pressure: F::of(eb_pressure(params, u.eb_deceleration_mps2)),
             eb_deceleration: F::of(u.eb_deceleration_mps2),
-            supply_pressure: F::of(params.brake.supply_pressure),
             wsp_enabled: config.wsp_enabled,
-            wsp_k: WspConstants::new(&config.wsp, cycle),
+            wsp_k: WspConstants::new(&config.wsp, &Pneumatics::of(u, params), cycle),
             ep_k: u
                 .ep_valve
                 .then(|| EpConstants::new(u, cycle, params.brake.supply_pressure)),
             ep: EpValve::default(),
             service_step_pressure: service_step_pressures(params, u),
             service_steps: u.service_steps.clamp(1, MAX_SERVICE_STEPS as u8),
-            pulse_fill_steps: (u.reapply_pulse_fill_s / dt + 0.5) as u32,
-            pulse_steps: ((u.reapply_pulse_fill_s + u.reapply_pulse_hold_s) / dt + 0.5) as u32,
-            reapply: [None; WHEELSETS],
-            reapply_until: F::of(0.95),
+            spring_pressure: F::of(params.brake.retaining_spring_force / params.brake.piston_area),
             reference: ReferenceSpeed::default(),
             channels: [WspChannel::default(); WHEELSETS],
             cylinders: [Cylinder::default(); WHEELSETS],
@@ -290,6 +322,11 @@ impl<F: Real> BrakeUnit<F> {
         self.acting_valves
     }
 
+    /// The WSP channels (phase, pressure memory, adhesion observer of each wheelset).
+    pub fn channels(&self) -> &[WspChannel<F>; WHEELSETS] {
+        &self.channels
+    }
+
     /// Time of each wheelset's first WSP vent command since the unit started, s.
     pub fn first_vent_time(&self) -> [Option<f64>; WHEELSETS] {
         let period = self.cycle_s;
@@ -304,12 +341,13 @@ impl<F: Real> BrakeUnit<F> {
                 deceleration_mps2: decel,
             } => {
                 let d = F::of(decel as f64);
-                let d = if d.is_finite() {
-                    d.clamp_to(F::ZERO, self.eb_deceleration)
-                } else {
-                    F::ZERO
-                };
-                (self.eb_pressure * d / self.eb_deceleration).min(self.supply_pressure)
+                if !(d > F::ZERO) {
+                    return F::ZERO;
+                }
+                // The brake force in proportion to EB's ([`service_pressure`]).
+                let share = d.min(self.eb_deceleration) / self.eb_deceleration;
+                (self.spring_pressure + (self.eb_pressure - self.spring_pressure) * share)
+                    .min(self.eb_pressure)
             }
             BrakeDemand::ServiceStep { step } => {
                 self.service_step_pressure[step.min(self.service_steps) as usize]
@@ -317,13 +355,30 @@ impl<F: Real> BrakeUnit<F> {
         }
     }
 
-    /// One control cycle: reference speed, WSP, delay line.
+    /// One control cycle: reference speed, demand (EP valve), WSP, delay line.
     fn control(&mut self, wheel_speeds: &[F; WHEELSETS]) {
-        self.reference.update(&self.wsp_k, wheel_speeds);
+        // The ECU's EP valve makes the pilot pressure (PI + hysteresis compensation).
+        let demand = match &self.ep_k {
+            Some(k) => self.ep.update(k, self.demand_pressure()),
+            None => self.demand_pressure(),
+        };
+        for j in 0..WHEELSETS {
+            let p = self.cylinders[j].pressure;
+            self.channels[j].observe(&self.wsp_k, wheel_speeds[j], p);
+        }
+        let vehicle_decel = crate::wsp::vehicle_deceleration(&self.wsp_k, &self.channels);
+        self.reference
+            .update(&self.wsp_k, wheel_speeds, vehicle_decel);
         let mut packed = 0u8;
         for j in 0..WHEELSETS {
             let valve = if self.wsp_enabled {
-                self.channels[j].update(&self.wsp_k, wheel_speeds[j], &self.reference)
+                let inputs = ChannelInputs {
+                    wheel_speed_mps: wheel_speeds[j],
+                    cylinder_pressure_pa: self.cylinders[j].pressure,
+                    demand_pressure_pa: demand,
+                    vehicle_decel_mps2: vehicle_decel,
+                };
+                self.channels[j].update(&self.wsp_k, &inputs, &self.reference)
             } else {
                 Valve::Apply
             };
@@ -332,12 +387,7 @@ impl<F: Real> BrakeUnit<F> {
             }
             packed |= (valve as u8) << (2 * j);
         }
-        // The ECU's EP valve makes the pilot pressure (PI + hysteresis compensation).
         // Delay line: write now, read what was written `delay` cycles ago.
-        let demand = match &self.ep_k {
-            Some(k) => self.ep.update(k, self.demand_pressure()),
-            None => self.demand_pressure(),
-        };
         self.delay_pressure[self.head] = demand;
         self.delay_valves[self.head] = packed;
         let tail = (self.head + DELAY_CAPACITY - self.delay) % DELAY_CAPACITY;
@@ -371,39 +421,19 @@ impl<F: Real> BrakeUnit<F> {
         for j in 0..WHEELSETS {
             let c = &mut self.cylinders[j];
             match self.acting_valves[j] {
+                // BOU relay: fill toward the demand with the fill lag, exhaust toward a
+                // lower demand with the vent lag. The WSP modulates by holding and venting
+                // (its pulsed reapply is a sequence of Apply and Hold commands).
                 Valve::Apply => {
-                    // BOU relay: fill toward the demand with the fill lag, exhaust toward a
-                    // lower demand with the vent lag. After a WSP action the refill comes in
-                    // pulses (fill, hold, ...) until the cylinder is back at the demand.
-                    let filling = self.acting_pressure > c.pressure;
-                    let in_pulse = match self.reapply[j] {
-                        Some(n)
-                            if filling
-                                && self.pulse_fill_steps > 0
-                                && c.pressure < self.reapply_until * self.acting_pressure =>
-                        {
-                            self.reapply[j] = Some(n.wrapping_add(1));
-                            n % self.pulse_steps.max(1) < self.pulse_fill_steps
-                        }
-                        _ => {
-                            self.reapply[j] = None;
-                            true
-                        }
-                    };
-                    let gain = if filling {
+                    let gain = if self.acting_pressure > c.pressure {
                         self.fill_gain
                     } else {
                         self.vent_gain
                     };
-                    if in_pulse {
-                        c.approach(self.acting_pressure, gain);
-                    }
+                    c.approach(self.acting_pressure, gain);
                 }
-                Valve::Hold => self.reapply[j] = Some(0),
-                Valve::Vent => {
-                    self.reapply[j] = Some(0);
-                    c.approach(F::ZERO, self.vent_gain);
-                }
+                Valve::Hold => {}
+                Valve::Vent => c.approach(F::ZERO, self.vent_gain),
             }
             out.cylinder_pressure_pa[j] = c.pressure;
             out.valves[j] = self.channels[j].valve;

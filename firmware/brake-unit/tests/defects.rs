@@ -63,13 +63,15 @@ fn cylinder_pressure_reaches_the_demand_in_f32() {
 /// cycles Vent -> Hold -> Vent (a wheel that spins up, then locks again) kept the brake off
 /// indefinitely. The timer exists so that WSP action, vent or hold, cannot release the
 /// brake for longer than `vent_max_s`: after it the channel applies and stays applied for
-/// `hold_max_s`.
+/// `timer_inhibit_s`.
 #[test]
 fn vent_hold_cycles_cannot_keep_the_brake_off_past_the_wsp_timer() {
-    use hils_brake_unit::wsp::{ReferenceSpeed, WspChannel, WspConstants};
+    use hils_brake_unit::wsp::{
+        ChannelInputs, Pneumatics, ReferenceSpeed, WspChannel, WspConstants,
+    };
     let tuning = hils_brake_unit::WspTuning::default();
     let dt = 1e-3;
-    let k = WspConstants::<f64>::new(&tuning, dt);
+    let k = WspConstants::<f64>::new(&tuning, &Pneumatics::default(), dt);
     let mut reference = ReferenceSpeed::default();
     let mut channel = WspChannel::default();
     let (mut first_action, mut first_apply_after, mut states) = (None, None, [0u32; 3]);
@@ -84,8 +86,16 @@ fn vent_hold_cycles_cannot_keep_the_brake_off_past_the_wsp_timer() {
         } else {
             10.0
         };
-        reference.update(&k, &[30.0, v, 30.0, 30.0]);
-        let valve = channel.update(&k, v, &reference);
+        // The cylinder at 300 kPa of a 355 kPa demand; the vehicle at 1 m/s^2.
+        channel.observe(&k, v, 300e3);
+        reference.update(&k, &[30.0, v, 30.0, 30.0], 1.0);
+        let inputs = ChannelInputs {
+            wheel_speed_mps: v,
+            cylinder_pressure_pa: 300e3,
+            demand_pressure_pa: 355e3,
+            vehicle_decel_mps2: 1.0,
+        };
+        let valve = channel.update(&k, &inputs, &reference);
         states[valve as usize] += 1;
         match (valve, first_action, first_apply_after) {
             (Valve::Apply, Some(_), None) => first_apply_after = Some(t),

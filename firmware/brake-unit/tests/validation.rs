@@ -27,8 +27,11 @@ macro_rules! wsp_fields {
 
 /// The keys the errors name, written out (not made from the field names, which carry units).
 const WSP_KEYS: &str = "wsp.deficit_min wsp.deficit_ratio wsp.reapply_ratio \
-    wsp.decel_threshold wsp.recover_accel wsp.caught_up_accel wsp.lock_ratio wsp.vent_max \
-    wsp.hold_max wsp.min_speed wsp.ref_max_decel wsp.accel_filter";
+    wsp.decel_threshold wsp.overbrake_decel wsp.overbrake_deficit_ratio wsp.turn_accel \
+    wsp.caught_up_accel wsp.dump_share wsp.dump_settle wsp.memory_share wsp.probe_step_share \
+    wsp.cap_share wsp.risen_share wsp.sudden_grip_accel wsp.lock_ratio wsp.vent_max \
+    wsp.hold_max wsp.timer_inhibit wsp.min_speed wsp.ref_max_decel wsp.ref_decel_gain \
+    wsp.ref_margin_decel wsp.accel_filter";
 
 #[test]
 fn every_brake_unit_and_wsp_value_is_checked() {
@@ -47,10 +50,13 @@ fn every_brake_unit_and_wsp_value_is_checked() {
         }),
         ("brake_unit.dead_time", |c| &mut c.params.dead_time_s),
     ];
-    let wsp: [fn(&mut UnitConfig) -> &mut f64; 12] = wsp_fields! {
-        deficit_min_mps, deficit_ratio, reapply_ratio, decel_threshold_mps2, recover_accel_mps2,
-        caught_up_accel_mps2, lock_ratio, vent_max_s, hold_max_s, min_speed_mps,
-        ref_max_decel_mps2, accel_filter_s,
+    let wsp: [fn(&mut UnitConfig) -> &mut f64; 24] = wsp_fields! {
+        deficit_min_mps, deficit_ratio, reapply_ratio, decel_threshold_mps2,
+        overbrake_decel_mps2, overbrake_deficit_ratio, turn_accel_mps2, caught_up_accel_mps2,
+        dump_share, dump_settle_s, memory_share, probe_step_share, cap_share, risen_share,
+        sudden_grip_accel_mps2, lock_ratio, vent_max_s, hold_max_s, timer_inhibit_s,
+        min_speed_mps, ref_max_decel_mps2, ref_decel_gain, ref_margin_decel_mps2,
+        accel_filter_s,
     };
     let wsp_keys: Vec<&str> = WSP_KEYS.split_whitespace().collect();
     assert_eq!(wsp_keys.len(), wsp.len());

@@ -17,6 +17,7 @@ extern crate std;
 pub mod brake;
 pub mod contact;
 pub mod friction;
+pub mod keys;
 pub mod math;
 pub mod params;
 pub mod plant;

@@ -789,6 +789,24 @@ impl<F: Real> Plant<F> {
         self.k.q_static
     }
 
+    /// Vertical force of each bogie's secondary (air) suspension on the carbody, N, bogie 1
+    /// (wheelsets 1, 2) first: the static preload, half the carbody's weight, plus the
+    /// deviation of the springs and dampers in the state (the step's secondary vertical
+    /// force), so the pitch load transfer in braking shows. What a car's air-spring
+    /// pressure transducers weigh (the rig's load-weighing signal, `hils_rig_core::load`).
+    pub fn air_spring_forces(&self) -> [F; 2] {
+        let (k, s) = (&self.k, &self.s);
+        // q_static = g (m_c / 4 + m_b / 2 + m_w): the weight g the plant was built with.
+        let quarter = F::of(0.25);
+        let g = k.q_static / (quarter * k.m_c + F::of(0.5) * k.m_b + k.m_w);
+        let preload = F::of(0.5) * k.m_c * g;
+        core::array::from_fn(|i| {
+            let e = s.z_c + k.x_bogie[i] * s.pitch_c - s.z_b[i];
+            let e_rate = s.vz_c + k.x_bogie[i] * s.pitch_rate_c - s.vz_b[i];
+            preload + k.neg_c_sv * e_rate + k.neg_k_sv * e
+        })
+    }
+
     /// Eq (2)'s brackets of wheelset `w` (times c mu_d0) at spin speed `omega` (rad/s;
     /// friction speed v_d = l_p |omega|) and its disc temperature, from its trackers: the
     /// refresh in turn of the step, and the state's start.

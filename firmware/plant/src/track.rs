@@ -47,6 +47,7 @@
 //! wheelset every 4 steps, 0.4 ms at 10 kHz, i.e. 4 cm at 100 m/s), one exp per step.
 
 use crate::contact::Polach;
+use crate::keys::{KeyInfo, KeyValue, KeyVisitor, Keys};
 use crate::params::{AdhesionSet, ContactParams, ParamError, check};
 use crate::real::Real;
 
@@ -158,14 +159,31 @@ impl ContactSets {
         }
     }
 
-    /// Checks both sets' ranges (the key names the set).
+    /// Checks both sets' ranges (the key names the set and the value: `sets.low.mu_0`).
     pub fn validate(&self) -> Result<(), ParamError> {
-        for (set, name) in [(&self.low, "sets.low"), (&self.very_low, "sets.very_low")] {
-            check(name, set.k_a, 1e-3, 100.0)?;
-            check(name, set.k_s, 1e-3, 100.0)?;
-            check(name, set.mu_0, 1e-3, 2.0)?;
-            check(name, set.a_ratio, 0.0, 1.0)?;
-            check(name, set.b_exp, 0.0, 100.0)?;
+        let keys = |set: &'static str| match set {
+            "low" => [
+                "sets.low.k_a",
+                "sets.low.k_s",
+                "sets.low.mu_0",
+                "sets.low.a_ratio",
+                "sets.low.b_exp",
+            ],
+            _ => [
+                "sets.very_low.k_a",
+                "sets.very_low.k_s",
+                "sets.very_low.mu_0",
+                "sets.very_low.a_ratio",
+                "sets.very_low.b_exp",
+            ],
+        };
+        for (set, name) in [(&self.low, "low"), (&self.very_low, "very_low")] {
+            let [k_a, k_s, mu_0, a_ratio, b_exp] = keys(name);
+            check(k_a, set.k_a, 1e-3, 100.0)?;
+            check(k_s, set.k_s, 1e-3, 100.0)?;
+            check(mu_0, set.mu_0, 1e-3, 2.0)?;
+            check(a_ratio, set.a_ratio, 0.0, 1.0)?;
+            check(b_exp, set.b_exp, 0.0, 100.0)?;
         }
         Ok(())
     }
@@ -318,32 +336,9 @@ impl Default for DegradedAdhesionParams {
 }
 
 impl DegradedAdhesionParams {
-    /// Checks every value; the error names the key.
+    /// Checks every value against the range of its key ([`Keys`]); the error names the key.
     pub fn validate(&self) -> Result<(), ParamError> {
-        check(
-            "degraded_adhesion.recovered_mu_ratio",
-            self.recovered_mu_ratio,
-            1.0,
-            10.0,
-        )?;
-        check(
-            "degraded_adhesion.energy_scale_j_per_m",
-            self.energy_scale_j_per_m,
-            1.0,
-            1e7,
-        )?;
-        check(
-            "degraded_adhesion.time_constant_s",
-            self.time_constant_s,
-            1e-3,
-            10.0,
-        )?;
-        check(
-            "degraded_adhesion.cell_length_m",
-            self.cell_length_m,
-            0.05,
-            10.0,
-        )
+        crate::keys::check_keys(self)
     }
 
     /// Checks that the conditioning ring spans a vehicle whose wheelsets lie `span_m` (m)
@@ -358,6 +353,34 @@ impl DegradedAdhesionParams {
             shortest.max(0.05),
             10.0,
         )
+    }
+}
+
+/// The key table of `[degraded_adhesion]`, in file order (ranges checked by
+/// [`DegradedAdhesionParams::validate`]).
+impl Keys for DegradedAdhesionParams {
+    fn visit_keys<V: KeyVisitor>(&mut self, v: &mut V) {
+        let key = |name, doc, unit, min, max| KeyInfo {
+            name,
+            doc,
+            unit,
+            min,
+            max,
+        };
+        v.key(
+            &KeyInfo::unranged("degraded_adhesion.enabled", "Whether the recovery acts."),
+            KeyValue::Flag(&mut self.enabled),
+        );
+        #[rustfmt::skip]
+        let reals: [(KeyInfo, &mut f64); 4] = [
+            (key("degraded_adhesion.recovered_mu_ratio", "Recovered over degraded friction, R (>= 1).", "", 1.0, 10.0), &mut self.recovered_mu_ratio),
+            (key("degraded_adhesion.energy_scale_j_per_m", "Specific energy W_0 that gives 63 % of the recovery, J per metre of rail.", "J/m", 1.0, 1e7), &mut self.energy_scale_j_per_m),
+            (key("degraded_adhesion.time_constant_s", "Low-pass of a contact's own dissipation, s.", "s", 1e-3, 10.0), &mut self.time_constant_s),
+            (key("degraded_adhesion.cell_length_m", "Length of a rail cell of the conditioning ring, m (128 cells must span the vehicle).", "m", 0.05, 10.0), &mut self.cell_length_m),
+        ];
+        for (info, value) in reals {
+            v.key(&info, KeyValue::Real(value));
+        }
     }
 }
 

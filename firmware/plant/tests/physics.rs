@@ -238,3 +238,55 @@ fn axle_load_transfer_matches_a_quasi_static_derivation() {
         "brake reaction moves {reaction_share} N"
     );
 }
+
+/// The air-spring (secondary vertical) forces: at rest half the carbody's weight on each
+/// bogie (the load a car's air-spring transducers weigh); in steady braking the carbody's
+/// pitch moment (h_c - h_sl) m_c a moves (h_c - h_sl) m_c a / bogie base onto the leading
+/// bogie, as the free-body derivation above has it.
+#[test]
+fn air_spring_forces_weigh_the_carbody_and_show_the_load_transfer() {
+    let p = Params::default();
+    let v = &p.vehicle;
+    let half = 0.5 * v.carbody_mass * v.g;
+    let mut plant = Plant::<f64>::new(&p, Rail::Wet, 0.0).unwrap();
+    for _ in 0..1000 {
+        plant.step(&[BrakeInput::ClampForce(0.0); 4]);
+    }
+    for f in plant.air_spring_forces() {
+        assert!(close(f, half, 1e-6 * half), "{f} vs {half}");
+    }
+    let f32_plant = Plant::<f32>::new(&p, Rail::Wet, 30.0).unwrap();
+    for f in f32_plant.air_spring_forces() {
+        assert!(close(f as f64, half, 0.05), "f32 {f}");
+    }
+    let mut plant = Plant::<f64>::new(&p, Rail::Wet, 40.0).unwrap();
+    let input = [BrakeInput::ClampForce(12_000.0); 4];
+    for _ in 0..100_000 {
+        plant.step(&input);
+    }
+    let n = 10_000;
+    let (mut a, mut f) = (0.0, [0.0; 2]);
+    for _ in 0..n {
+        plant.step(&input);
+        a -= plant.outputs().carbody_accel / n as f64;
+        for (i, x) in plant.air_spring_forces().iter().enumerate() {
+            f[i] += x / n as f64;
+        }
+    }
+    let moment =
+        (v.carbody_cog_height - p.suspension.secondary_longitudinal_height) * v.carbody_mass * a;
+    let transfer = moment / v.bogie_base;
+    assert!(transfer > 500.0, "{transfer} N");
+    assert!(
+        close(f[0], half + transfer, 30.0),
+        "{} vs {}",
+        f[0],
+        half + transfer
+    );
+    assert!(
+        close(f[1], half - transfer, 30.0),
+        "{} vs {}",
+        f[1],
+        half - transfer
+    );
+}

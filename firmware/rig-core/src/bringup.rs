@@ -180,6 +180,21 @@ pub fn die_temperature_c(cal: &AdcFactoryCal, ts_data: u16, vdda_mv: u32) -> f32
     (at_cal_vref - cal.ts_cal1 as f32) * (TS_CAL2_DEGC - TS_CAL1_DEGC) / span + TS_CAL1_DEGC
 }
 
+/// Probes of the pulse check's jumper: D7 (PA8) left undriven with the chip's weak pull-up,
+/// then pull-down, alternately; D12 (PA6) read each time.
+pub const JUMPER_PROBES: usize = 6;
+
+/// Whether the jumper D7-D12 is fitted and nothing else is on D7, from the probes
+/// `(d7_pulled_up, d12_high)`: D12 followed every weak pull of D7, up and down. A rig's
+/// pull-down on the pulse line (docs/rig.md, "Lines in reset") or an interface stage
+/// overrides the weak pull-up, and an open D12 does not follow both ways: then PA8, wheelset
+/// 1's output to a controller, is never driven by the bring-up image.
+pub fn jumper_found(probes: &[(bool, bool)]) -> bool {
+    probes.iter().any(|p| p.0)
+        && probes.iter().any(|p| !p.0)
+        && probes.iter().all(|&(up, high)| up == high)
+}
+
 /// Speed the pulse check sets on wheelset 1's output, km/h.
 pub const PULSE_TEST_SPEED_KMH: f32 = 150.0;
 /// The capture timer's clock: 170 MHz / 4, so one period of the test frequency fits its
@@ -252,9 +267,99 @@ impl PulseCapture {
     }
 }
 
+/// An independent clock the bring-up measures SYSCLK against (TIM16 input capture of its TI1
+/// selected by TIM16_TISEL: 1 LSI, 2 LSE; RM0440 TIM16 and ST's `TIM_TIM16_TI1_LSI/LSE`).
+/// Every check before compares two clocks derived from SYSCLK: a crystal of the wrong
+/// frequency passed them all.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ReferenceClock {
+    /// The 32.768 kHz crystal X2 (LSE): tens of ppm.
+    Lse,
+    /// The internal 32 kHz RC (LSI): 29.5..34 kHz over the G474's range (datasheet).
+    Lsi,
+}
+
+impl ReferenceClock {
+    /// The TIM16_TISEL.TI1SEL code of this clock.
+    pub fn tisel(self) -> u8 {
+        match self {
+            ReferenceClock::Lsi => 1,
+            ReferenceClock::Lse => 2,
+        }
+    }
+
+    /// Nominal frequency, Hz.
+    pub fn nominal_hz(self) -> f64 {
+        match self {
+            ReferenceClock::Lse => 32_768.0,
+            ReferenceClock::Lsi => 32_000.0,
+        }
+    }
+
+    /// The range of SYSCLK estimates that passes, Hz: LSE +-500 ppm (both crystals' tolerance
+    /// and ageing, with margin); LSI the frequencies its 29.5..34 kHz spread allows.
+    pub fn sysclk_range_hz(self) -> (f64, f64) {
+        let f = SYSCLK_HZ as f64;
+        match self {
+            ReferenceClock::Lse => (f * (1.0 - 500e-6), f * (1.0 + 500e-6)),
+            ReferenceClock::Lsi => (f * 29_500.0 / 32_000.0, f * 34_000.0 / 32_000.0),
+        }
+    }
+}
+
+/// Reference edges per capture (TIM16 input prescaler /8): an LSE period of 5188 counts at
+/// 170 MHz becomes 41 504, still within the 16-bit counter.
+pub const REFERENCE_EDGES_PER_CAPTURE: u32 = 8;
+
+/// SYSCLK as the reference clock measures it, Hz: the timer counts SYSCLK (PSC 0) between
+/// captures of every [`REFERENCE_EDGES_PER_CAPTURE`]-th reference edge.
+pub fn sysclk_from_reference(capture: &PulseCapture, reference: ReferenceClock) -> f64 {
+    if capture.periods == 0 {
+        return 0.0;
+    }
+    let counts_per_edge =
+        capture.total_counts as f64 / capture.periods as f64 / REFERENCE_EDGES_PER_CAPTURE as f64;
+    counts_per_edge * reference.nominal_hz()
+}
+
+/// Whether SYSCLK measured against `reference` is 170 MHz within its tolerance, with every
+/// capture interval within 1 % of the mean (no capture missed).
+pub fn sysclk_matches(capture: &PulseCapture, reference: ReferenceClock) -> bool {
+    let f = sysclk_from_reference(capture, reference);
+    let (lo, hi) = reference.sysclk_range_hz();
+    let mean = capture.total_counts as f64 / capture.periods.max(1) as f64;
+    let steady = [capture.min_counts, capture.max_counts]
+        .iter()
+        .all(|&c| ((c as f64 - mean) / mean).abs() <= 0.01);
+    capture.periods > 0 && steady && (lo..=hi).contains(&f)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_jumper_is_found_only_when_d12_follows_both_pulls() {
+        let probes = |d12: &dyn Fn(bool, usize) -> bool| -> [(bool, bool); JUMPER_PROBES] {
+            core::array::from_fn(|k| (k % 2 == 0, d12(k % 2 == 0, k)))
+        };
+        // Fitted, nothing else on the line.
+        assert!(jumper_found(&probes(&|up, _| up)));
+        // A rig's pull-down (or a stage input) holds D7 low: never high.
+        assert!(!jumper_found(&probes(&|_, _| false)));
+        // A pull-up elsewhere, or D12 open and reading high: never low.
+        assert!(!jumper_found(&probes(&|_, _| true)));
+        // An open D12 that happens to follow once, then not.
+        assert!(!jumper_found(&probes(&|up, k| if k < 2 {
+            up
+        } else {
+            k % 3 == 0
+        })));
+        // Only one direction probed decides nothing.
+        assert!(!jumper_found(&[(true, true)]));
+        assert!(!jumper_found(&[]));
+    }
 
     #[test]
     fn wait_states_follow_the_rm0440_table() {
@@ -396,5 +501,41 @@ mod tests {
             10
         ));
         assert!(!period_matches(0, 0, 170_000_000, 10_000, 10));
+    }
+
+    /// Captures of every 8th edge of a reference at `ref_hz` by a timer at `sysclk_hz`.
+    fn reference_capture(sysclk_hz: f64, ref_hz: f64, n: u32) -> PulseCapture {
+        let mut c = PulseCapture::default();
+        for k in 0..=n {
+            let t = k as f64 * REFERENCE_EDGES_PER_CAPTURE as f64 / ref_hz;
+            c.capture((t * sysclk_hz).round() as u64 as u16);
+        }
+        c
+    }
+
+    #[test]
+    fn a_wrong_crystal_fails_against_the_lse_and_a_far_one_against_the_lsi() {
+        let lse = ReferenceClock::Lse;
+        let right = reference_capture(170e6, 32_768.0, 64);
+        assert!(sysclk_matches(&right, lse));
+        assert!((sysclk_from_reference(&right, lse) - 170e6).abs() < 170.0);
+        // A 25 MHz crystal where 24 MHz is assumed: SYSCLK 177.08 MHz, +4.2 %.
+        let wrong = reference_capture(170e6 * 25.0 / 24.0, 32_768.0, 64);
+        assert!(!sysclk_matches(&wrong, lse));
+        // The LSI spreads +-7 %: it passes a 4 % error, but not an 8 MHz crystal (x 1/3).
+        let lsi = ReferenceClock::Lsi;
+        assert!(sysclk_matches(&reference_capture(170e6, 31_000.0, 64), lsi));
+        assert!(sysclk_matches(
+            &reference_capture(170e6 * 25.0 / 24.0, 32_000.0, 64),
+            lsi
+        ));
+        assert!(!sysclk_matches(
+            &reference_capture(170e6 / 3.0, 32_000.0, 64),
+            lsi
+        ));
+        assert!(!sysclk_matches(&PulseCapture::default(), lse));
+        assert_eq!((lse.tisel(), lsi.tisel()), (2, 1));
+        // 8 LSE periods at 170 MHz fit the 16-bit counter.
+        assert!(REFERENCE_EDGES_PER_CAPTURE as f64 * 170e6 / 32_768.0 < 65_536.0);
     }
 }

@@ -7,6 +7,7 @@
 //! |---|---|---|---|---|
 //! | 0x100 | `RIG_WHEEL_SPEED_12` | out | 1 ms | wheel speeds of wheelsets 1, 2 (16 bit, 0.01 km/h), alive counter, checksum |
 //! | 0x101 | `RIG_WHEEL_SPEED_34` | out | 1 ms | wheel speeds of wheelsets 3, 4 (16 bit, 0.01 km/h), alive counter, checksum |
+//! | 0x102 | `RIG_BRAKE_DEMAND` | out | 10 ms and on change (optional) | EB loop closed, service deceleration: the PWM's demand as a frame |
 //! | 0x110 | `RIG_STATUS` | out | 10 ms | vehicle speed, deceleration, state, mode, command result, fault flags, counter, checksum |
 //! | 0x120 | `RIG_DIAG` | out | 100 ms | step time max/mean, overruns, sensor fault kinds, bus-off count |
 //! | 0x200 | `RIG_COMMAND` | in | on demand | multiplexed by opcode: start, stop, brake, fault injection, calibration, clear faults, configure, track zone, track commit/clear, vehicle; counter, checksum |
@@ -33,7 +34,9 @@
 //! over 0-655.34 km/h, beyond any vehicle or WSP test (four 14-bit speeds in one frame
 //! stopped at 163.82 km/h). The raw value 0xFFFF means "not available" (safe state, see
 //! [`crate::rig`]); speeds above the range are sent as 655.34 km/h (0xFFFE) and flagged
-//! ([`crate::rig::Faults::SPEED_SATURATED`]). Bytes 4-6 are reserved (0).
+//! ([`crate::rig::Faults::SPEED_SATURATED`]). Byte 4 carries the two wheelsets' valve
+//! inputs as the step sampled them (`Dump1`, `Hold1`, `Dump2`, `Hold2`, 2 bits each: 0 off,
+//! 1 energised, 3 not wired; [`crate::valves`]); bytes 5-6 are reserved (0).
 
 use embedded_can::{Frame, Id, StandardId};
 use hils_plant::{FrictionModel, Rail, Surface, Zone};
@@ -41,9 +44,12 @@ use hils_plant::{FrictionModel, Rail, Surface, Zone};
 use num_enum::{IntoPrimitive, TryFromPrimitive};
 
 use crate::Code;
+use crate::arming::Disarm;
 
+use crate::controller_io::IoItem;
 pub use crate::sensor::InjectedFault;
 use crate::sensor::{SensorFault, SensorKind};
+use crate::valves::ValveStates;
 
 /// Identifier of `RIG_WHEEL_SPEED_12` (wheelsets 1 and 2).
 pub const ID_WHEEL_SPEED_12: u16 = 0x100;
@@ -51,10 +57,14 @@ pub const ID_WHEEL_SPEED_12: u16 = 0x100;
 pub const ID_WHEEL_SPEED_34: u16 = 0x101;
 /// The wheel-speed identifiers by pair of wheelsets ([`WheelSpeedFrame::pair`]).
 pub const ID_WHEEL_SPEEDS: [u16; 2] = [ID_WHEEL_SPEED_12, ID_WHEEL_SPEED_34];
+/// Identifier of `RIG_BRAKE_DEMAND` (board -> controller, optional).
+pub const ID_BRAKE_DEMAND: u16 = 0x102;
 /// Identifier of `RIG_STATUS`.
 pub const ID_STATUS: u16 = 0x110;
 /// Identifier of `RIG_DIAG`.
 pub const ID_DIAG: u16 = 0x120;
+/// `RIG_HEALTH` (board -> bus): the board's own health (stack, receive losses, arming), 100 ms.
+pub const ID_HEALTH: u16 = 0x121;
 /// Identifier of `RIG_COMMAND`.
 pub const ID_COMMAND: u16 = 0x200;
 
@@ -409,19 +419,55 @@ pub mod wheel_speed {
             Signal::scaled("WheelSpeed4", 16, 16, 0.01),
         ],
     ];
+    /// `Dump1..4`, `Hold1..4`: the valve inputs of the frame's wheelsets, `[dump, hold]`
+    /// per wheelset (2 bits: 0 off, 1 energised, 3 not wired).
+    pub const VALVES: [[[Signal; 2]; 2]; 2] = [
+        [
+            [Signal::raw("Dump1", 32, 2), Signal::raw("Hold1", 34, 2)],
+            [Signal::raw("Dump2", 36, 2), Signal::raw("Hold2", 38, 2)],
+        ],
+        [
+            [Signal::raw("Dump3", 32, 2), Signal::raw("Hold3", 34, 2)],
+            [Signal::raw("Dump4", 36, 2), Signal::raw("Hold4", 38, 2)],
+        ],
+    ];
     /// Every signal of `RIG_WHEEL_SPEED_12`.
-    pub const ALL_12: [Signal; 4] = [
+    pub const ALL_12: [Signal; 8] = [
         SPEEDS[0][0],
         SPEEDS[0][1],
+        VALVES[0][0][0],
+        VALVES[0][0][1],
+        VALVES[0][1][0],
+        VALVES[0][1][1],
         Signal::raw("WheelSpeed12Alive", 56, 4),
         Signal::raw("WheelSpeed12Checksum", 60, 4),
     ];
     /// Every signal of `RIG_WHEEL_SPEED_34`.
-    pub const ALL_34: [Signal; 4] = [
+    pub const ALL_34: [Signal; 8] = [
         SPEEDS[1][0],
         SPEEDS[1][1],
+        VALVES[1][0][0],
+        VALVES[1][0][1],
+        VALVES[1][1][0],
+        VALVES[1][1][1],
         Signal::raw("WheelSpeed34Alive", 56, 4),
         Signal::raw("WheelSpeed34Checksum", 60, 4),
+    ];
+}
+
+/// `RIG_BRAKE_DEMAND` (0x102).
+pub mod brake_demand {
+    use super::Signal;
+    /// 1: the EB loop is closed (no emergency brake); 0: open (emergency brake).
+    pub const EB_LOOP_CLOSED: Signal = Signal::raw("EbLoopClosed", 0, 1);
+    /// Service deceleration demanded, m/s^2 (0.001 m/s^2 per bit).
+    pub const SERVICE: Signal = Signal::scaled("ServiceDemand", 16, 16, 0.001);
+    /// Every signal of the frame.
+    pub const ALL: [Signal; 4] = [
+        EB_LOOP_CLOSED,
+        SERVICE,
+        Signal::raw("DemandAlive", 56, 4),
+        Signal::raw("DemandChecksum", 60, 4),
     ];
 }
 
@@ -481,6 +527,38 @@ pub mod diag {
         SENSOR_FAULTS[2],
         SENSOR_FAULTS[3],
         BUS_OFF_COUNT,
+    ];
+}
+
+/// `RIG_HEALTH` (0x121).
+pub mod health {
+    use super::Signal;
+    /// Stack high-water mark: the most stack ever used since power-up, bytes (4 B per bit).
+    pub const STACK_PEAK: Signal = Signal::scaled("StackPeak", 0, 16, 4.0);
+    /// `RIG_COMMAND` frames lost in reception since power-up, saturating; a lower bound:
+    /// FDCAN RF0L is a flag, so losses before the interrupt clears it count once.
+    pub const RX_LOST: Signal = Signal::raw("RxLost", 16, 8);
+    /// ADC ring restarts after a stall (no progress, overrun) since power-up, saturating.
+    pub const ADC_RESTARTS: Signal = Signal::raw("AdcRestarts", 24, 8);
+    /// 1: armed for a controller ([`crate::arming`]).
+    pub const ARMED: Signal = Signal::raw("Armed", 32, 1);
+    /// Why disarmed ([`crate::arming::Disarm`] code; 0 while armed).
+    pub const DISARM_CAUSE: Signal = Signal::raw("DisarmCause", 33, 3);
+    /// Consecutive fault resets before this start (saturating at 15; 0 after a clean one).
+    pub const FAULT_RESETS: Signal = Signal::raw("FaultResets", 36, 4);
+    /// The stack's size, bytes (4 B per bit): [`STACK_PEAK`] is judged against it.
+    pub const STACK_SIZE: Signal = Signal::scaled("StackSize", 40, 16, 4.0);
+    /// Every signal of the frame.
+    pub const ALL: [Signal; 9] = [
+        STACK_PEAK,
+        RX_LOST,
+        ADC_RESTARTS,
+        ARMED,
+        DISARM_CAUSE,
+        FAULT_RESETS,
+        STACK_SIZE,
+        Signal::raw("HealthAlive", 56, 4),
+        Signal::raw("HealthChecksum", 60, 4),
     ];
 }
 
@@ -577,15 +655,17 @@ pub mod command {
 }
 
 /// Every frame's identifier and signal table (what `hils.dbc` must describe).
-pub const FRAMES: [(u16, &[Signal]); 5] = [
+pub const FRAMES: [(u16, &[Signal]); 7] = [
     (ID_WHEEL_SPEED_12, &wheel_speed::ALL_12),
     (ID_WHEEL_SPEED_34, &wheel_speed::ALL_34),
+    (ID_BRAKE_DEMAND, &brake_demand::ALL),
     (ID_STATUS, &status::ALL),
     (ID_DIAG, &diag::ALL),
+    (ID_HEALTH, &health::ALL),
     (ID_COMMAND, &command::ALL),
 ];
 
-/// The opcodes of `RIG_COMMAND` (byte 0), in one place: 1-10 in declaration order.
+/// The opcodes of `RIG_COMMAND` (byte 0), in one place: 1-12 in declaration order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, IntoPrimitive, TryFromPrimitive)]
 #[repr(u8)]
 pub enum Opcode {
@@ -609,6 +689,10 @@ pub enum Opcode {
     Track,
     /// [`Command::Vehicle`].
     Vehicle,
+    /// [`Command::Arm`].
+    Arm,
+    /// [`Command::Disarm`].
+    Disarm,
 }
 
 /// The code of a surface in `RIG_COMMAND` and telemetry: 0 dry, 1 wet, 2 low, 3 very low
@@ -759,6 +843,9 @@ pub struct WheelSpeedFrame {
     pub pair: usize,
     /// Circumferential speeds r omega of the pair's two wheelsets, km/h (`None`: not available).
     pub speeds_kmh: [Option<f32>; 2],
+    /// The valve inputs; the frame carries its pair's two wheelsets (a decoded frame knows
+    /// only those).
+    pub valves: ValveStates,
     /// Alive counter of the cycle (the same in both frames of a cycle).
     pub counter: u8,
 }
@@ -780,13 +867,23 @@ impl WheelSpeedFrame {
         }
     }
 
-    /// The two frames of one cycle: the four wheelsets' speeds, one alive counter.
-    pub fn cycle(speeds_kmh: [Option<f32>; 4], counter: u8) -> [Self; 2] {
+    /// The two frames of one cycle: the four wheelsets' speeds and valve inputs, one alive
+    /// counter.
+    pub fn cycle(speeds_kmh: [Option<f32>; 4], valves: ValveStates, counter: u8) -> [Self; 2] {
         core::array::from_fn(|pair| Self {
             pair,
             speeds_kmh: [speeds_kmh[2 * pair], speeds_kmh[2 * pair + 1]],
+            valves,
             counter,
         })
+    }
+
+    /// The 2-bit code of a valve input: 0 off, 1 energised, 3 not wired.
+    fn valve_code(state: Option<bool>) -> u64 {
+        match state {
+            Some(on) => on as u64,
+            None => 3,
+        }
     }
 
     /// The frame's identifier (`None` for a pair other than 0 or 1).
@@ -800,6 +897,11 @@ impl WheelSpeedFrame {
         let mut data = [0u8; 8];
         for (signal, s) in wheel_speed::SPEEDS[self.pair].iter().zip(self.speeds_kmh) {
             signal.put_raw(&mut data, Self::raw_speed(s).0 as u64);
+        }
+        for (k, [dump, hold]) in wheel_speed::VALVES[self.pair].iter().enumerate() {
+            let j = 2 * self.pair + k;
+            dump.put_raw(&mut data, Self::valve_code(self.valves.dump(j)));
+            hold.put_raw(&mut data, Self::valve_code(self.valves.hold(j)));
         }
         seal(id, data, self.counter)
     }
@@ -818,9 +920,62 @@ impl WheelSpeedFrame {
                 Some(s.get(&data))
             }
         });
+        let mut valves = ValveStates::default();
+        for (k, signals) in wheel_speed::VALVES[pair].iter().enumerate() {
+            let bit = 1 << (2 * pair + k);
+            for (signal, (state, known)) in signals.iter().zip([
+                (&mut valves.dump, &mut valves.dump_known),
+                (&mut valves.hold, &mut valves.hold_known),
+            ]) {
+                match signal.get_raw(&data) {
+                    0 => *known |= bit,
+                    1 => (*state, *known) = (*state | bit, *known | bit),
+                    3 => {}
+                    _ => return Err(DecodeError::BadValue(signal.name)),
+                }
+            }
+        }
         Ok(Self {
             pair,
             speeds_kmh,
+            valves,
+            counter,
+        })
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// RIG_BRAKE_DEMAND
+
+/// `RIG_BRAKE_DEMAND` (0x102, optional: every 10 ms and in the tick the demand changes): the
+/// brake demand the board drives on the train lines ([`crate::demand`]), for a controller
+/// that takes it from the bus. The frame's absence (a timeout) is for the controller to
+/// treat as an emergency brake, as an open loop.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BrakeDemandFrame {
+    /// The EB loop is closed (no emergency brake).
+    pub eb_loop_closed: bool,
+    /// Service deceleration demanded, m/s^2 (0-65.535 at 0.001).
+    pub service_mps2: f32,
+    /// Alive counter, 0-15.
+    pub counter: u8,
+}
+
+impl BrakeDemandFrame {
+    /// The frame's bytes (`None` if the frame type cannot hold them).
+    pub fn encode<F: Frame>(&self) -> Option<F> {
+        let mut d = [0u8; 8];
+        brake_demand::EB_LOOP_CLOSED.put_raw(&mut d, self.eb_loop_closed as u64);
+        brake_demand::SERVICE.put(&mut d, self.service_mps2);
+        seal(ID_BRAKE_DEMAND, d, self.counter)
+    }
+
+    /// Reads a `RIG_BRAKE_DEMAND` frame; refuses a wrong identifier, length or checksum.
+    pub fn decode<F: Frame>(frame: &F) -> Result<Self, DecodeError> {
+        let (d, counter) = open(frame, ID_BRAKE_DEMAND)?;
+        Ok(Self {
+            eb_loop_closed: brake_demand::EB_LOOP_CLOSED.get_raw(&d) == 1,
+            service_mps2: brake_demand::SERVICE.get(&d),
             counter,
         })
     }
@@ -975,6 +1130,62 @@ impl DiagFrame {
 }
 
 // ---------------------------------------------------------------------------------------
+// RIG_HEALTH
+
+/// `RIG_HEALTH` (0x121, every 100 ms): the board's own health, sealed like `RIG_STATUS`.
+/// (`RIG_DIAG` has no bit left.)
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct HealthFrame {
+    /// Stack high-water mark since power-up, bytes (sent to 4 B, at most 262 140).
+    pub stack_peak_bytes: u32,
+    /// The stack's size, bytes (sent to 4 B).
+    pub stack_size_bytes: u32,
+    /// Command frames lost in reception since power-up, at least (saturates at 255; RF0L
+    /// is a flag: losses before the interrupt clears it count once).
+    pub rx_lost: u8,
+    /// ADC ring restarts since power-up (saturates at 255).
+    pub adc_restarts: u8,
+    /// `None` while armed for a controller; else why not.
+    pub disarmed: Option<Disarm>,
+    /// Consecutive fault resets before this start (saturates at 15).
+    pub fault_resets: u8,
+    /// Alive counter, 0-15.
+    pub counter: u8,
+}
+
+impl HealthFrame {
+    /// The frame's bytes (`None` if the frame type cannot hold them).
+    pub fn encode<F: Frame>(&self) -> Option<F> {
+        let bytes = |b: u32| (b / 4).min(health::STACK_PEAK.max_raw()) as u64;
+        let mut d = [0u8; 8];
+        health::STACK_PEAK.put_raw(&mut d, bytes(self.stack_peak_bytes));
+        health::STACK_SIZE.put_raw(&mut d, bytes(self.stack_size_bytes));
+        health::RX_LOST.put_raw(&mut d, self.rx_lost as u64);
+        health::ADC_RESTARTS.put_raw(&mut d, self.adc_restarts as u64);
+        health::ARMED.put_raw(&mut d, self.disarmed.is_none() as u64);
+        health::DISARM_CAUSE.put_raw(&mut d, self.disarmed.map_or(0, u8::from) as u64);
+        health::FAULT_RESETS.put_raw(&mut d, self.fault_resets.min(15) as u64);
+        seal(ID_HEALTH, d, self.counter)
+    }
+
+    /// Reads a `RIG_HEALTH` frame; refuses a wrong identifier, length, checksum or cause.
+    pub fn decode<F: Frame>(frame: &F) -> Result<Self, DecodeError> {
+        let (d, counter) = open(frame, ID_HEALTH)?;
+        let armed = health::ARMED.get_raw(&d) == 1;
+        let cause: Disarm = decode_enum(&d, health::DISARM_CAUSE)?;
+        Ok(Self {
+            stack_peak_bytes: health::STACK_PEAK.get_raw(&d) as u32 * 4,
+            stack_size_bytes: health::STACK_SIZE.get_raw(&d) as u32 * 4,
+            rx_lost: health::RX_LOST.get_raw(&d) as u8,
+            adc_restarts: health::ADC_RESTARTS.get_raw(&d) as u8,
+            disarmed: (!armed).then_some(cause),
+            fault_resets: health::FAULT_RESETS.get_raw(&d) as u8,
+            counter,
+        })
+    }
+}
+
+// ---------------------------------------------------------------------------------------
 // RIG_COMMAND
 
 /// Brake command of the self-test mode and of `Brake` commands: the simulated brake unit's
@@ -1014,6 +1225,9 @@ pub enum ConfigItem {
     TelemetryDivider(u16),
     /// Teeth of the simulated axle-speed-sensor wheel, 1-1000.
     Teeth(u16),
+    /// A controller I/O item (codes 2-14) and its value in the item's unit
+    /// ([`crate::controller_io::IoItem`], range checked when decoded).
+    Io(IoItem, u16),
 }
 
 /// The values of a `Start` command (the signals `Start*` of opcode 1).
@@ -1082,6 +1296,11 @@ pub enum Command {
         /// The value, in the unit of its `[vehicle]` key (kg, kg m^2, m).
         value: f32,
     },
+    /// Opcode 11: arm the rig for a controller: the outputs a controller reads go live in
+    /// the following rig-mode runs ([`crate::arming`]).
+    Arm,
+    /// Opcode 12: disarm: the outputs a controller reads go to their safe values at once.
+    Disarm,
 }
 
 impl Command {
@@ -1103,6 +1322,8 @@ impl Command {
             Command::TrackZone { .. } => Opcode::TrackZone,
             Command::Track(_) => Opcode::Track,
             Command::Vehicle { .. } => Opcode::Vehicle,
+            Command::Arm => Opcode::Arm,
+            Command::Disarm => Opcode::Disarm,
         }
     }
 }
@@ -1148,7 +1369,7 @@ impl CommandFrame {
                 START_EMERGENCY.put_raw(&mut d, start.emergency as u64);
                 START_SPEED.put(&mut d, start.initial_speed_kmh);
             }
-            Command::Stop | Command::ClearFaults => {}
+            Command::Stop | Command::ClearFaults | Command::Arm | Command::Disarm => {}
             Command::Brake(b) => {
                 BRAKE_DEMAND.put_raw(&mut d, brake_signal_code(b) as u64);
                 match b {
@@ -1180,6 +1401,7 @@ impl CommandFrame {
                 let (code, value) = match item {
                     ConfigItem::TelemetryDivider(v) => (0, v),
                     ConfigItem::Teeth(v) => (1, v),
+                    ConfigItem::Io(item, v) => (u8::from(item) as u64, v),
                 };
                 CONFIG_ITEM.put_raw(&mut d, code);
                 CONFIG_VALUE.put_raw(&mut d, value as u64);
@@ -1229,6 +1451,8 @@ impl CommandFrame {
             Opcode::TrackZone => decode_zone(&d)?,
             Opcode::Track => decode_track(&d)?,
             Opcode::Vehicle => decode_vehicle(&d)?,
+            Opcode::Arm => Command::Arm,
+            Opcode::Disarm => Command::Disarm,
         };
         Ok(Self { command, counter })
     }
@@ -1362,7 +1586,11 @@ fn decode_config(d: &[u8; 8]) -> Result<ConfigItem, DecodeError> {
         0 if (1..=10_000).contains(&v) => ConfigItem::TelemetryDivider(v),
         1 if (1..=1000).contains(&v) => ConfigItem::Teeth(v),
         0 | 1 => return Err(DecodeError::BadValue("ConfigValue")),
-        _ => return Err(DecodeError::BadValue("ConfigItem")),
+        code => match IoItem::from_raw(code as u8) {
+            Some(item) if item.accepts(v) => ConfigItem::Io(item, v),
+            Some(_) => return Err(DecodeError::BadValue("ConfigValue")),
+            None => return Err(DecodeError::BadValue("ConfigItem")),
+        },
     })
 }
 
@@ -1398,7 +1626,14 @@ mod tests {
     #[test]
     fn wheel_speed_roundtrip_within_half_resolution() {
         let speeds = [Some(350.0), Some(0.0), None, Some(655.34)];
-        let frames = WheelSpeedFrame::cycle(speeds, 9);
+        let valves = ValveStates {
+            dump: 0b0101,
+            hold: 0b0011,
+            dump_known: 0b0111,
+            hold_known: 0b1011,
+        };
+        let frames = WheelSpeedFrame::cycle(speeds, valves, 9);
+        let mut back_valves = ValveStates::default();
         let mut back = [None; 4];
         for (pair, w) in frames.iter().enumerate() {
             let f: TestFrame = w.encode().unwrap();
@@ -1408,6 +1643,10 @@ mod tests {
             );
             let d = WheelSpeedFrame::decode(&f).unwrap();
             assert_eq!((d.pair, d.counter), (pair, 9));
+            back_valves.dump |= d.valves.dump;
+            back_valves.hold |= d.valves.hold;
+            back_valves.dump_known |= d.valves.dump_known;
+            back_valves.hold_known |= d.valves.hold_known;
             back[2 * pair..2 * pair + 2].copy_from_slice(&d.speeds_kmh);
         }
         for (a, b) in speeds.iter().zip(back.iter()) {
@@ -1419,6 +1658,8 @@ mod tests {
                 _ => panic!("{a:?} vs {b:?}"),
             }
         }
+        // The valve inputs of both frames are the cycle's, not-wired ones not known.
+        assert_eq!(back_valves, valves);
         // 350 km/h and above at 0.01 km/h: within half a step (f32 keeps 16 bits exactly).
         for raw in [35_000u16, 35_001, 65_534] {
             let v = raw as f32 * 0.01;
@@ -1428,6 +1669,7 @@ mod tests {
             WheelSpeedFrame {
                 pair: 2,
                 speeds_kmh: [None; 2],
+                valves: ValveStates::default(),
                 counter: 0
             }
             .encode::<TestFrame>()
@@ -1455,6 +1697,7 @@ mod tests {
         let f: TestFrame = WheelSpeedFrame {
             pair: 0,
             speeds_kmh: [Some(100.0); 2],
+            valves: ValveStates::default(),
             counter: 3,
         }
         .encode()
@@ -1641,7 +1884,7 @@ mod tests {
             seal(ID_COMMAND, d, 1).unwrap()
         };
         let nan = f32::NAN.to_bits().to_le_bytes();
-        let cases: [([u8; 7], DecodeError); 13] = [
+        let cases: [([u8; 7], DecodeError); 14] = [
             ([0, 0, 0, 0, 0, 0, 0], DecodeError::UnknownOpcode(0)),
             ([99, 0, 0, 0, 0, 0, 0], DecodeError::UnknownOpcode(99)),
             ([4, 4, 1, 0, 0, 0, 0], DecodeError::BadValue("Channel")),
@@ -1655,7 +1898,9 @@ mod tests {
                 DecodeError::BadValue("CalibrationValue"),
             ),
             ([7, 0, 0, 0, 0, 0, 0], DecodeError::BadValue("ConfigValue")),
-            ([7, 5, 1, 0, 0, 0, 0], DecodeError::BadValue("ConfigItem")),
+            ([7, 15, 1, 0, 0, 0, 0], DecodeError::BadValue("ConfigItem")),
+            // An I/O item (5: the full-scale duty, 20-990 per mille) out of its range.
+            ([7, 5, 1, 0, 0, 0, 0], DecodeError::BadValue("ConfigValue")),
             // Surface code 5 in a zone (bits 13-15 of byte 1), and as a track's base.
             (
                 [8, 5 << 5, 0, 0, 0, 0, 0],

@@ -5,9 +5,11 @@
 //! no allocation. Queues that feed lower-priority tasks (CAN transmission, defmt logging)
 //! report "full" instead of blocking; the step counts what it had to drop.
 
+use crate::controller_io::DrivenOutputs;
 use crate::pulse::PulseRegisters;
 use crate::sensor::ADC_SEQUENCE_LEN;
 use crate::telemetry::{RunHeader, TelemetryRecord};
+use crate::valves::ValveLevels;
 
 /// What the step hands to the logging task.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -64,4 +66,17 @@ pub trait RigIo {
 
     /// Queues a telemetry event for the logging task; `false` if the queue is full.
     fn queue_telemetry(&mut self, event: &TelemetryEvent) -> bool;
+
+    /// The valve inputs' port as it reads now ([`crate::valves`]: GPIOC_IDR on the board).
+    /// Default (an IO with no valve inputs): every pin high, no coil energised through the
+    /// active-low stage.
+    fn valve_levels(&mut self) -> ValveLevels {
+        ValveLevels(u16::MAX)
+    }
+
+    /// Drives the EB loop relay, the service demand PWM and the air-spring DACs
+    /// ([`crate::controller_io`]). Default (an IO without those lines): nothing.
+    fn set_controller_outputs(&mut self, outputs: &DrivenOutputs) {
+        let _ = outputs;
+    }
 }

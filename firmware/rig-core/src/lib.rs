@@ -8,6 +8,8 @@
 //! is a thin HAL shell that moves bytes between these types and the peripherals.
 //!
 //! Modules, one concern each:
+//! * [`adc_watch`]: the ADC ring's stall (no progress, overrun) and its aligned restart.
+//! * [`arming`]: the arming gate: whether the outputs a real controller reads are live.
 //! * [`can`]: the CAN frame codec over [`embedded_can::Frame`] (wheel speeds, status,
 //!   diagnostics out; commands in), described by `hils.dbc` beside this crate.
 //! * [`sensor`]: ADC oversampling, offset/gain calibration, scaling to clamp force or
@@ -16,14 +18,22 @@
 //! * [`timing`]: step accounting from the DWT cycle counter (max, mean, overruns, missed ticks).
 //! * [`bus`]: CAN bus state supervision (error passive, bus-off, recovery).
 //! * [`can_timing`]: nominal CAN bit timing from the kernel clock and its oscillator tolerance.
+//! * [`fdcan`]: FDCAN register sequences: bus-off restart with the TX FIFO flushed, NBTP
+//!   checked before joining the bus, Rx FIFO elements.
 //! * [`can_tx`]: transmit freshness (stale frames dropped and counted, not sent late).
 //! * [`log_gate`]: counting the telemetry the RTT channel could not take.
+//! * [`reset_loop`]: fault resets in a row, kept across resets, and the hold after three.
+//! * [`stack`]: the painted stack's high-water mark and telling an overflow HardFault.
 //! * [`handoff`]: the slot protocol that hands a value built in thread mode to the step.
 //! * [`heartbeat`]: whether thread mode is alive (the watchdog is fed only then).
 //! * [`bringup`]: pass/fail rules of the board's bring-up self-test.
 //! * [`telemetry`]: the decimated telemetry record, its defmt line and its parser.
 //! * [`setup`]: the track and vehicle a run is set up with, as the board keeps them.
 //! * [`digest`]: the CRC-16 setup digest a `Start` carries.
+//! * [`valves`]: the controller's WSP dump and hold valve inputs, debounced.
+//! * [`demand`]: the brake demand to the controller: emergency brake loop, service PWM.
+//! * [`load`]: the air-spring pressure (load-weighing) signals on the DACs.
+//! * [`controller_io`]: the controller I/O's configuration and what the step drives.
 //! * [`rig`]: the real-time step and the run state machine (commands, faults, safe state).
 //! * [`hw`]: the hardware-interface traits the board implements.
 //! * [`script`]: a scripted self-test run shared by the QEMU telemetry fixture and its host check.
@@ -33,23 +43,32 @@
 #[cfg(test)]
 extern crate std;
 
+pub mod adc_watch;
+pub mod arming;
 pub mod bringup;
 pub mod bus;
 pub mod can;
 pub mod can_timing;
 pub mod can_tx;
+pub mod controller_io;
+pub mod demand;
 pub mod digest;
+pub mod fdcan;
 pub mod handoff;
 pub mod heartbeat;
 pub mod hw;
+pub mod load;
 pub mod log_gate;
 pub mod pulse;
+pub mod reset_loop;
 pub mod rig;
 pub mod script;
 pub mod sensor;
 pub mod setup;
+pub mod stack;
 pub mod telemetry;
 pub mod timing;
+pub mod valves;
 
 pub use hils_plant::WHEELSETS;
 

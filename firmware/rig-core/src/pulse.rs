@@ -12,10 +12,17 @@
 //! speed signal) and for NaN the output is silent: CCR = 0 holds the pin low, with a short
 //! 0.1 ms period so that the next setting takes effect at once.
 //!
-//! **Update.** The board writes the registers every step with preload (ARR and CCR
-//! preloaded, PSC always is): the new frequency starts at the end of the running period,
-//! so the train never shows a runt pulse. Like a real sensor, a change shows within one
-//! period of the old frequency.
+//! **Update** ([`update`], [`apply`]; RM0440 TIMx_CR1.UDIS, TIMx_EGR.UG, TIMx_CCMRx.OCxM).
+//! A new frequency is written with preload (ARR and CCR preloaded, PSC always is) under
+//! CR1.UDIS, so an update event that falls between the three writes cannot load a mixed
+//! PSC/ARR pair (a wrong frequency for one period; possible whenever the prescaler changes,
+//! e.g. at 1297 Hz, ~140 km/h with 90 teeth): the new frequency starts at the end of the
+//! running period, without a runt pulse, as a real sensor's change shows within a period.
+//! Going silent (safe state) does not wait for the running period (up to 2 s at 0.5 Hz):
+//! the output is forced inactive at once (OCxM = force inactive) and the silent registers
+//! are loaded (UG, with UDIS clear: UG does not load them while UDIS is set). Leaving
+//! silence loads the new registers at once (UG) and restores PWM mode 1. Unchanged
+//! registers are not written.
 
 use core::f32::consts::TAU;
 
@@ -23,7 +30,7 @@ use core::f32::consts::TAU;
 pub const MIN_FREQUENCY_HZ: f32 = 0.5;
 
 /// Register values of one pulse channel (written as they are).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct PulseRegisters {
     /// TIMx_PSC: prescaler - 1.
@@ -115,6 +122,78 @@ impl PulseTimer {
     }
 }
 
+/// How the board writes a channel's registers for a new setting ([`update`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PulseUpdate {
+    /// The same setting: nothing to write.
+    Keep,
+    /// A new frequency: PSC, ARR, CCR written under UDIS, loaded at the running period's end.
+    Preload(PulseRegisters),
+    /// Silent at once: output forced inactive, the silent registers loaded (UG).
+    SilenceNow(PulseRegisters),
+    /// From silent to a frequency: registers loaded at once (UG), PWM mode 1 again.
+    Resume(PulseRegisters),
+}
+
+/// The update from the registers last written to `next` (module doc).
+pub fn update(last: &PulseRegisters, next: &PulseRegisters) -> PulseUpdate {
+    if last == next {
+        PulseUpdate::Keep
+    } else if next.is_silent() {
+        PulseUpdate::SilenceNow(*next)
+    } else if last.is_silent() {
+        PulseUpdate::Resume(*next)
+    } else {
+        PulseUpdate::Preload(*next)
+    }
+}
+
+/// The registers of one pulse timer channel as [`apply`] drives them (the board implements
+/// it over TIM1/TIM8/TIM20/TIM15 channel 1).
+pub trait PulseTimerRegs {
+    /// TIMx_CR1.UDIS: no update event (the shadow registers keep their values).
+    fn set_update_disable(&mut self, disable: bool);
+    /// TIMx_PSC (preloaded).
+    fn write_prescaler(&mut self, psc: u16);
+    /// TIMx_ARR (preloaded, ARPE).
+    fn write_period(&mut self, arr: u32);
+    /// TIMx_CCR1 (preloaded, OC1PE).
+    fn write_compare(&mut self, ccr: u32);
+    /// TIMx_CCMR1.OC1M: PWM mode 1 (`true`) or force inactive (`false`), at once.
+    fn set_pwm(&mut self, pwm: bool);
+    /// TIMx_EGR.UG: counter to 0 and the preloaded registers into the shadows at once.
+    fn generate_update(&mut self);
+}
+
+/// PSC, ARR and CCR under UDIS (no update event between them).
+#[inline]
+fn write<T: PulseTimerRegs>(t: &mut T, r: &PulseRegisters) {
+    t.set_update_disable(true);
+    t.write_prescaler(r.psc);
+    t.write_period(r.arr);
+    t.write_compare(r.ccr);
+    t.set_update_disable(false);
+}
+
+/// Writes an update in the order that keeps every period whole (module doc).
+#[inline]
+pub fn apply(u: PulseUpdate, t: &mut impl PulseTimerRegs) {
+    match u {
+        PulseUpdate::Keep => {}
+        PulseUpdate::Preload(r) => write(t, &r),
+        PulseUpdate::SilenceNow(r) => {
+            t.set_pwm(false);
+            write(t, &r);
+            t.generate_update();
+        }
+        PulseUpdate::Resume(r) => {
+            write(t, &r);
+            t.generate_update();
+            t.set_pwm(true);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -190,6 +269,128 @@ mod tests {
         // Above the exact range the frequency is held at f_clk / 500.
         let r = TIMER.registers(1e9);
         assert!((TIMER.frequency_of(&r) - 340_000.0).abs() < 1.0);
+    }
+
+    /// A 16-bit timer as RM0440 describes the parts used: PSC, ARR, CCR1 preloaded into
+    /// shadows at an update event (overflow or UG), none while UDIS is set (UG then only
+    /// resets the counter); OC1M takes effect at once.
+    #[derive(Clone, Default)]
+    struct Timer {
+        pre: PulseRegisters,
+        shadow: PulseRegisters,
+        udis: bool,
+        pwm: bool,
+        /// An overflow happens right after this many register writes (None: never).
+        overflow_after: Option<usize>,
+        writes: usize,
+        /// Every shadow set the timer ran a period with.
+        periods: std::vec::Vec<PulseRegisters>,
+    }
+
+    impl Timer {
+        fn running(r: PulseRegisters) -> Self {
+            Self {
+                pre: r,
+                shadow: r,
+                pwm: true,
+                ..Default::default()
+            }
+        }
+        fn update_event(&mut self) {
+            if !self.udis {
+                self.shadow = self.pre;
+            }
+            self.periods.push(self.shadow);
+        }
+        fn wrote(&mut self) {
+            self.writes += 1;
+            if self.overflow_after == Some(self.writes) {
+                self.update_event();
+            }
+        }
+        /// The pin now: low when forced inactive or CCR 0.
+        fn output_can_be_high(&self) -> bool {
+            self.pwm && self.shadow.ccr > 0
+        }
+    }
+
+    impl PulseTimerRegs for Timer {
+        fn set_update_disable(&mut self, d: bool) {
+            self.udis = d;
+            self.wrote();
+        }
+        fn write_prescaler(&mut self, psc: u16) {
+            self.pre.psc = psc;
+            self.wrote();
+        }
+        fn write_period(&mut self, arr: u32) {
+            self.pre.arr = arr;
+            self.wrote();
+        }
+        fn write_compare(&mut self, ccr: u32) {
+            self.pre.ccr = ccr;
+            self.wrote();
+        }
+        fn set_pwm(&mut self, pwm: bool) {
+            self.pwm = pwm;
+            self.wrote();
+        }
+        fn generate_update(&mut self) {
+            if !self.udis {
+                self.shadow = self.pre;
+            }
+            self.wrote();
+        }
+    }
+
+    #[test]
+    fn an_update_event_between_the_writes_never_loads_a_mixed_setting() {
+        // 1297 Hz: the prescaler changes between these two (PSC 1 -> 2).
+        let (a, b) = (TIMER.registers(1300.0), TIMER.registers(1290.0));
+        assert_ne!(a.psc, b.psc);
+        for at in 0..8 {
+            let mut t = Timer::running(a);
+            t.overflow_after = Some(at);
+            apply(update(&a, &b), &mut t);
+            t.update_event();
+            assert!(
+                t.periods.iter().all(|p| *p == a || *p == b),
+                "overflow after write {at}: {:?}",
+                t.periods
+            );
+            assert_eq!(t.shadow, b);
+        }
+        // Negative control: the same writes without UDIS load a mixed pair for some timing.
+        let mixed = (0..4).any(|at| {
+            let mut t = Timer::running(a);
+            t.overflow_after = Some(at);
+            t.write_prescaler(b.psc);
+            t.write_period(b.arr);
+            t.write_compare(b.ccr);
+            t.periods.iter().any(|p| *p != a && *p != b)
+        });
+        assert!(mixed);
+    }
+
+    #[test]
+    fn going_silent_is_at_once_and_coming_back_too() {
+        let slow = TIMER.registers(0.6); // a 1.7 s period
+        let silent = TIMER.silent();
+        let mut t = Timer::running(slow);
+        let u = update(&slow, &silent);
+        assert_eq!(u, PulseUpdate::SilenceNow(silent));
+        apply(u, &mut t);
+        // Low now, without waiting for the running period; the silent setting loaded.
+        assert!(!t.output_can_be_high());
+        assert_eq!((t.shadow, t.udis), (silent, false));
+        let fast = TIMER.registers(1388.0);
+        let u = update(&silent, &fast);
+        assert_eq!(u, PulseUpdate::Resume(fast));
+        apply(u, &mut t);
+        assert!(t.output_can_be_high());
+        assert_eq!(t.shadow, fast);
+        assert_eq!(update(&fast, &fast), PulseUpdate::Keep);
+        assert_eq!(update(&fast, &slow), PulseUpdate::Preload(slow));
     }
 
     proptest! {

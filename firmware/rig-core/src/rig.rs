@@ -37,6 +37,17 @@
 //! Overruns, missed ticks, dropped frames or telemetry, CAN error passive and bus-off are
 //! flagged and counted but do not stop a run (the rig operator decides from the flags).
 //! `ClearFaults` clears latched faults whose cause is gone and takes `Fault` to `Stopped`.
+//!
+//! # Arming
+//!
+//! The outputs a real controller reads (pulse trains, wheel speeds, the controller I/O) are
+//! live only when the arming gate says so ([`crate::arming`], [`Rig::controller_outputs_live`]):
+//! armed by the `Arm` command, in a rig-mode run started armed (arming alone makes nothing
+//! live). A rig-mode `Start` is refused while the rig
+//! is not armed ([`CommandError::NotArmed`]); `Stop`, `Fault`, a latched fault, a self-test
+//! start, `Disarm` and every reset disarm it. A self-test run (the button, `selftest-autostart`,
+//! a self-test `Start`) never drives these outputs: its speeds are in the telemetry and the
+//! status frame only.
 
 use embedded_can::Frame;
 use hils_brake_unit::BrakeDemand;
@@ -49,18 +60,22 @@ use hils_sil::scenario::at_standstill;
 use hils_sil::{ClosedLoop, LoopError};
 
 use crate::Code;
+use crate::arming::{ArmRefused, ArmingGate, Disarm};
 use crate::can::{
-    BrakeCommand, Calibration, Command, CommandFrame, CommandResult, ConfigItem, DecodeError,
-    DiagFrame, RigMode, RigState, StartCommand, StatusFrame, TrackCommand, WHEEL_SPEED_MAX_KMH,
-    WheelSpeedFrame, ZoneFrame, friction_code, rail_code, surface_code,
+    BrakeCommand, BrakeDemandFrame, Calibration, Command, CommandFrame, CommandResult, ConfigItem,
+    DecodeError, DiagFrame, HealthFrame, RigMode, RigState, StartCommand, StatusFrame,
+    TrackCommand, WHEEL_SPEED_MAX_KMH, WheelSpeedFrame, ZoneFrame, friction_code, rail_code,
+    surface_code,
 };
+use crate::controller_io::{DrivenOutputs, IoConfig, IoConfigError, IoItem};
 use crate::digest::setup_digest;
 use crate::hw::{RigIo, TelemetryEvent};
 use crate::pulse::{PulseRegisters, PulseTimer, wheel_frequency_hz};
 use crate::sensor::{CalibrationError, SensorChannel, SensorFault, SensorKind, split_sequence};
 use crate::setup::{TrackFrames, VehicleValues};
-use crate::telemetry::{RunHeader, TelemetryRecord, WSP_KNOWN};
+use crate::telemetry::{RunHeader, TelemetryRecord};
 use crate::timing::{StepTiming, cycles_to_us};
+use crate::valves::{ValveInputs, ValveStates};
 use crate::{CHANNELS, KMH_PER_MPS, STEP_RATE_HZ, WHEELSETS};
 
 /// A frame schedule in ticks: sent when `tick % period == phase`.
@@ -93,6 +108,17 @@ pub const STATUS_SCHEDULE: Schedule = Schedule {
 pub const DIAG_SCHEDULE: Schedule = Schedule {
     period: 1000,
     phase: 50,
+};
+/// `RIG_HEALTH` every 1000 ticks (100 ms), half a period after `RIG_DIAG`.
+pub const HEALTH_SCHEDULE: Schedule = Schedule {
+    period: 1000,
+    phase: 550,
+};
+/// `RIG_BRAKE_DEMAND` (when configured) every 100 ticks (10 ms), and in the tick the demand
+/// changes.
+pub const DEMAND_SCHEDULE: Schedule = Schedule {
+    period: 100,
+    phase: 2,
 };
 /// Ticks without a fresh ADC sequence after which a rig-mode run faults (1 ms).
 pub const ADC_STALE_TICKS: u32 = 10;
@@ -142,6 +168,23 @@ bitflags::bitflags! {
     }
 }
 
+/// The board's own health as its tasks measured it, for `RIG_HEALTH`
+/// ([`Rig::set_board_health`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BoardHealth {
+    /// Stack high-water mark since power-up, bytes.
+    pub stack_peak_bytes: u32,
+    /// The stack's size, bytes.
+    pub stack_size_bytes: u32,
+    /// Command frames lost in reception since power-up: a lower bound (FDCAN RF0L is a
+    /// flag; losses before the interrupt clears it count once).
+    pub rx_lost: u32,
+    /// ADC ring restarts since power-up.
+    pub adc_restarts: u32,
+    /// Consecutive fault resets before this start.
+    pub fault_resets: u32,
+}
+
 /// Configuration of the rig.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RigConfig {
@@ -153,16 +196,20 @@ pub struct RigConfig {
     pub teeth: u16,
     /// Telemetry every this many plant steps.
     pub telemetry_divider: u16,
+    /// The controller I/O: valve inputs wired, demand and load signals.
+    pub io: IoConfig,
 }
 
 impl RigConfig {
-    /// NUCLEO-G474RE at 170 MHz, 16-bit pulse timers at 170 MHz, 90 teeth, 100 Hz telemetry.
+    /// NUCLEO-G474RE at 170 MHz, 16-bit pulse timers (the demand PWM's too) at 170 MHz, 90
+    /// teeth, 100 Hz telemetry, no valve input wired, the default demand and load signals.
     pub const fn nucleo_g474re() -> Self {
         Self {
             cpu_hz: 170_000_000,
             pulse_timer: PulseTimer::timer16(170_000_000),
             teeth: 90,
             telemetry_divider: 100,
+            io: IoConfig::DEFAULT,
         }
     }
 }
@@ -202,6 +249,9 @@ pub enum CommandError {
     },
     /// The calibration command was refused.
     Calibration(CalibrationError),
+    /// A controller I/O configuration value that would make the configuration
+    /// inconsistent ([`IoConfig::set`]).
+    IoConfig(IoConfigError),
     /// A `Start` whose `StartDigest` differs from the digest of the track and vehicle the
     /// board keeps ([`crate::digest::setup_digest`]): a `Track` or `Vehicle` frame the
     /// sender sent did not arrive. Nothing changes; the sender resends the setup.
@@ -209,6 +259,10 @@ pub enum CommandError {
         /// The digest of the board's setup.
         kept: u16,
     },
+    /// A rig-mode `Start` while the rig is not armed for a controller (send `Arm` first).
+    NotArmed,
+    /// The `Arm` command was refused.
+    Arm(ArmRefused),
 }
 
 /// The simulation of a run.
@@ -397,8 +451,13 @@ pub struct Rig<S: SimStore = Simulation> {
     stale_ticks: u32,
     /// `ClearFaults` asked the bus supervision to clear its sticky bus-off (board).
     bus_clear_requested: bool,
-    counters: [u8; 2],
+    /// Alive counters: wheel speeds, status, health, brake demand.
+    counters: [u8; 4],
     diag_window: DiagWindow,
+    /// The valve inputs (debounced each tick).
+    valves: ValveInputs,
+    /// The controller outputs as last driven.
+    driven: DrivenOutputs,
     wheel_speed_kmh: [Option<f32>; WHEELSETS],
     pulses: [PulseRegisters; WHEELSETS],
     /// Sensor channels with a condition present but not latched (this tick).
@@ -423,6 +482,10 @@ pub struct Rig<S: SimStore = Simulation> {
     stale_builds: u32,
     /// The track and vehicle kept for the following runs.
     setup: KeptSetup,
+    /// Whether the outputs a controller reads are live ([`crate::arming`]).
+    arming: ArmingGate,
+    /// The board's own health (`RIG_HEALTH`).
+    health: BoardHealth,
 }
 
 /// What the board keeps for the following runs from `TrackZone`, `Track` and `Vehicle`
@@ -562,8 +625,10 @@ impl<S: SimStore> Rig<S> {
             last_result: CommandResult::None,
             stale_ticks: 0,
             bus_clear_requested: false,
-            counters: [0; 2],
+            counters: [0; 4],
             diag_window: DiagWindow::default(),
+            valves: ValveInputs::new(config.io.valves),
+            driven: DrivenOutputs::safe(&config.pulse_timer),
             wheel_speed_kmh: [None; WHEELSETS],
             pulses: [silent; WHEELSETS],
             pending: [false; CHANNELS],
@@ -577,6 +642,8 @@ impl<S: SimStore> Rig<S> {
             start_seq: 0,
             stale_builds: 0,
             setup: KeptSetup::default(),
+            arming: ArmingGate::new(),
+            health: BoardHealth::default(),
         }
     }
 
@@ -616,6 +683,23 @@ impl<S: SimStore> Rig<S> {
     /// State of the rig.
     pub fn state(&self) -> RigState {
         self.state
+    }
+
+    /// The arming gate of the outputs a controller reads.
+    pub fn arming(&self) -> &ArmingGate {
+        &self.arming
+    }
+
+    /// Whether the outputs a controller reads are live now (armed, in a rig-mode run:
+    /// [`ArmingGate::outputs_live`]). Every controller-facing output follows this answer
+    /// and holds its safe value otherwise.
+    pub fn controller_outputs_live(&self) -> bool {
+        self.arming.outputs_live(self.state, self.mode)
+    }
+
+    /// Whether a sensor channel has a latched fault.
+    fn sensor_fault_latched(&self) -> bool {
+        self.sensors.iter().any(|s| s.fault().is_some())
     }
 
     /// The simulation, unless the store is lent to the builder.
@@ -695,6 +779,12 @@ impl<S: SimStore> Rig<S> {
         self.bus_flags.set(Faults::CAN_ERROR_PASSIVE, error_passive);
         self.bus_flags.set(Faults::CAN_BUS_OFF, bus_off);
         self.bus_off_count = bus_off_count.min(255) as u8;
+    }
+
+    /// The board's own health as its tasks measured it (stack, receive losses, ADC
+    /// restarts, fault resets), sent in `RIG_HEALTH`.
+    pub fn set_board_health(&mut self, health: BoardHealth) {
+        self.health = health;
     }
 
     /// Whether `ClearFaults` asked since the last call that the bus supervision clear its
@@ -778,23 +868,34 @@ impl<S: SimStore> Rig<S> {
             initial_speed_kmh,
             ..
         } = start;
-        if track && self.setup.track().is_none() {
-            return Err(CommandError::NoTrack);
-        }
+        // In this order (the host names a rejection by the same order): busy, speed,
+        // sensor faults, arming, track, setup digest.
         if self.busy() {
             return Err(CommandError::NotNow(self.state));
         }
         if !(0.0..=WHEEL_SPEED_MAX_KMH).contains(&initial_speed_kmh) {
             return Err(CommandError::SpeedOutOfRange);
         }
-        if mode == RigMode::Rig && self.sensors.iter().any(|s| s.fault().is_some()) {
+        if mode == RigMode::Rig && self.sensor_fault_latched() {
             return Err(CommandError::SensorFaults);
+        }
+        if mode == RigMode::Rig && !self.arming.is_armed() {
+            return Err(CommandError::NotArmed);
+        }
+        if track && self.setup.track().is_none() {
+            return Err(CommandError::NoTrack);
         }
         // After the busy check: the CRC runs only on an idle board's step.
         let kept = self.kept_setup_digest(track);
         if start.setup_digest != kept {
             return Err(CommandError::SetupMismatch { kept });
         }
+        if mode == RigMode::SelfTest {
+            // The board's own brake unit closes this loop: the controller is not in it.
+            self.arming.disarm(Disarm::SelfTest);
+        }
+        // The run before drives nothing from here, whatever becomes of this request.
+        self.arming.run_left();
         // The old run's simulation is no longer shown (plain data: nothing to drop).
         if let Some(sim) = self.sim_mut() {
             *sim = Sim::None;
@@ -880,12 +981,14 @@ impl<S: SimStore> Rig<S> {
         self.rail = req.rail;
         self.friction = req.friction;
         self.initial_speed_kmh = req.initial_speed_kmh;
+        // Rig mode: the demand in force (the board drives it on the train lines) stays.
         self.brake = match (req.mode, req.emergency) {
             (RigMode::SelfTest, true) => Some(BrakeCommand::Emergency),
             (RigMode::SelfTest, false) => Some(BrakeCommand::Release),
-            (RigMode::Rig, _) => None,
+            (RigMode::Rig, _) => self.brake,
         };
         self.state = RigState::Running;
+        self.arming.run_started(req.mode);
         self.run_steps = 0;
         self.timing.reset();
         self.diag_window = DiagWindow::default();
@@ -910,6 +1013,7 @@ impl<S: SimStore> Rig<S> {
                     self.start_request = None;
                     self.start_request_new = false;
                     self.state = RigState::Stopped;
+                    self.arming.disarm(Disarm::Stop);
                     Ok(())
                 }
                 s => Err(CommandError::NotNow(s)),
@@ -918,8 +1022,8 @@ impl<S: SimStore> Rig<S> {
                 if let Some(Sim::SelfTest(c)) = self.sim_mut() {
                     c.set_demand(b);
                 }
-                // In rig mode the brake controller gets its command from the train lines;
-                // the command is kept as the run log's `cmd` marker.
+                // In rig mode the board drives the command on the train lines (EB loop,
+                // service PWM: `update_outputs`, this tick) and logs it as `cmd`.
                 self.brake = Some(b);
                 Ok(())
             }
@@ -976,22 +1080,48 @@ impl<S: SimStore> Rig<S> {
                 match item {
                     ConfigItem::TelemetryDivider(d) => self.config.telemetry_divider = d.max(1),
                     ConfigItem::Teeth(t) => self.config.teeth = t.max(1),
+                    ConfigItem::Io(item, v) => {
+                        self.config
+                            .io
+                            .set(item, v)
+                            .map_err(CommandError::IoConfig)?;
+                        if item == IoItem::ValveWiring {
+                            self.valves.set_wiring(self.config.io.valves);
+                        }
+                    }
                 }
                 Ok(())
             }
             Command::TrackZone { .. } | Command::Track(_) => self.setup.apply(&command),
             Command::Vehicle { .. } => self.vehicle_command(&command),
+            Command::Arm => self
+                .arming
+                .arm(self.state, self.sensor_fault_latched())
+                .map_err(CommandError::Arm),
+            Command::Disarm => {
+                self.arming.disarm(Disarm::Command);
+                Ok(())
+            }
         }
     }
 
+    /// Ends the run in `state`; `Fault` and `Stopped` disarm (safe state).
     fn end_run(&mut self, state: RigState) {
         self.state = state;
         self.end_event = true;
+        match state {
+            RigState::Fault => self.arming.disarm(Disarm::Fault),
+            RigState::Stopped => self.arming.disarm(Disarm::Stop),
+            _ => {}
+        }
     }
 
     /// One tick of the real-time loop.
     pub fn step<IO: RigIo>(&mut self, io: &mut IO) {
         self.tick = self.tick.wrapping_add(1);
+
+        // 0. Valve inputs, sampled at the start of every tick.
+        self.valves.update(io.valve_levels());
 
         // 1. Sensors.
         // Without a fresh sequence the channels are not updated (a stalled DMA is one
@@ -1139,18 +1269,13 @@ impl<S: SimStore> Rig<S> {
             surfaces |= surface_code(*s) << (2 * j);
         }
         let w = |f: &dyn Fn(usize) -> f32| -> [f32; 4] { [f(0), f(1), f(2), f(3)] };
-        let (p_cyl, f_clamp, wsp) = match unit {
+        let (p_cyl, f_clamp, valves) = match unit {
             Some(u) => {
-                let mut bits = WSP_KNOWN;
-                for j in 0..WHEELSETS {
-                    if u.venting[j] {
-                        bits |= 1 << j;
-                    }
-                }
+                let holding = u.valves.map(|v| v == hils_brake_unit::Valve::Hold);
                 (
                     u.cylinder_pressure_pa,
                     w(&|j| o.wheelsets[j].clamp_force),
-                    bits,
+                    ValveStates::of_unit(u.venting, holding),
                 )
             }
             None => {
@@ -1166,7 +1291,7 @@ impl<S: SimStore> Rig<S> {
                 (
                     measured(SensorKind::PressureTransducer),
                     measured(SensorKind::LoadCell),
-                    0,
+                    self.valves.states(),
                 )
             }
         };
@@ -1178,7 +1303,8 @@ impl<S: SimStore> Rig<S> {
                 .brake
                 .map(|b| u8::from(hils_sil::Cmd::of(b)))
                 .unwrap_or(0xFF),
-            wsp,
+            driven: self.driven.bits(),
+            valves: valves.bits(),
             v_ref: o.vehicle_speed,
             omega: w(&|j| o.wheelsets[j].omega),
             p_cyl,
@@ -1188,6 +1314,8 @@ impl<S: SimStore> Rig<S> {
             q: w(&|j| o.wheelsets[j].axle_load),
             mu_d: w(&|j| o.wheelsets[j].mu_d),
             a_x: o.carbody_accel,
+            service_demand: self.driven.service_mps2,
+            air_spring: self.driven.air_spring_pa,
             step_max_cycles: window.max_cycles,
             step_mean_cycles: window.mean_cycles,
             overruns: self.timing.overruns,
@@ -1210,17 +1338,25 @@ impl<S: SimStore> Rig<S> {
     }
 
     fn update_outputs<IO: RigIo>(&mut self, io: &mut IO) {
+        // Every fault disarms (a latched sensor fault also outside a run).
+        if self.sensor_fault_latched() {
+            self.arming.disarm(Disarm::Fault);
+        }
+        // The run's plant (status frame), and the plant the controller-facing outputs show:
+        // only while the arming gate says they are live.
         let live = matches!(self.state, RigState::Running | RigState::Finished);
-        // Wheel circumferential speeds r omega (m/s) for CAN, spin speeds omega (rad/s)
-        // for the pulse trains.
-        let (speeds, o) = match (sim_in(&self.sim, self.sim_lent), live) {
-            (Some(Sim::Rig(p)), true) => (p.wheel_speeds(), Some(p)),
-            (Some(Sim::SelfTest(c)), true) => (c.plant.wheel_speeds(), Some(&c.plant)),
-            _ => ([0.0; WHEELSETS], None),
+        let plant = match (sim_in(&self.sim, self.sim_lent), live) {
+            (Some(Sim::Rig(p)), true) => Some(p),
+            (Some(Sim::SelfTest(c)), true) => Some(&c.plant),
+            _ => None,
         };
-        let (v, a) = o
+        let (v, a) = plant
             .map(|p| (p.vehicle_speed(), p.carbody_accel()))
             .unwrap_or((0.0, 0.0));
+        let o = plant.filter(|_| self.arming.outputs_live(self.state, self.mode));
+        // Wheel circumferential speeds r omega (m/s) for CAN, spin speeds omega (rad/s)
+        // for the pulse trains.
+        let speeds = o.map(|p| p.wheel_speeds()).unwrap_or([0.0; WHEELSETS]);
         // At rest after the run (`Finished`): trains silent, speeds 0.00 km/h (the plant's
         // residual creep and carbody swing-back are not wheel rotation to report).
         let at_rest = self.state == RigState::Finished;
@@ -1244,6 +1380,8 @@ impl<S: SimStore> Rig<S> {
             });
         }
 
+        self.drive_controller(io);
+
         if WHEEL_SPEED_SCHEDULE.due(self.tick) {
             let mut saturated = false;
             for s in self.wheel_speed_kmh {
@@ -1252,7 +1390,8 @@ impl<S: SimStore> Rig<S> {
             if saturated {
                 self.sticky |= Faults::SPEED_SATURATED;
             }
-            for frame in WheelSpeedFrame::cycle(self.wheel_speed_kmh, self.counters[0]) {
+            let valves = self.valves.states();
+            for frame in WheelSpeedFrame::cycle(self.wheel_speed_kmh, valves, self.counters[0]) {
                 self.send(io, frame.encode());
             }
             self.counters[0] = (self.counters[0] + 1) & 0x0F;
@@ -1287,6 +1426,66 @@ impl<S: SimStore> Rig<S> {
             };
             self.send(io, frame.encode());
         }
+        if HEALTH_SCHEDULE.due(self.tick) {
+            let h = self.health;
+            let frame = HealthFrame {
+                stack_peak_bytes: h.stack_peak_bytes,
+                stack_size_bytes: h.stack_size_bytes,
+                rx_lost: h.rx_lost.min(255) as u8,
+                adc_restarts: h.adc_restarts.min(255) as u8,
+                disarmed: self.arming.disarmed_by(),
+                fault_resets: h.fault_resets.min(15) as u8,
+                counter: self.counters[2],
+            };
+            self.counters[2] = (self.counters[2] + 1) & 0x0F;
+            self.send(io, frame.encode());
+        }
+    }
+
+    /// The controller's demand and load lines ([`crate::controller_io`]): while the arming
+    /// gate says the controller-facing outputs are live (armed, a rig-mode run running or
+    /// finished: [`Rig::controller_outputs_live`]) the brake command in force (release when
+    /// none was given) and the plant's air-spring forces; else, in the same tick, the safe
+    /// outputs. The demand frame, when configured, on its schedule and in the tick the
+    /// demand changes.
+    fn drive_controller<IO: RigIo>(&mut self, io: &mut IO) {
+        let timer = self.config.pulse_timer;
+        let plant = if self.controller_outputs_live() {
+            self.plant()
+        } else {
+            None
+        };
+        let driven = match plant {
+            Some(p) => self.config.io.driven(
+                &timer,
+                self.brake.unwrap_or(BrakeCommand::Release),
+                p.air_spring_forces(),
+            ),
+            None => DrivenOutputs::safe(&timer),
+        };
+        let changed = (driven.eb_loop_closed, driven.service_mps2)
+            != (self.driven.eb_loop_closed, self.driven.service_mps2);
+        self.driven = driven;
+        io.set_controller_outputs(&driven);
+        if self.config.io.demand.frame && (changed || DEMAND_SCHEDULE.due(self.tick)) {
+            let frame = BrakeDemandFrame {
+                eb_loop_closed: driven.eb_loop_closed,
+                service_mps2: driven.service_mps2,
+                counter: self.counters[3],
+            };
+            self.counters[3] = (self.counters[3] + 1) & 0x0F;
+            self.send(io, frame.encode());
+        }
+    }
+
+    /// The valve inputs as the step last sampled them (debounced; wired ones known).
+    pub fn valve_states(&self) -> ValveStates {
+        self.valves.states()
+    }
+
+    /// The controller outputs as last driven.
+    pub fn driven(&self) -> DrivenOutputs {
+        self.driven
     }
 
     fn send<IO: RigIo>(&mut self, io: &mut IO, frame: Option<IO::Frame>) {

@@ -96,7 +96,7 @@ pub const COST_TICKS: u32 = 21_400;
 
 /// The command the cost sequence (issue 11, `hils target-cost --rig`) gives at tick `k`,
 /// carried out in that tick's step: the self-test paper scenario started and run 2 s,
-/// stopped, restarted in rig mode (measured brake inputs, 120 km/h), a sensor fault
+/// stopped, armed, restarted in rig mode (measured brake inputs, 120 km/h), a sensor fault
 /// injected (the run faults), removed, cleared, then a calibration (tare, gain, kind).
 pub fn cost_command(k: u32) -> Option<Command> {
     let inject = |fault| Command::InjectFault { channel: 1, fault };
@@ -104,6 +104,7 @@ pub fn cost_command(k: u32) -> Option<Command> {
     Some(match k {
         0 => Command::paper_self_test(FrictionModel::Variable),
         20_000 => Command::Stop,
+        20_005 => Command::Arm,
         20_010 => Command::Start(StartCommand {
             mode: RigMode::Rig,
             rail: Rail::Dry,

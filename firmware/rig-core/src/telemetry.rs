@@ -1,7 +1,7 @@
 //! Telemetry: the decimated record of a run, its defmt lines and their parser.
 //!
 //! The board logs one [`TelemetryRecord`] every `divider` plant steps (default 100: 100 Hz)
-//! as a defmt line `tlm1 <44 fields>`, a [`RunHeader`] line `tlm1-start ...` when a run
+//! as a defmt line `tlm1 <48 fields>`, a [`RunHeader`] line `tlm1-start ...` when a run
 //! starts and a `tlm1-end <step> <state>` line when it ends. The host decoder (`hils decode`)
 //! gets the lines' text from defmt's decoder (or from a probe-rs log), parses them here
 //! ([`parse_line`]) and writes a run-log CSV (`spec/measured-data.md`, section 1).
@@ -21,13 +21,14 @@
 use crate::Code;
 use crate::can::{RigMode, RigState};
 
-/// Names of the fields of a `tlm1` line, in order (44).
-pub const FIELDS: [&str; 44] = [
+/// Names of the fields of a `tlm1` line, in order (48).
+pub const FIELDS: [&str; 48] = [
     "step",
     "state",
     "mode",
     "cmd",
-    "wsp",
+    "driven",
+    "valves",
     "v_ref",
     "omega1",
     "omega2",
@@ -58,6 +59,9 @@ pub const FIELDS: [&str; 44] = [
     "mu_d3",
     "mu_d4",
     "a_x",
+    "service_demand",
+    "air_spring1",
+    "air_spring2",
     "step_max_cycles",
     "step_mean_cycles",
     "overruns",
@@ -76,9 +80,6 @@ pub const HEADER_TAG: &str = "tlm1-start";
 /// Tag of a run end line.
 pub const END_TAG: &str = "tlm1-end";
 
-/// `wsp` bit: the valve states are known (self-test mode); bits 0-3 = wheelset 1-4 venting.
-pub const WSP_KNOWN: u8 = 0x80;
-
 /// One telemetry record (SI units).
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
 pub struct TelemetryRecord {
@@ -90,8 +91,13 @@ pub struct TelemetryRecord {
     pub mode: u8,
     /// Brake command in force (`hils_sil::Cmd` code of [`crate::can::BrakeCommand`]).
     pub cmd: u8,
-    /// WSP venting bits 0-3, [`WSP_KNOWN`] when known.
-    pub wsp: u8,
+    /// What the step drove on the controller's lines ([`crate::controller_io::DrivenOutputs::bits`]):
+    /// bit 0 EB loop closed, 1 service PWM active, 2 air-spring DACs active.
+    pub driven: u8,
+    /// The WSP valves ([`crate::valves::ValveStates::bits`]): bits 0-3 dump, 4-7 hold,
+    /// 8-11 dump known, 12-15 hold known (rig mode: the inputs wired; self-test: the
+    /// simulated unit's valves, all known).
+    pub valves: u16,
     /// Vehicle (carbody) speed, m/s.
     pub v_ref: f32,
     /// Wheelset angular speeds, rad/s.
@@ -110,6 +116,10 @@ pub struct TelemetryRecord {
     pub mu_d: [f32; 4],
     /// Carbody longitudinal acceleration, m/s^2.
     pub a_x: f32,
+    /// Service deceleration driven on the demand PWM, m/s^2 (0 while silent).
+    pub service_demand: f32,
+    /// Air-spring pressure of bogie 1 and 2 driven on the DACs, Pa (NaN while silent).
+    pub air_spring: [f32; 2],
     /// Longest and mean step since the last record, CPU cycles.
     pub step_max_cycles: u32,
     /// Mean step since the last record, CPU cycles.
@@ -274,7 +284,8 @@ pub fn parse_line(text: &str) -> Result<Option<Line>, ParseError> {
                 state: f.next()?,
                 mode: f.next()?,
                 cmd: f.next()?,
-                wsp: f.next()?,
+                driven: f.next()?,
+                valves: f.next()?,
                 v_ref: f.next()?,
                 omega: f.four()?,
                 p_cyl: f.four()?,
@@ -284,6 +295,8 @@ pub fn parse_line(text: &str) -> Result<Option<Line>, ParseError> {
                 q: f.four()?,
                 mu_d: f.four()?,
                 a_x: f.next()?,
+                service_demand: f.next()?,
+                air_spring: [f.next()?, f.next()?],
                 step_max_cycles: f.next()?,
                 step_mean_cycles: f.next()?,
                 overruns: f.next()?,
@@ -394,7 +407,8 @@ impl TelemetryRecord {
             state,
             mode,
             cmd,
-            wsp,
+            driven,
+            valves,
             v_ref,
             omega,
             p_cyl,
@@ -404,6 +418,8 @@ impl TelemetryRecord {
             q,
             mu_d,
             a_x,
+            service_demand,
+            air_spring,
             step_max_cycles,
             step_mean_cycles,
             overruns,
@@ -414,14 +430,17 @@ impl TelemetryRecord {
             seq,
         } = self;
         visit(FieldValue::U32(*step));
-        for code in [state, mode, cmd, wsp] {
+        for code in [state, mode, cmd, driven] {
             visit(FieldValue::U8(*code));
         }
+        visit(FieldValue::U16(*valves));
         visit(FieldValue::F32(*v_ref));
         for values in [omega, p_cyl, f_clamp, f_brake, t_disc, q, mu_d] {
             values.iter().for_each(|&x| visit(FieldValue::F32(x)));
         }
-        visit(FieldValue::F32(*a_x));
+        for x in [a_x, service_demand, &air_spring[0], &air_spring[1]] {
+            visit(FieldValue::F32(*x));
+        }
         for count in [
             step_max_cycles,
             step_mean_cycles,
@@ -462,12 +481,13 @@ impl TelemetryRecord {
     pub fn log(&self) {
         let r = self;
         defmt::println!(
-            "tlm1 {=u32} {=u8} {=u8} {=u8} {=u8} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=u32} {=u32} {=u32} {=u32} {=u32} {=u16} {=u8} {=u32} {=u32}",
+            "tlm1 {=u32} {=u8} {=u8} {=u8} {=u8} {=u16} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=f32} {=u32} {=u32} {=u32} {=u32} {=u32} {=u16} {=u8} {=u32} {=u32}",
             r.step,
             r.state,
             r.mode,
             r.cmd,
-            r.wsp,
+            r.driven,
+            r.valves,
             r.v_ref,
             r.omega[0],
             r.omega[1],
@@ -498,6 +518,9 @@ impl TelemetryRecord {
             r.mu_d[2],
             r.mu_d[3],
             r.a_x,
+            r.service_demand,
+            r.air_spring[0],
+            r.air_spring[1],
             r.step_max_cycles,
             r.step_mean_cycles,
             r.overruns,
@@ -562,7 +585,8 @@ mod tests {
             state: 1,
             mode: 1,
             cmd: 1,
-            wsp: WSP_KNOWN | 0b1010,
+            driven: 0b101,
+            valves: 0xFF_1A,
             v_ref: 38.5,
             omega: [88.1, 87.9, 1.0e-7, 0.0],
             p_cyl: [f32::NAN, 312_345.67, 0.1, 3.0e5],
@@ -572,6 +596,8 @@ mod tests {
             q: [99_000.0, 101_000.5, 98_000.25, 100_000.0],
             mu_d: [0.41, 0.39, 0.4, 0.42],
             a_x: -1.3889,
+            service_demand: 0.8,
+            air_spring: [5.05e5, f32::NAN],
             step_max_cycles: 9_000,
             step_mean_cycles: 7_000,
             overruns: 2,
@@ -650,15 +676,15 @@ mod tests {
         assert_eq!(
             parse_line(short),
             Err(ParseError::FieldCount {
-                expected: 44,
-                found: 43
+                expected: 48,
+                found: 47
             })
         );
         let bad = line.replacen(" 38.5 ", " 38.5x ", 1);
         assert_ne!(bad, line);
         let e = parse_line(&bad).unwrap_err();
-        assert_eq!(e, ParseError::BadField { index: 5 });
-        assert_eq!(std::format!("{e}"), "field 6 (`v_ref`) is not a number");
+        assert_eq!(e, ParseError::BadField { index: 6 });
+        assert_eq!(std::format!("{e}"), "field 7 (`v_ref`) is not a number");
         // A u8 field holding 300.
         let bad = line.replacen("tlm1 41000 1", "tlm1 41000 300", 1);
         assert_eq!(parse_line(&bad), Err(ParseError::BadField { index: 1 }));

@@ -17,11 +17,13 @@ use embedded_can::{Frame, StandardId};
 use hils_plant::{FrictionModel, Rail, Surface};
 use hils_rig_core::Code;
 use hils_rig_core::can::{
-    self, BrakeCommand, Calibration, Command, CommandFrame, CommandResult, ConfigItem, DiagFrame,
-    InjectedFault, RigMode, RigState, StartCommand, StatusFrame, TrackCommand, VehicleKey,
-    WheelSpeedFrame, ZoneFrame,
+    self, BrakeCommand, BrakeDemandFrame, Calibration, Command, CommandFrame, CommandResult,
+    ConfigItem, DiagFrame, HealthFrame, InjectedFault, RigMode, RigState, StartCommand,
+    StatusFrame, TrackCommand, VehicleKey, WheelSpeedFrame, ZoneFrame,
 };
+use hils_rig_core::controller_io::IoItem;
 use hils_rig_core::sensor::{SensorFault, SensorKind};
+use hils_rig_core::valves::ValveStates;
 use proptest::prelude::*;
 
 type TestFrame = can::ClassicFrame;
@@ -214,6 +216,18 @@ fn wheel_fields(w: &WheelSpeedFrame, frame: Option<&TestFrame>) -> Fields {
         // Not available: raw 0xFFFF = 655.35 km/h in the DBC's scaling.
         m.insert(n, w.speeds_kmh[j].map(|v| v as f64).unwrap_or(655.35));
     }
+    // The valve inputs of the pair's wheelsets: 0 off, 1 energised, 3 not wired.
+    const VALVE_NAMES: [[&str; 2]; 4] = [
+        ["Dump1", "Hold1"],
+        ["Dump2", "Hold2"],
+        ["Dump3", "Hold3"],
+        ["Dump4", "Hold4"],
+    ];
+    let code = |x: Option<bool>| x.map_or(3.0, |on| on as u8 as f64);
+    for j in 2 * w.pair..2 * w.pair + 2 {
+        m.insert(VALVE_NAMES[j][0], code(w.valves.dump(j)));
+        m.insert(VALVE_NAMES[j][1], code(w.valves.hold(j)));
+    }
     m.insert(alive, w.counter as f64);
     m.insert(crc, frame.map(checksum_of).unwrap_or(0.0));
     m
@@ -226,9 +240,11 @@ proptest! {
     /// 350 km/h (raw 35 000).
     #[test]
     fn wheel_speed_frames(speeds in proptest::array::uniform4(proptest::option::weighted(0.9,
-                              prop_oneof![0u32..=65534, 35_000u32..=65534])), counter in 0u8..16) {
+                              prop_oneof![0u32..=65534, 35_000u32..=65534])), counter in 0u8..16,
+                          valve_bits: u16) {
         let kmh = speeds.map(|s| s.map(|r| r as f32 * 0.01));
-        for w in WheelSpeedFrame::cycle(kmh, counter) {
+        let valves = ValveStates::of_bits(valve_bits);
+        for w in WheelSpeedFrame::cycle(kmh, valves, counter) {
             let f: TestFrame = w.encode().unwrap();
             let checksum = if w.pair == 0 { "WheelSpeed12Checksum" } else { "WheelSpeed34Checksum" };
             both_ways(w.id().unwrap(), None, &f, &wheel_fields(&w, Some(&f)),
@@ -266,6 +282,22 @@ proptest! {
     }
 
     #[test]
+    fn brake_demand_frame(closed: bool, demand in 0u32..=65535, counter in 0u8..16) {
+        let d = BrakeDemandFrame { eb_loop_closed: closed, service_mps2: demand as f32 * 0.001, counter };
+        let fields = |d: &BrakeDemandFrame, f: Option<&TestFrame>| -> Fields {
+            Fields::from([
+                ("EbLoopClosed", d.eb_loop_closed as u8 as f64),
+                ("ServiceDemand", d.service_mps2 as f64),
+                ("DemandAlive", d.counter as f64),
+                ("DemandChecksum", f.map(checksum_of).unwrap_or(0.0)),
+            ])
+        };
+        let f: TestFrame = d.encode().unwrap();
+        both_ways(can::ID_BRAKE_DEMAND, None, &f, &fields(&d, Some(&f)),
+            |f| BrakeDemandFrame::decode(f).unwrap(), |d| fields(d, None), Some("DemandChecksum"));
+    }
+
+    #[test]
     fn diag_frame(max in 0u32..=65535, mean in 0u32..=65535, overruns: u16, sensors in proptest::array::uniform4(0u8..6), bus_off in 0u8..16) {
         let d = DiagFrame {
             step_max_us: max as f32 * 0.01,
@@ -291,7 +323,38 @@ proptest! {
     }
 
     #[test]
-    fn command_frame(pick in 0usize..12, a in 0u32..=16382, b in 0u32..=10000, ch in 0u8..4, k in 0u8..5,
+    fn health_frame(peak in 0u32..=65535, size in 0u32..=65535, rx_lost: u8, adc: u8,
+                    cause in proptest::option::of(0u8..5), resets in 0u8..16, counter in 0u8..16) {
+        use hils_rig_core::arming::Disarm;
+        let h = HealthFrame {
+            stack_peak_bytes: peak * 4,
+            stack_size_bytes: size * 4,
+            rx_lost,
+            adc_restarts: adc,
+            disarmed: cause.map(|c| Disarm::try_from(c).unwrap()),
+            fault_resets: resets,
+            counter,
+        };
+        let fields = |h: &HealthFrame, f: Option<&TestFrame>| -> Fields {
+            Fields::from([
+                ("StackPeak", h.stack_peak_bytes as f64),
+                ("StackSize", h.stack_size_bytes as f64),
+                ("RxLost", h.rx_lost as f64),
+                ("AdcRestarts", h.adc_restarts as f64),
+                ("Armed", h.disarmed.is_none() as u8 as f64),
+                ("DisarmCause", h.disarmed.map_or(0, u8::from) as f64),
+                ("FaultResets", h.fault_resets as f64),
+                ("HealthAlive", h.counter as f64),
+                ("HealthChecksum", f.map(checksum_of).unwrap_or(0.0)),
+            ])
+        };
+        let f: TestFrame = h.encode().unwrap();
+        both_ways(can::ID_HEALTH, None, &f, &fields(&h, Some(&f)),
+            |f| HealthFrame::decode(f).unwrap(), |h| fields(h, None), Some("HealthChecksum"));
+    }
+
+    #[test]
+    fn command_frame(pick in 0usize..15, a in 0u32..=16382, b in 0u32..=10000, ch in 0u8..4, k in 0u8..5,
                      flags in 0u8..32, gain in 0.001f32..1.0e6, counter in 0u8..16,
                      zone in (0u32..(1 << 20), 0u32..(1 << 20), 0u8..32, 0u8..4, 1u8..=255),
                      digest in 0u16..=u16::MAX) {
@@ -320,6 +383,8 @@ proptest! {
             5 => Command::Calibrate { channel: ch, action: if k % 2 == 0 { Calibration::SetGain(gain) } else { Calibration::SetOffset(gain.min(4095.0)) } },
             6 => Command::Calibrate { channel: ch, action: Calibration::SetKind(if k % 2 == 0 { SensorKind::LoadCell } else { SensorKind::PressureTransducer }) },
             7 => Command::ClearFaults,
+            12 => Command::Arm,
+            13 => Command::Disarm,
             9 => Command::TrackZone { index: zone.2, zone: ZoneFrame {
                 start_dm: zone.0, end_dm: zone.1, surface: surface(zone.3) } },
             10 => Command::Track(if flags & 1 == 0 { TrackCommand::Clear } else {
@@ -329,6 +394,11 @@ proptest! {
             } else {
                 Command::Vehicle { key: VehicleKey::VALUES[k as usize], value: gain }
             },
+            8 => {
+                let item = IoItem::ALL[(a as usize) % IoItem::ALL.len()];
+                let (lo, hi) = item.range();
+                Command::Configure(ConfigItem::Io(item, lo + (b as u16) % (hi - lo + 1)))
+            }
             _ => Command::Configure(if k % 2 == 0 { ConfigItem::TelemetryDivider(b.max(1) as u16) } else { ConfigItem::Teeth((b % 1000).max(1) as u16) }),
         };
         let cf = CommandFrame { command, counter };
@@ -380,7 +450,11 @@ proptest! {
                     m.insert("CalValue", value);
                 }
                 Command::Configure(item) => {
-                    let (code, v) = match item { ConfigItem::TelemetryDivider(v) => (0.0, v), ConfigItem::Teeth(v) => (1.0, v) };
+                    let (code, v) = match item {
+                        ConfigItem::TelemetryDivider(v) => (0.0, v),
+                        ConfigItem::Teeth(v) => (1.0, v),
+                        ConfigItem::Io(item, v) => (u8::from(item) as f64, v),
+                    };
                     m.insert("ConfigItem", code);
                     m.insert("ConfigValue", v as f64);
                 }
@@ -406,7 +480,7 @@ proptest! {
                     m.insert("VehicleKey", code);
                     m.insert("VehicleValue", value as f64);
                 }
-                Command::Stop | Command::ClearFaults => {}
+                Command::Stop | Command::ClearFaults | Command::Arm | Command::Disarm => {}
             }
             m
         };
@@ -420,13 +494,13 @@ proptest! {
 fn dbc_describes_exactly_the_codec_messages_and_no_signals_overlap() {
     let dbc = dbc();
     let ids: Vec<u32> = dbc.messages.iter().map(|m| m.id.raw()).collect();
-    assert_eq!(ids, vec![0x100, 0x101, 0x110, 0x120, 0x200]);
+    assert_eq!(ids, vec![0x100, 0x101, 0x102, 0x110, 0x120, 0x121, 0x200]);
     for m in &dbc.messages {
         let MessageId::Standard(id) = m.id else {
             panic!()
         };
         let muxes: Vec<Option<u64>> = if id == can::ID_COMMAND {
-            (1..=7).map(Some).collect()
+            (1..=12).map(Some).collect()
         } else {
             vec![None]
         };
@@ -450,7 +524,16 @@ fn dbc_describes_exactly_the_codec_messages_and_no_signals_overlap() {
         Some(can_dbc::AttributeValue::Int(v)) => *v,
         other => panic!("{other:?}"),
     };
-    assert_eq!((cycle(0x100), cycle(0x110), cycle(0x120)), (1, 10, 100));
+    assert_eq!(
+        (
+            cycle(0x100),
+            cycle(0x102),
+            cycle(0x110),
+            cycle(0x120),
+            cycle(0x121)
+        ),
+        (1, 10, 10, 100, 100)
+    );
 }
 
 /// The signal tables that the codec encodes and decodes with (`can::FRAMES`) are the DBC's

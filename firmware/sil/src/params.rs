@@ -7,7 +7,8 @@
 
 use hils_brake_unit::{BrakeUnitParams, UnitConfig};
 use hils_plant::DegradedAdhesionParams;
-use hils_plant::params::{ParamError, Params, Rail, STEP_S, check};
+use hils_plant::keys::{KeyInfo, KeyValue, KeyVisitor, Keys, Unranged, check_keys};
+use hils_plant::params::{ParamError, Params, Rail, STEP_S};
 #[cfg(feature = "serde")]
 use serde::Deserialize;
 
@@ -67,16 +68,41 @@ pub struct ScenarioParams {
 }
 
 impl ScenarioParams {
-    /// Checks every value against its range; the error names the file's key.
+    /// Checks every value against the range of its key ([`Keys`]); the error names the
+    /// file's key.
     pub fn validate(&self) -> Result<(), ParamError> {
-        let p = &self.paper_eb;
-        check(
-            "scenario.paper_eb.initial_speed_kmh",
-            p.initial_speed_kmh,
-            0.0,
-            500.0,
-        )?;
-        check("scenario.paper_eb.step", p.step_s, 1e-6, 1e-2)
+        check_keys(self)
+    }
+}
+
+/// The key table of `[scenario.paper_eb]`, in file order.
+impl Keys for ScenarioParams {
+    fn visit_keys<V: KeyVisitor>(&mut self, v: &mut V) {
+        let p = &mut self.paper_eb;
+        v.key(
+            &KeyInfo {
+                name: "scenario.paper_eb.initial_speed_kmh",
+                doc: "Speed at the EB command, km/h.",
+                unit: "km/h",
+                min: 0.0,
+                max: 500.0,
+            },
+            KeyValue::Real(&mut p.initial_speed_kmh),
+        );
+        let rail = KeyInfo::unranged("scenario.paper_eb.rail", "Rail condition: wet or dry.");
+        p.rail.visit_as(&rail, v);
+        let track = KeyInfo::unranged("scenario.paper_eb.track", "The track, in words.");
+        v.key(&track, KeyValue::Note);
+        v.key(
+            &KeyInfo {
+                name: "scenario.paper_eb.step",
+                doc: "Plant step, s (10 kHz: 0.1 ms, paper text).",
+                unit: "s",
+                min: 1e-6,
+                max: 1e-2,
+            },
+            KeyValue::Real(&mut p.step_s),
+        );
     }
 }
 
@@ -109,6 +135,17 @@ impl ParamFile {
     /// The brake unit of the file at the paper scenario's step.
     pub fn unit_config(&self) -> UnitConfig {
         UnitConfig::with_params(self.scenario.paper_eb.step_s, self.brake_unit)
+    }
+}
+
+/// Every key of the file, in file order: the plant's sections, `[brake_unit]`,
+/// `[scenario.paper_eb]`, `[degraded_adhesion]`.
+impl Keys for ParamFile {
+    fn visit_keys<V: KeyVisitor>(&mut self, visitor: &mut V) {
+        self.plant.visit_keys(visitor);
+        self.brake_unit.visit_keys(visitor);
+        self.scenario.visit_keys(visitor);
+        self.degraded_adhesion.visit_keys(visitor);
     }
 }
 

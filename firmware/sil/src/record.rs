@@ -126,8 +126,20 @@ pub mod run_log {
     pub const T_DISC: Channel = Channel::wheelset("t_disc", "_c");
     /// Axle load, N.
     pub const Q: Channel = Channel::wheelset("q", "_n");
-    /// WSP valve venting, 0/1.
+    /// WSP valve venting, 0/1 (the dump valve's coil energised).
     pub const WSP: Channel = Channel::wheelset("wsp", "");
+    /// WSP hold valve coil energised, 0/1 (holding: hold without `wsp`; rig logs and
+    /// `hils decode`, an extra column).
+    pub const HOLD: Channel = Channel::wheelset("hold", "");
+    /// The emergency brake loop the rig drove: 1 closed (no EB), 0 open (EB) (rig logs).
+    pub const EB_LOOP: Channel = Channel::scalar("eb_loop_closed", "");
+    /// The service brake deceleration the rig drove on the demand PWM, m/s^2 (rig logs).
+    pub const SERVICE_DEMAND: Channel = Channel::scalar("service_demand", "_mps2");
+    /// The air-spring pressure of bogie 1 the rig drove on its DAC, Pa (rig logs; empty
+    /// while the output is silent).
+    pub const AIR_SPRING1: Channel = Channel::scalar("air_spring1", "_pa");
+    /// The air-spring pressure of bogie 2 the rig drove on its DAC, Pa.
+    pub const AIR_SPRING2: Channel = Channel::scalar("air_spring2", "_pa");
     /// Carbody longitudinal acceleration, m/s^2.
     pub const A_X: Channel = Channel::scalar("a_x", "_mps2");
     /// Brake command in force ([`super::Cmd::text`]).
@@ -170,7 +182,7 @@ pub mod run_log {
 
     /// Every channel, in the order writers put them: the spec's, the simulation's extras,
     /// the rig's extras. A writer leaves out what it does not log and keeps the order.
-    pub const ALL: [Channel; 25] = [
+    pub const ALL: [Channel; 30] = [
         T,
         V_REF,
         OMEGA,
@@ -180,6 +192,7 @@ pub mod run_log {
         T_DISC,
         Q,
         WSP,
+        HOLD,
         A_X,
         CMD,
         MU_D,
@@ -196,6 +209,10 @@ pub mod run_log {
         MISSED_TICKS,
         SURFACE,
         MU_AVAIL,
+        EB_LOOP,
+        SERVICE_DEMAND,
+        AIR_SPRING1,
+        AIR_SPRING2,
     ];
 }
 

@@ -39,3 +39,33 @@ fn eb_pressure_decelerates_the_nominal_vehicle_at_5_kmh_per_s() {
         "deceleration {decel}"
     );
 }
+
+#[test]
+fn a_service_demand_decelerates_the_nominal_vehicle_as_demanded() {
+    // Issue 25: the service pressure was the EB pressure times the deceleration share, which
+    // leaves the retaining spring's K_r / A_c = 44 kPa out of proportion: 0.6 m/s^2 gave
+    // 0.49. The brake force (the clamp force) is in proportion now. Constant mu_d0, dry
+    // rail, WSP off: the steady deceleration is the demand.
+    let mut p = Params::default();
+    p.friction.model = FrictionModel::Constant;
+    let mut config = UnitConfig::new(1e-4);
+    config.wsp_enabled = false;
+    for demand in [0.3f32, 0.6, 1.0] {
+        let mut sim = ClosedLoop::<f64>::with_config(&p, Rail::Dry, 120.0 / 3.6, &config).unwrap();
+        sim.set_demand(BrakeDemand::Service {
+            deceleration_mps2: demand,
+        });
+        let mut v4 = 0.0;
+        for step in 1..=140_000 {
+            sim.step();
+            if step == 40_000 {
+                v4 = sim.outputs().vehicle_speed;
+            }
+        }
+        let decel = (v4 - sim.outputs().vehicle_speed) / 10.0;
+        assert!(
+            (decel - demand as f64).abs() < 0.01 * demand as f64,
+            "demand {demand}: deceleration {decel}"
+        );
+    }
+}

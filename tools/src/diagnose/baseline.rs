@@ -4,6 +4,7 @@
 
 use hils_plant::Params;
 
+use super::links;
 use super::replay::{Model, Replay, Score, Split};
 use super::search::{Diagnoser, NO_DISCREPANCY_RMS, SCAN_RMS};
 use crate::measured::RunLog;
@@ -17,7 +18,12 @@ pub struct Baseline {
     /// v_ref's slow error per run, m/s (None: not estimable).
     pub vref_slow_sigma_mps: Vec<Option<f64>>,
     pub validation: Score,
+    /// Whether the baseline leaves an error beyond the noise anywhere: in the fitted
+    /// channels, or on a link only compared (the disc temperatures).
     pub discrepancy: bool,
+    /// Whether it does in the fitted channels (what the listed effects are fitted to: the
+    /// search runs only then).
+    pub fitted_discrepancy: bool,
 }
 
 /// The error when the baseline (or a model) cannot replay the runs.
@@ -53,7 +59,21 @@ pub fn prepare(
     }
     let validation = d.score(&replays, Split::Validation);
     let rms = validation.rms();
-    let discrepancy = rms > NO_DISCREPANCY_RMS || validation.max_window_rms() > SCAN_RMS;
+    let fitted_discrepancy = rms > NO_DISCREPANCY_RMS || validation.max_window_rms() > SCAN_RMS;
+    let thermal: Vec<String> = links::errors(&d.runs, &replays)
+        .into_iter()
+        .filter(|(k, e)| k.0 == links::Link::DiscThermal && *e > links::LINK_EXPLAINED_RMS)
+        .map(|(k, _)| links::key_name(k))
+        .collect();
+    if !fitted_discrepancy && !thermal.is_empty() {
+        notes.push(format!(
+            "the baseline explains every fitted channel but not the disc temperatures ({}): a \
+             discrepancy no listed effect acts on alone (the thermal model's constants are not \
+             among the effects); no cause is searched",
+            thermal.join(", ")
+        ));
+    }
+    let discrepancy = fitted_discrepancy || !thermal.is_empty();
     if std::env::var_os("HILS_DIAG_DEBUG").is_some() {
         eprintln!("baseline validation rms {rms:.2}");
         debug_errors(&d, &replays, &validation);
@@ -65,6 +85,7 @@ pub fn prepare(
         vref_slow_sigma_mps: slow,
         validation,
         discrepancy,
+        fitted_discrepancy,
     };
     Ok((base, notes))
 }
@@ -73,7 +94,8 @@ pub fn prepare(
 fn reader_notes(d: &Diagnoser, logs: &[RunLog]) -> Vec<String> {
     let mut notes = Vec::new();
     for (log, run) in logs.iter().zip(&d.runs) {
-        for n in log.notes.iter().chain(&run.notes) {
+        // The reader's notes are among the admission's (restated per column there).
+        for n in &run.notes {
             notes.push(format!("{}: {n}", run.name));
         }
         if !log.unknown_columns.is_empty() {

@@ -9,6 +9,7 @@ use nalgebra::DMatrix;
 
 use super::baseline::{Baseline, numeric_fault};
 use super::effects::Effect;
+use super::links;
 use super::replay::{self, Score, Split};
 use super::search::{
     Diagnoser, FINE_STEPS, FIT_STEP_S, FIT_TOLERANCE, REFINE_PATIENCE, SetFit, debug, search,
@@ -53,10 +54,15 @@ pub fn find(
         fit_base_validation: base.validation.clone(),
         evaluations: 0,
     };
-    if base.discrepancy {
+    if base.fitted_discrepancy {
         let fit_base = fit_baseline(&fit_d)?;
         causes.fit_base_validation = fit_base.validation.clone();
-        let s = search(&fit_d, &fit_base, started);
+        let unlisted: Vec<Effect> =
+            links::odd_wheelsets(&base.d.runs, &base.replays, links::Link::DiscPadFriction)
+                .into_iter()
+                .map(|j| Effect::WheelsetFriction(j as u8))
+                .collect();
+        let s = search(&fit_d, &fit_base, &unlisted, started);
         causes.singles = s.singles;
         causes.effects = s.result.effects.clone();
         (causes.x, causes.ci95_half) = (s.result.x.clone(), s.result.ci95_half.clone());
@@ -79,6 +85,7 @@ fn fit_baseline(fit_d: &Diagnoser) -> anyhow::Result<SetFit> {
         replay::weighted_residuals(run, rep, Split::Fit, &mut residuals);
     }
     Ok(SetFit {
+        links: links::errors(&fit_d.runs, &reps),
         effects: vec![],
         x: vec![],
         ci95_half: vec![],

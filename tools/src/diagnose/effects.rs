@@ -30,6 +30,11 @@ pub enum Effect {
     ActuatorLag,
     SensorGain,
     SensorGainPressure,
+    /// Not a listed effect (issue 27): the pad friction of one wheelset (0-based) differs
+    /// from the others' (a pad batch, a glazed disc), scaling its brake torque. The search
+    /// fits it where the disc-pad-friction link shows such a wheelset, so that no listed
+    /// vehicle-wide effect is bent to it; it is never named as a cause.
+    WheelsetFriction(u8),
 }
 
 pub const ALL: [Effect; 11] = [
@@ -70,7 +75,18 @@ impl Effect {
             Effect::Mass => "mass",
             Effect::ActuatorLag => "actuator-lag",
             Effect::SensorGain | Effect::SensorGainPressure => "sensor-gain",
+            Effect::WheelsetFriction(j) => [
+                "wheelset-friction-1",
+                "wheelset-friction-2",
+                "wheelset-friction-3",
+                "wheelset-friction-4",
+            ][j as usize % 4],
         }
+    }
+
+    /// Whether the effect is one of the spec's list (a cause the diagnosis may name).
+    pub fn is_listed(self) -> bool {
+        !matches!(self, Effect::WheelsetFriction(_))
     }
 
     /// Words for the report.
@@ -87,6 +103,9 @@ impl Effect {
             Effect::ActuatorLag => "the pad force follows the cylinder pressure with a lag",
             Effect::SensorGain => "a brake-input sensor (clamp force or pressure) reads scaled",
             Effect::SensorGainPressure => "a cylinder-pressure sensor reads scaled",
+            Effect::WheelsetFriction(_) => {
+                "the pad friction of one wheelset differs from the others' (not a listed effect)"
+            }
         }
     }
 
@@ -172,6 +191,7 @@ impl Effect {
                     )
                 })
                 .collect(),
+            Effect::WheelsetFriction(_) => vec![("mu_scale", ParamSpec::new(1.0, 0.02, 0.3, 3.0))],
         }
     }
 
@@ -211,6 +231,7 @@ impl Effect {
             Effect::ActuatorLag => vec![model.actuator_lag_s],
             Effect::SensorGain => model.input_gain.to_vec(),
             Effect::SensorGainPressure => model.pressure_obs_gain.to_vec(),
+            Effect::WheelsetFriction(j) => vec![model.wheelset_mu_scale[j as usize % 4]],
         }
     }
 }
@@ -263,6 +284,7 @@ pub fn build(base: &Params, rail: Rail, active: &[(Effect, &[f64])]) -> Model {
             Effect::ActuatorLag => model.actuator_lag_s = x[0],
             Effect::SensorGain => model.input_gain.copy_from_slice(&x[..4]),
             Effect::SensorGainPressure => model.pressure_obs_gain.copy_from_slice(&x[..4]),
+            Effect::WheelsetFriction(j) => model.wheelset_mu_scale[*j as usize % 4] = x[0],
         }
     }
     model

@@ -114,7 +114,7 @@ impl Group {
     /// from the channel's typical magnitude `scale`.
     pub fn floor(self, scale: f64) -> f64 {
         match self {
-            Group::Speeds => 0.02,
+            Group::Speeds => SPEED_FLOOR_MPS,
             Group::BrakeForces => (0.01 * scale).max(50.0),
             Group::AxleLoads => (0.02 * scale).max(200.0),
             Group::PadForces => (0.01 * scale).max(50.0),
@@ -141,6 +141,9 @@ pub struct Channel {
     /// Typical magnitude (largest absolute bin mean).
     pub scale: f64,
 }
+
+/// Resolution of a replayed speed, m/s: the smallest bin sigma of a speed channel.
+pub const SPEED_FLOOR_MPS: f64 = 0.02;
 
 /// Resolution of a replayed speed relative to the speed lost since the start: two
 /// simulators of the same vehicle (integration, rotating masses, creep) differ by about
@@ -339,6 +342,12 @@ fn initial_speed(t: &[f64], v: &[f64]) -> f64 {
     }
 }
 
+/// Whether bin `b` of width `bin_s` is validation data (every third block of
+/// [`VALIDATION_BLOCK_S`], by the bin's start).
+pub fn is_validation_bin(b: usize, bin_s: f64) -> bool {
+    ((b as f64 * bin_s / VALIDATION_BLOCK_S) as usize) % 3 == 2
+}
+
 /// Comparison bin width for a log with median interval `dt_s`: 20 ms, or 2 samples.
 pub fn bin_width(dt_s: f64) -> f64 {
     (2.0 * dt_s).max(0.02)
@@ -405,15 +414,12 @@ impl BrakeInputs {
                 notes.push(format!("{name}: no value at all; the input is taken as 0"));
                 x.iter_mut().for_each(|v| *v = 0.0);
             }
-            let filled = fill_gaps(t, &mut x);
-            if filled > 0 {
-                notes.push(format!(
-                    "{name}: {filled} empty cell(s) of the brake input filled by linear interpolation"
-                ));
-            }
+            // Gaps and empty cells are bridged (the admission stage checked they can be,
+            // and its notes say so per column).
+            fill_gaps(t, &mut x);
             input[j] = x;
             if kind == InputKind::ClampForce {
-                pressure_obs[j] = pressure_beside_clamp(log, t, j, notes);
+                pressure_obs[j] = pressure_beside_clamp(log, t, j);
             }
         }
         BrakeInputs {
@@ -441,23 +447,12 @@ impl BrakeInputs {
 }
 
 /// The cylinder pressure of wheelset `j` logged beside its clamp force, gaps filled.
-fn pressure_beside_clamp(
-    log: &RunLog,
-    t: &[f64],
-    j: usize,
-    notes: &mut Vec<String>,
-) -> Option<Vec<f64>> {
+fn pressure_beside_clamp(log: &RunLog, t: &[f64], j: usize) -> Option<Vec<f64>> {
     let mut p = log.p_cyl_pa[j].clone()?;
     if !p.iter().any(|v| v.is_finite()) {
         return None;
     }
-    let filled = fill_gaps(t, &mut p);
-    if filled > 0 {
-        notes.push(format!(
-            "p_cyl{}_pa: {filled} empty cell(s) filled by interpolation for the pressure-to-pad-force check",
-            j + 1
-        ));
-    }
+    fill_gaps(t, &mut p);
     Some(p)
 }
 
@@ -480,7 +475,7 @@ fn disc_temp_inputs(
     });
     if disc_temp_input.iter().any(|x| x.is_some()) {
         notes.push(
-            "t_disc logged: Eq (2) is evaluated at the measured disc temperature (empty cells interpolated); the thermal model is checked on the disc-thermal link".to_string(),
+            "t_disc logged: where Eq (2) acts it is evaluated at the measured disc temperature; the thermal model is checked on the disc-thermal link".to_string(),
         );
     }
     disc_temp_input
@@ -501,9 +496,7 @@ impl Bins {
         Bins {
             bin_s,
             n_bins,
-            validation: (0..n_bins)
-                .map(|b| ((b as f64 * bin_s / VALIDATION_BLOCK_S) as usize) % 3 == 2)
-                .collect(),
+            validation: (0..n_bins).map(|b| is_validation_bin(b, bin_s)).collect(),
             bin_time: (0..n_bins).map(|b| (b as f64 + 0.5) * bin_s).collect(),
         }
     }
@@ -631,11 +624,13 @@ impl ChannelSetup<'_> {
             count: cnt,
         } = self.bins.sums(t, x);
         // A brake force at standstill is static friction (any value up to the limit
-        // holds the wheel): compared only while the wheelset turns.
+        // holds the wheel): compared only while the wheelset turns. Where its speed is not
+        // measured (a dead sensor), the vehicle's standstill is the wheel's.
         let turning = |b: usize| match quantity {
             Quantity::BrakeForce(j) => {
                 let w = wheel_bin[j][b];
-                !(w.is_finite() && w < STANDSTILL_MPS && v_bin[b].abs() < STANDSTILL_MPS)
+                let wheel_still = !w.is_finite() || w < STANDSTILL_MPS;
+                !(wheel_still && v_bin[b].abs() < STANDSTILL_MPS)
             }
             _ => true,
         };
@@ -696,6 +691,14 @@ impl ChannelSetup<'_> {
     }
 }
 
+/// The rail condition as the metadata writes it (`wet`, `dry`).
+pub fn rail_name(rail: Rail) -> &'static str {
+    match rail {
+        Rail::Wet => "wet",
+        Rail::Dry => "dry",
+    }
+}
+
 /// Initial disc temperature: the mean over the logged discs of their first readings, degC.
 fn disc_temp0(log: &RunLog) -> Option<f64> {
     let firsts: Vec<f64> = log
@@ -750,8 +753,8 @@ impl Prepared {
             Some(r) => (r, true),
             None => {
                 notes.push(format!(
-                    "no `rail` metadata: the baseline scenario's rail ({:?}) is used",
-                    Rail::default()
+                    "no `rail` metadata: the baseline scenario's rail ({}) is used",
+                    rail_name(Rail::default())
                 ));
                 (Rail::default(), false)
             }
@@ -917,6 +920,9 @@ pub struct Model {
     pub pressure_obs_gain: [f64; WHEELSETS],
     /// Lag of the pad force behind the cylinder pressure, s.
     pub actuator_lag_s: f64,
+    /// Scale of each wheelset's brake torque for the same clamp force (a pad friction that
+    /// differs per wheelset, [`super::effects::Effect::WheelsetFriction`]; 1 = none).
+    pub wheelset_mu_scale: [f64; WHEELSETS],
 }
 
 impl Model {
@@ -930,6 +936,7 @@ impl Model {
             input_gain: [1.0; WHEELSETS],
             pressure_obs_gain: [1.0; WHEELSETS],
             actuator_lag_s: lag,
+            wheelset_mu_scale: [1.0; WHEELSETS],
         }
     }
 }
@@ -1084,7 +1091,10 @@ fn drive(
     let mut trace: Vec<[f64; TRACE]> = Vec::with_capacity(steps + 1);
     let mut mu_trace: Vec<[f64; WHEELSETS]> = Vec::with_capacity(steps + 1);
     trace.push(trace_row(&plant.outputs(), r_w));
-    mu_trace.push(plant.outputs().wheelsets.map(|w| w.mu_d));
+    let scale = model.wheelset_mu_scale;
+    mu_trace.push(std::array::from_fn(|j| {
+        plant.outputs().wheelsets[j].mu_d * scale[j]
+    }));
     let mut inputs = [BrakeInput::ClampForce(0.0); WHEELSETS];
     for k in 0..steps {
         for j in 0..WHEELSETS {
@@ -1106,12 +1116,15 @@ fn drive(
                 }
                 _ => f,
             };
-            inputs[j] = BrakeInput::ClampForce(f);
+            // A wheelset's own pad friction scales its torque as a scaled clamp force
+            // would (the clamp force itself is the measured one).
+            inputs[j] = BrakeInput::ClampForce(f * model.wheelset_mu_scale[j]);
         }
         plant.step(&inputs);
         let o = plant.outputs();
         trace.push(trace_row(&o, r_w));
-        mu_trace.push(o.wheelsets.map(|w| w.mu_d));
+        let scale = model.wheelset_mu_scale;
+        mu_trace.push(std::array::from_fn(|j| o.wheelsets[j].mu_d * scale[j]));
     }
     let flags = plant.sticky_flags().0;
     if flags & hils_plant::Flags::NUMERIC_FAULT != 0 {

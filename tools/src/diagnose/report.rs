@@ -81,9 +81,10 @@ pub fn cause_paragraph(out: &Outcome) -> String {
         return format!(
             "The baseline does not explain the data (validation error {:.1} times the noise), and none of \
              the listed effects, alone or combined, explains it: {:.0} % of the error stays unexplained. \
-             No cause is claimed; the plots below show where and when the error grows.",
+             No cause is claimed;{} the plots below show where and when the error grows.",
             r.gain.baseline,
-            r.unexplained_share * 100.0
+            r.unexplained_share * 100.0,
+            wheelset_differences(r)
         );
     }
     let mut s = String::from("The cause: ");
@@ -134,12 +135,12 @@ pub fn cause_paragraph(out: &Outcome) -> String {
     if !missed.is_empty() {
         let _ = write!(
             s,
-            " The baseline misses the wheel slide of wheelset(s) {:?}; the extended model {}.",
-            missed,
+            " The baseline misses the wheel slide of wheelset(s) {}; the extended model {}.",
+            wheelset_list(&missed),
             if missed.iter().all(|j| r.slides.extended.contains(j)) {
                 "reproduces it".to_string()
             } else {
-                format!("shows slides on {:?}", r.slides.extended)
+                format!("shows slides on {}", wheelset_list(&r.slides.extended))
             }
         );
     }
@@ -151,6 +152,33 @@ pub fn cause_paragraph(out: &Outcome) -> String {
         );
     }
     s
+}
+
+/// The differences of single wheelsets the localisation found, in words (empty if none).
+fn wheelset_differences(r: &Report) -> String {
+    let found: Vec<String> = r
+        .localisation
+        .iter()
+        .filter(|l| !l.explained && l.wheelset.is_some())
+        .filter_map(|l| l.note.split_once(": no listed effect explains it: "))
+        .map(|(_, size)| size.to_string())
+        .collect();
+    if found.is_empty() {
+        String::new()
+    } else {
+        format!(" where it sits: {};", found.join("; "))
+    }
+}
+
+/// Wheelsets (1-based) as people read them: `2, 4`, or `none`.
+pub fn wheelset_list(ws: &[usize]) -> String {
+    if ws.is_empty() {
+        return "none".into();
+    }
+    ws.iter()
+        .map(|w| w.to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 fn t_series(run: &Prepared, y: &[f64], scale: f64) -> Vec<(f64, f64)> {
@@ -291,7 +319,7 @@ fn result_section(r: &Report) -> String {
     let mut md = String::from("\n\n## Result\n\n");
     let _ = writeln!(
         md,
-        "- discrepancy: **{}**\n- causes: {}\n- confounded: {}\n- unexplained share: {:.3}\n- gain ({}): baseline {:.3}, extended {:.3}, reduction {:.3}\n- speeds alone: baseline {:.4} m/s, extended {:.4} m/s\n- slides: measured {:?}, baseline {:?}, extended {:?}\n",
+        "- discrepancy: **{}**\n- causes: {}\n- confounded: {}\n- unexplained share: {:.3}\n- gain ({}): baseline {:.3}, extended {:.3}, reduction {:.3}\n- speeds alone: baseline {:.4} m/s, extended {:.4} m/s\n- slides: measured {}, baseline {}, extended {}\n",
         r.discrepancy,
         if r.causes.is_empty() {
             "none".into()
@@ -314,9 +342,9 @@ fn result_section(r: &Report) -> String {
         r.gain.reduction,
         r.gain.speed_rms_mps["baseline"],
         r.gain.speed_rms_mps["extended"],
-        r.slides.measured,
-        r.slides.baseline,
-        r.slides.extended
+        wheelset_list(&r.slides.measured),
+        wheelset_list(&r.slides.baseline),
+        wheelset_list(&r.slides.extended)
     );
     if !r.findings.is_empty() {
         md += "| effect | parameter | value | 95 % CI | gain alone |\n|---|---|---|---|---|\n";
@@ -379,9 +407,9 @@ fn run_text(p: &RunPage, rb: &[(Quantity, f64, f64)]) -> String {
     let _ = writeln!(md, "### {}\n", run.name);
     let _ = writeln!(
         md,
-        "Initial speed {:.2} km/h (measured), rail {:?}{}, {} samples over {:.2} s, replay step {} ms, comparison bins of {} ms (every third 0.2 s block is validation data).\n",
+        "Initial speed {:.2} km/h (measured), rail {}{}, {} samples over {:.2} s, replay step {} ms, comparison bins of {} ms (every third 0.2 s block is validation data).\n",
         run.v0 * KMH_PER_MPS,
-        run.rail,
+        super::replay::rail_name(run.rail),
         if run.rail_from_metadata {
             " (metadata)"
         } else {

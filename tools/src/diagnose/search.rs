@@ -38,6 +38,10 @@ pub const CONFOUND_TOLERANCE: f64 = 1.1;
 pub const MAX_UNEXPLAINED: f64 = 0.5;
 /// Largest number of effects combined.
 pub const MAX_EFFECTS: usize = 3;
+/// The complexity (parameter count, [`SetFit::complexity`]) of an effect outside the
+/// spec's list: more than any listed combination, so a listed explanation the data cannot
+/// tell from it is preferred.
+pub const OUT_OF_LIST_COMPLEXITY: usize = 16;
 
 /// A fitted set of effects.
 #[derive(Clone, Debug)]
@@ -53,6 +57,9 @@ pub struct SetFit {
     pub residuals: Vec<f64>,
     /// Their Jacobian in scaled parameters (columns in the order of `x`, flattened).
     pub jacobian: Option<DMatrix<f64>>,
+    /// Validation error of every link of the signal chain (issue 27: an extension is judged
+    /// on each).
+    pub links: links::Errors,
 }
 
 impl SetFit {
@@ -70,8 +77,26 @@ impl SetFit {
         significant(a, b)
     }
 
-    fn n_params(&self) -> usize {
-        self.x.iter().map(|v| v.len()).sum()
+    /// Number of parameters, an effect outside the spec's list counted as
+    /// [`OUT_OF_LIST_COMPLEXITY`]: it is taken only where it is clearly better than every
+    /// listed explanation.
+    fn complexity(&self) -> usize {
+        self.effects
+            .iter()
+            .zip(&self.x)
+            .map(|(e, x)| {
+                if e.is_listed() {
+                    x.len()
+                } else {
+                    OUT_OF_LIST_COMPLEXITY
+                }
+            })
+            .sum()
+    }
+
+    /// Whether the set makes a link worse than the baseline (`base`) beyond the noise.
+    pub fn spoils(&self, base: &SetFit) -> bool {
+        links::spoiled(&base.links, &self.links).is_some()
     }
 
     /// Columns of effect `k` in the flattened parameter vector.
@@ -310,6 +335,7 @@ impl Diagnoser {
         let ci: Vec<f64> = fit.ci95_half.iter().map(|h| h * inflate).collect();
         let reps = self.replays(&self.models(effects, &xs))?;
         Some(SetFit {
+            links: links::errors(&self.runs, &reps),
             effects: effects.to_vec(),
             ci95_half: split_x(&ci),
             x: xs,
@@ -432,6 +458,32 @@ impl Diagnoser {
             .zip(&neutral)
             .zip(&specs)
             .any(|((v, n), (_, p))| (v - n).abs() >= MIN_EFFECT * p.scale)
+    }
+
+    /// How far a set departs from the baseline: the root sum of squares of each parameter's
+    /// change from the value at which its effect changes nothing, in units of the parameter's
+    /// scale (a friction factor by its amplitude alone). Among explanations the data cannot
+    /// tell apart, the smallest change to the baseline is preferred ([`pick`]).
+    pub fn departure(&self, set: &SetFit) -> f64 {
+        let rail = self.rail();
+        let mut sum = 0.0;
+        for (k, e) in set.effects.iter().enumerate() {
+            let others: Vec<(Effect, &[f64])> = (0..set.effects.len())
+                .filter(|&i| i != k)
+                .map(|i| (set.effects[i], set.x[i].as_slice()))
+                .collect();
+            let model = effects::build(&self.baseline, rail, &others);
+            let specs = e.params(&self.baseline, rail);
+            let starts: Vec<f64> = specs.iter().map(|(_, p)| p.start).collect();
+            let neutral = e.neutral(&model, rail, &starts);
+            let factor = matches!(e, Effect::FrictionSpeed | Effect::FrictionTemperature);
+            for (i, ((v, n), (_, p))) in set.x[k].iter().zip(&neutral).zip(&specs).enumerate() {
+                if !(factor && i == 1) {
+                    sum += ((v - n) / p.scale).powi(2);
+                }
+            }
+        }
+        sum.sqrt()
     }
 
     /// Probes effect `a` at the fitted set `s`: Jacobian columns of the fit residuals with
@@ -561,29 +613,31 @@ fn probe_directions(a: Effect, neutral: &[f64], specs: &[lsq::ParamSpec]) -> (bo
     (factor_absent, directions)
 }
 
-fn pick(trials: Vec<SetFit>) -> Option<SetFit> {
+fn pick(d: &Diagnoser, trials: Vec<SetFit>) -> Option<SetFit> {
     let best_idx =
         (0..trials.len()).min_by(|&a, &b| trials[a].val().total_cmp(&trials[b].val()))?;
     let best = &trials[best_idx];
-    let simpler = (0..trials.len())
+    // The fits the best is not clearly better than (by the tolerance and by half a noise
+    // variance: below the noise, relative differences mean nothing).
+    let tied: Vec<usize> = (0..trials.len())
         .filter(|&i| {
-            // Simpler wins unless the other is better by the tolerance and by half a noise
-            // variance (below the noise, relative differences mean nothing).
             let replay::ComparedRms {
-                reference: simple,
-                candidate: complex,
+                reference: other,
+                candidate: b,
             } = replay::compare(&trials[i].validation, &best.validation);
-            let clearly_better = complex * PARSIMONY_TOLERANCE < simple
-                && simple * simple - complex * complex >= 0.5;
-            trials[i].n_params() < best.n_params() && !clearly_better
+            !(b * PARSIMONY_TOLERANCE < other && other * other - b * b >= 0.5)
         })
-        .min_by(|&a, &b| {
-            trials[a]
-                .n_params()
-                .cmp(&trials[b].n_params())
-                .then(trials[a].val().total_cmp(&trials[b].val()))
-        });
-    let i = simpler.unwrap_or(best_idx);
+        .collect();
+    // Among them the simplest, then the smallest change to the baseline, then the lowest
+    // error.
+    let departure: Vec<f64> = trials.iter().map(|t| d.departure(t)).collect();
+    let i = tied.into_iter().min_by(|&a, &b| {
+        trials[a]
+            .complexity()
+            .cmp(&trials[b].complexity())
+            .then(departure[a].total_cmp(&departure[b]))
+            .then(trials[a].val().total_cmp(&trials[b].val()))
+    })?;
     trials.into_iter().nth(i)
 }
 
@@ -681,6 +735,7 @@ fn probe_others(
 
 fn grow(
     d: &Diagnoser,
+    base: &SetFit,
     start: SetFit,
     singles: &[SetFit],
     applicable: &[Effect],
@@ -691,7 +746,7 @@ fn grow(
     // Below 0.7 x noise no addition can be significant (it must remove half a variance).
     while !current.effects.is_empty() && current.effects.len() < MAX_EFFECTS && current.val() >= 0.7
     {
-        match forward_step(d, &current, singles, applicable) {
+        match forward_step(d, base, &current, singles, applicable) {
             Some(better) => current = better,
             None => break,
         }
@@ -700,7 +755,7 @@ fn grow(
     // Backward elimination: drop an effect the others make redundant (another optimum may
     // explain the data as well with fewer effects: parsimony).
     while current.effects.len() >= 2 {
-        match backward_step(d, &current, singles) {
+        match backward_step(d, base, &current, singles) {
             Some(simpler) => current = simpler,
             None => break,
         }
@@ -713,6 +768,7 @@ fn grow(
 /// is a significant and material improvement.
 fn forward_step(
     d: &Diagnoser,
+    base: &SetFit,
     current: &SetFit,
     singles: &[SetFit],
     applicable: &[Effect],
@@ -753,7 +809,11 @@ fn forward_step(
         .map(|(_, p, delta)| (p.effect, probe_start(p, delta)))
         .collect();
     add_friction_factors(d, current, singles, applicable, &mut chosen);
-    let best = pick(fit_additions(d, current, &chosen))?;
+    let additions: Vec<SetFit> = fit_additions(d, current, &chosen)
+        .into_iter()
+        .filter(|s| !s.spoils(base))
+        .collect();
+    let best = pick(d, additions)?;
     (current.improved_by(&best) && d.material(&best, best.effects.len() - 1)).then_some(best)
 }
 
@@ -819,7 +879,12 @@ fn fit_additions(d: &Diagnoser, current: &SetFit, chosen: &[(Effect, Vec<f64>)])
 
 /// One step of the backward elimination: the best set without one of `current`'s
 /// effects, when it is not significantly worse.
-fn backward_step(d: &Diagnoser, current: &SetFit, singles: &[SetFit]) -> Option<SetFit> {
+fn backward_step(
+    d: &Diagnoser,
+    base: &SetFit,
+    current: &SetFit,
+    singles: &[SetFit],
+) -> Option<SetFit> {
     let without: Vec<SetFit> = elimination_starts(current, singles)
         .into_par_iter()
         .filter_map(|(k, start)| {
@@ -837,6 +902,7 @@ fn backward_step(d: &Diagnoser, current: &SetFit, singles: &[SetFit]) -> Option<
         .collect();
     let best = without
         .into_iter()
+        .filter(|s| !s.spoils(base))
         .min_by(|a, b| a.val().total_cmp(&b.val()))?;
     (!best.improved_by(current)).then_some(best)
 }
@@ -981,11 +1047,22 @@ fn choose_by_links(
 
 /// Forward selection with linearised candidate ranking, backward elimination, and the
 /// confounding check, all at the fit step.
-pub(super) fn search(d: &Diagnoser, base: &SetFit, started: Instant) -> Search {
+///
+/// `unlisted` are effects outside the spec's list that the data show (a wheelset whose pad
+/// friction differs from the others'): fitted like the others so that no listed effect is
+/// bent to them, never named as causes. A set that makes a link worse than the baseline
+/// beyond the noise is never kept ([`SetFit::spoils`]).
+pub(super) fn search(
+    d: &Diagnoser,
+    base: &SetFit,
+    unlisted: &[Effect],
+    started: Instant,
+) -> Search {
     let applicable: Vec<Effect> = effects::ALL
         .iter()
         .copied()
         .filter(|e| e.applicable(&d.runs) && d.runs.iter().any(|r| effects::shows(*e, r)))
+        .chain(unlisted.iter().copied())
         .collect();
     let singles: Vec<SetFit> = applicable
         .par_iter()
@@ -997,9 +1074,9 @@ pub(super) fn search(d: &Diagnoser, base: &SetFit, started: Instant) -> Search {
     // right combination); the best final set wins, the simplest among equals.
     let finals: Vec<SetFit> = first_effects(d, base, &singles)
         .into_par_iter()
-        .map(|f| grow(d, f, &singles, &applicable, started))
+        .map(|f| grow(d, base, f, &singles, &applicable, started))
         .collect();
-    let mut current = pick(finals).unwrap_or_else(|| base.clone());
+    let mut current = pick(d, finals).unwrap_or_else(|| base.clone());
     // Confounded: could another effect stand in for a cause? Screen each swap with the
     // linearised fit, confirm the promising ones with a real fit on validation data.
     let mut confounded = Vec::new();
@@ -1007,7 +1084,7 @@ pub(super) fn search(d: &Diagnoser, base: &SetFit, started: Instant) -> Search {
         let probes = probe_others(d, &current, &singles, &applicable);
         let swaps = screen_swaps(d, &current, &j_s, &probes);
         let confirmed = confirm_swaps(d, &current, &singles, &swaps);
-        confounded = confounded_groups(&current, &confirmed);
+        confounded = confounded_groups(base, &current, &confirmed);
         current = choose_by_links(d, current, &confirmed, &confounded);
     }
     debug(started, d.replays_done(), "confounded alternatives");
@@ -1015,7 +1092,7 @@ pub(super) fn search(d: &Diagnoser, base: &SetFit, started: Instant) -> Search {
     // (a flat valley of compensating parameters); continue it.
     if !current.effects.is_empty() {
         if let Some(p) = d.fit_set(&current.effects, Some(&current.x)) {
-            if p.fit.rms() <= current.fit.rms() {
+            if p.fit.rms() <= current.fit.rms() && !p.spoils(base) {
                 current = p;
             }
         }
@@ -1034,10 +1111,10 @@ fn first_effects(d: &Diagnoser, base: &SetFit, singles: &[SetFit]) -> Vec<SetFit
     let mut firsts: Vec<SetFit> = Vec::new();
     let material: Vec<SetFit> = singles
         .iter()
-        .filter(|s| d.material(s, 0))
+        .filter(|s| d.material(s, 0) && !s.spoils(base))
         .cloned()
         .collect();
-    if let Some(best) = pick(material.clone()) {
+    if let Some(best) = pick(d, material.clone()) {
         if base.improved_by(&best) {
             firsts.push(best);
         }
@@ -1137,9 +1214,18 @@ fn confirm_swaps(
 }
 
 /// Each cause with the effects that explain the validation data as well in its place.
-fn confounded_groups(current: &SetFit, confirmed: &[(usize, Effect, SetFit)]) -> Vec<Vec<String>> {
+/// Alternatives that make a link worse than the baseline are told apart by that link; an
+/// effect outside the spec's list is never listed.
+fn confounded_groups(
+    base: &SetFit,
+    current: &SetFit,
+    confirmed: &[(usize, Effect, SetFit)],
+) -> Vec<Vec<String>> {
     let mut confounded = Vec::new();
     for (k, e) in current.effects.iter().enumerate() {
+        if !e.is_listed() {
+            continue;
+        }
         let mut group = vec![e.name().to_string()];
         for (kk, a, f) in confirmed {
             let replay::ComparedRms {
@@ -1149,6 +1235,8 @@ fn confounded_groups(current: &SetFit, confirmed: &[(usize, Effect, SetFit)]) ->
             // Confounded: within the tolerance, or not significantly worse (below the
             // noise, relative differences mean nothing).
             if *kk == k
+                && a.is_listed()
+                && !f.spoils(base)
                 && (alt <= CONFOUND_TOLERANCE * now || !significant(alt, now))
                 && !group.contains(&a.name().to_string())
             {

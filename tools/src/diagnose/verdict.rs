@@ -178,6 +178,9 @@ fn tried(baseline: &Params, rail: Rail, causes: &Causes) -> Vec<Tried> {
             Tried {
                 effect: match e {
                     Effect::SensorGainPressure => "sensor-gain (p_cyl observation)".into(),
+                    Effect::WheelsetFriction(j) => {
+                        format!("pad friction of wheelset {} (not a listed effect)", j + 1)
+                    }
                     _ => e.name().into(),
                 },
                 params: param_keys(e, baseline, rail)

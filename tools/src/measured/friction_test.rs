@@ -25,6 +25,8 @@ pub struct FrictionTest {
     pub notes: Vec<String>,
     /// Rows skipped (not measured, or brake released).
     pub skipped: usize,
+    /// Points kept (`mu.len()`, or counted when streamed: [`stream_friction_test`]).
+    pub points: usize,
 }
 
 /// Rows of a time series with a clamp force below this share of the file's largest clamp
@@ -46,11 +48,55 @@ enum RowMu {
 /// A friction test from its table (every cell already checked against its column's
 /// limits; the time, when present, measured and increasing).
 pub(crate) fn from_table(mut table: Table) -> Result<FrictionTest, MeasuredError> {
-    let required = |t: &Table, c: hils_sil::record::Channel| t.required(c.name(0), "friction test");
     table.require_rows()?;
+    let clamp_max = clamp_max_of(&table);
+    let (mut out, counts) = points_of(&mut table, clamp_max)?;
+    counts.finish(&mut out, &table)?;
+    Ok(out)
+}
+
+/// Rows of a friction test skipped, by cause.
+#[derive(Clone, Copy, Debug, Default)]
+struct Skipped {
+    /// A needed cell empty (not measured).
+    empty: usize,
+    /// Brake released (clamp force below [`RELEASED_SHARE`] of the largest).
+    released: usize,
+}
+
+impl Skipped {
+    /// The notes and the count of skipped rows; an error when no row gave a point.
+    fn finish(self, out: &mut FrictionTest, table: &Table) -> Result<(), MeasuredError> {
+        out.notes.extend(skip_notes(self.empty, self.released));
+        out.skipped = self.empty + self.released;
+        if out.points == 0 {
+            return Err(table.err(0, 0, "", "no usable friction points (every row skipped)"));
+        }
+        Ok(())
+    }
+}
+
+/// The largest clamp force of the table when mu comes from the forces (0 otherwise).
+fn clamp_max_of(table: &Table) -> f64 {
+    if table.index(MU.name(0)).is_some() {
+        return 0.0;
+    }
+    match table.index(F_CLAMP.name(0)).map(|i| &table.columns[i]) {
+        Some(super::table::Cells::Numeric(c, _)) => c
+            .iter()
+            .filter(|x| x.is_finite())
+            .fold(0.0f64, |m, &x| m.max(x)),
+        _ => 0.0,
+    }
+}
+
+/// The points of the rows the table holds (`clamp_max`: the file's largest clamp force,
+/// for mu from the forces) and the rows skipped.
+fn points_of(table: &mut Table, clamp_max: f64) -> Result<(FrictionTest, Skipped), MeasuredError> {
+    let required = |t: &Table, c: hils_sil::record::Channel| t.required(c.name(0), "friction test");
     let mut used = vec![false; table.header.len()];
-    let i_v = required(&table, V_FRICTION)?;
-    let i_t = required(&table, T_DISC)?;
+    let i_v = required(table, V_FRICTION)?;
+    let i_t = required(table, T_DISC)?;
     used[i_v] = true;
     used[i_t] = true;
     let v = table.numeric(i_v);
@@ -59,7 +105,7 @@ pub(crate) fn from_table(mut table: Table) -> Result<FrictionTest, MeasuredError
         used[i] = true;
         table.numeric(i)
     });
-    let source = mu_source(&mut table, &mut used)?;
+    let source = mu_source(table, &mut used)?;
     let mut out = FrictionTest {
         path: table.path.clone(),
         metadata: table.metadata.clone(),
@@ -74,44 +120,93 @@ pub(crate) fn from_table(mut table: Table) -> Result<FrictionTest, MeasuredError
         ..Default::default()
     };
     let mut kept_t = Vec::new();
-    let (mut empty, mut released) = (0usize, 0usize);
-    let clamp_max = match &source {
-        MuSource::Forces(c, _) => c
-            .iter()
-            .filter(|x| x.is_finite())
-            .fold(0.0f64, |m, &x| m.max(x)),
-        MuSource::Direct(_) => 0.0,
-    };
+    let mut skipped = Skipped::default();
     for r in 0..table.rows() {
-        let mu = match row_mu(&table, &source, clamp_max, r)? {
+        let mu = match row_mu(table, &source, clamp_max, r)? {
             RowMu::Value(mu) => mu,
             RowMu::Released => {
-                released += 1;
+                skipped.released += 1;
                 continue;
             }
         };
         if mu.is_nan() || v[r].is_nan() || temp[r].is_nan() {
-            empty += 1;
+            skipped.empty += 1;
             continue;
         }
         out.v_friction_mps.push(v[r]);
         out.t_disc_c.push(temp[r]);
         out.mu.push(mu);
-        out.rows.push(r + 1);
+        out.rows.push(table.rows_before + r + 1);
         if let Some(t) = &time {
             kept_t.push(t[r]);
         }
     }
     out.notes.extend(std::mem::take(&mut table.notes));
-    out.notes.extend(skip_notes(empty, released));
-    out.skipped = empty + released;
+    out.points = out.mu.len();
     if time.is_some() {
         out.t_s = Some(kept_t);
     }
-    if out.mu.is_empty() {
-        return Err(table.err(0, 0, "", "no usable friction points (every row skipped)"));
+    Ok((out, skipped))
+}
+
+/// Rows per chunk of [`stream_friction_test`].
+pub const CHUNK_ROWS: usize = 1 << 16;
+
+/// Reads a friction test in chunks of [`CHUNK_ROWS`] rows, for files too large to hold
+/// (tens of millions of points): `each` gets each chunk's points (rows numbered from the
+/// file's first), which are then dropped. The same checks and the same points as
+/// [`super::read_friction_test`]; mu from the forces needs the file's largest clamp force
+/// first, so such a file is read twice. `open` opens the input (once or twice). Columns
+/// are named and units converted by the channel `map` (None: the spec's names). Returns the
+/// file's description without points (metadata, notes, rows skipped, `points` counted).
+pub fn stream_friction_test<R: std::io::BufRead>(
+    path: &std::path::Path,
+    map: Option<&super::ChannelMap>,
+    mut open: impl FnMut() -> std::io::Result<R>,
+    mut each: impl FnMut(&FrictionTest) -> Result<(), MeasuredError>,
+) -> Result<FrictionTest, MeasuredError> {
+    use super::table::{Kind, file_error, read_table_chunks};
+    let mut input = || open().map_err(|e| file_error(path, format!("cannot read: {e}")));
+    let (mut total, mut skipped) = (FrictionTest::default(), Skipped::default());
+    let mut take = |t: &mut Table, clamp_max: f64| -> Result<(), MeasuredError> {
+        let (chunk, s) = points_of(t, clamp_max)?;
+        skipped.empty += s.empty;
+        skipped.released += s.released;
+        total.points += chunk.points;
+        total.notes.extend(chunk.notes.iter().cloned());
+        total.unknown_columns.clone_from(&chunk.unknown_columns);
+        each(&chunk)
+    };
+    // First pass: the points when mu is a column; the largest clamp force when mu comes
+    // from the forces (a second pass takes the points).
+    let direct = |t: &Table| t.index(MU.name(0)).is_some();
+    let clamp_max = std::cell::Cell::new(0.0f64);
+    let mut first_pass = |t: &mut Table| -> Result<(), MeasuredError> {
+        if t.kind != Kind::Friction {
+            return Err(file_error(path, super::NOT_A_FRICTION_TEST));
+        }
+        if direct(t) {
+            take(t, 0.0)
+        } else {
+            clamp_max.set(clamp_max.get().max(clamp_max_of(t)));
+            Ok(())
+        }
+    };
+    let mut last = read_table_chunks(path, input()?, map, CHUNK_ROWS, &mut first_pass)?;
+    first_pass(&mut last)?;
+    if last.rows_before + last.rows() == 0 {
+        return Err(last.err(last.header_line, 0, "", "no data rows"));
     }
-    Ok(out)
+    if !direct(&last) {
+        let max = clamp_max.get();
+        last = read_table_chunks(path, input()?, map, CHUNK_ROWS, |t| take(t, max))?;
+        take(&mut last, max)?;
+    }
+    super::check_metadata(&mut last, map)?;
+    total.path = last.path.clone();
+    total.metadata = last.metadata.clone();
+    skipped.finish(&mut total, &last)?;
+    Ok(total)
 }
 
 /// The `mu` column, else both `f_clamp_n` and `f_friction_n` (marked used).

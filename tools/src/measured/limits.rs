@@ -45,7 +45,7 @@ const fn limit(channel: Channel, min: f64, max: f64, basis: &'static str) -> Lim
 }
 
 /// The run-log columns (spec section 1).
-pub const RUN_LOG: [Limit; 10] = [
+pub const RUN_LOG: [Limit; 11] = [
     limit(
         rl::T,
         -MAX_SPAN_S,
@@ -90,6 +90,7 @@ pub const RUN_LOG: [Limit; 10] = [
     ),
     limit(rl::Q, -5e3, 5e5, "axle load up to 50 t; -5 kN noise"),
     limit(rl::WSP, 0.0, 1.0, "valve flag, 0 or 1"),
+    limit(rl::HOLD, 0.0, 1.0, "valve flag, 0 or 1"),
     limit(rl::A_X, -30.0, 30.0, "about 3 g"),
 ];
 

@@ -35,7 +35,7 @@ pub mod units;
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 
-pub use friction_test::{FrictionTest, RELEASED_SHARE};
+pub use friction_test::{FrictionTest, RELEASED_SHARE, stream_friction_test};
 pub use limits::{Limit, MAX_SPAN_S, plausible_range};
 pub use map::ChannelMap;
 pub use run_log::{PerWheelset, RunLog};
@@ -124,6 +124,16 @@ fn not_mdf_under_an_mdf_name(path: &Path, head: &[u8]) -> Result<(), MeasuredErr
 }
 
 fn from_table(mut table: Table, map: Option<&ChannelMap>) -> Result<Measured, MeasuredError> {
+    check_metadata(&mut table, map)?;
+    match table.kind {
+        Kind::Friction => friction_test::from_table(table).map(Measured::Friction),
+        Kind::Run => run_log::from_table(table).map(Measured::Run),
+    }
+}
+
+/// Checks the table's metadata (no key given twice with different values) and adds the
+/// channel `map`'s (a key both give must agree).
+fn check_metadata(table: &mut Table, map: Option<&ChannelMap>) -> Result<(), MeasuredError> {
     table.metadata.check_repeats(&table.path)?;
     if let Some(map) = map {
         let origin = format!("the channel map {}", map.path.display());
@@ -131,10 +141,7 @@ fn from_table(mut table: Table, map: Option<&ChannelMap>) -> Result<Measured, Me
             .metadata
             .merge(&table.path, map.metadata_pairs(), &origin)?;
     }
-    match table.kind {
-        Kind::Friction => friction_test::from_table(table).map(Measured::Friction),
-        Kind::Run => run_log::from_table(table).map(Measured::Run),
-    }
+    Ok(())
 }
 
 impl Measured {
@@ -198,6 +205,34 @@ pub fn read_friction_test_with(
 /// The channel map of a `--map FILE` flag (None without one).
 pub fn load_map(path: Option<&Path>) -> Result<Option<ChannelMap>, MeasuredError> {
     path.map(ChannelMap::load).transpose()
+}
+
+/// Reads a friction test, CSV or MDF4, through a channel map, handing its points to `each`:
+/// a CSV in chunks ([`stream_friction_test`], memory bounded whatever its length; `open`
+/// opens its bytes, once or twice), an MDF4 file whole (its records are read per channel,
+/// not in row chunks: docs/mdf4.md). Returns the test without points (`points` counted).
+pub fn stream_friction_test_with<R: BufRead>(
+    path: &Path,
+    map: Option<&ChannelMap>,
+    open: impl FnMut() -> std::io::Result<R>,
+    mut each: impl FnMut(&FrictionTest) -> Result<(), MeasuredError>,
+) -> Result<FrictionTest, MeasuredError> {
+    let mut head = Vec::with_capacity(8);
+    std::fs::File::open(path)
+        .and_then(|f| std::io::Read::read_to_end(&mut std::io::Read::take(f, 8), &mut head))
+        .map_err(|e| file_error(path, format!("cannot read: {e}")))?;
+    not_mdf_under_an_mdf_name(path, &head)?;
+    if !crate::mdf4::is_mdf(&head) {
+        return stream_friction_test(path, map, open, each);
+    }
+    let mut test = read_friction_test_with(path, map)?;
+    each(&test)?;
+    test.v_friction_mps = Vec::new();
+    test.t_disc_c = Vec::new();
+    test.mu = Vec::new();
+    test.rows = Vec::new();
+    test.t_s = None;
+    Ok(test)
 }
 
 /// Parses a friction test's text.

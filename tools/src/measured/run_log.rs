@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use hils_plant::{Rail, WHEELSETS};
 use hils_sil::record::Channel;
 use hils_sil::record::run_log::{
-    A_X, CMD, F_BRAKE, F_CLAMP, OMEGA, P_CYL, Q, T, T_DISC, V_REF, WSP,
+    A_X, CMD, F_BRAKE, F_CLAMP, HOLD, OMEGA, P_CYL, Q, T, T_DISC, V_REF, WSP,
 };
 
 use super::table::{MeasuredError, Metadata, Table, TextColumn};
@@ -32,6 +32,8 @@ pub struct RunLog {
     pub t_disc_c: PerWheelset,
     pub q_n: PerWheelset,
     pub wsp: PerWheelset,
+    /// WSP hold valve coil energised (`hold1..4`, rig logs).
+    pub hold: PerWheelset,
     pub a_x_mps2: Option<Vec<f64>>,
     /// The `cmd` column's texts (interned: one copy of each distinct text).
     pub cmd: Option<TextColumn>,
@@ -76,7 +78,7 @@ impl RunLog {
 const KIND: &str = "run log";
 
 /// The optional per-wheelset channels, in the order of the schema.
-const OPTIONAL: [Channel; 6] = [P_CYL, F_CLAMP, F_BRAKE, T_DISC, Q, WSP];
+const OPTIONAL: [Channel; 7] = [P_CYL, F_CLAMP, F_BRAKE, T_DISC, Q, WSP, HOLD];
 
 /// The columns taken so far and their empty-cell counts.
 struct Taken {
@@ -135,12 +137,12 @@ impl Taken {
 }
 
 /// Every wheelset needs a brake input (its clamp force or its cylinder pressure); WSP
-/// flags are 0/1.
+/// valve flags (`wsp`, `hold`) are 0/1.
 fn check_inputs(
     table: &Table,
     p_cyl: &PerWheelset,
     f_clamp: &PerWheelset,
-    wsp: &PerWheelset,
+    valves: [(Channel, &PerWheelset); 2],
 ) -> Result<(), MeasuredError> {
     for j in 0..WHEELSETS {
         if p_cyl[j].is_none() && f_clamp[j].is_none() {
@@ -152,14 +154,16 @@ fn check_inputs(
             ));
         }
     }
-    for j in 0..WHEELSETS {
-        if let Some(w) = &wsp[j] {
-            if let Some(r) = w
-                .iter()
-                .position(|&x| !(x.is_nan() || x == 0.0 || x == 1.0))
-            {
-                let idx = table.index(WSP.name(j)).unwrap_or(0);
-                return Err(table.row_err(r, idx, format!("`{}` is not 0 or 1", w[r])));
+    for (channel, flags) in valves {
+        for j in 0..WHEELSETS {
+            if let Some(w) = &flags[j] {
+                if let Some(r) = w
+                    .iter()
+                    .position(|&x| !(x.is_nan() || x == 0.0 || x == 1.0))
+                {
+                    let idx = table.index(channel.name(j)).unwrap_or(0);
+                    return Err(table.row_err(r, idx, format!("`{}` is not 0 or 1", w[r])));
+                }
             }
         }
     }
@@ -222,9 +226,14 @@ pub(crate) fn from_table(table: Table) -> Result<RunLog, MeasuredError> {
     for (j, slot) in omega.iter_mut().enumerate() {
         *slot = taken.required(OMEGA, j)?;
     }
-    let [p_cyl_pa, f_clamp_n, f_brake_n, t_disc_c, q_n, wsp] =
+    let [p_cyl_pa, f_clamp_n, f_brake_n, t_disc_c, q_n, wsp, hold] =
         OPTIONAL.map(|c| taken.per_wheelset(c));
-    check_inputs(&taken.table, &p_cyl_pa, &f_clamp_n, &wsp)?;
+    check_inputs(
+        &taken.table,
+        &p_cyl_pa,
+        &f_clamp_n,
+        [(WSP, &wsp), (HOLD, &hold)],
+    )?;
     let a_x_mps2 = match taken.table.index(A_X.name(0)) {
         Some(i) => Some(taken.take(i)),
         None => None,
@@ -255,6 +264,7 @@ pub(crate) fn from_table(table: Table) -> Result<RunLog, MeasuredError> {
         t_disc_c,
         q_n,
         wsp,
+        hold,
         a_x_mps2,
         cmd,
         unknown_columns,

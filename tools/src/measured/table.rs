@@ -244,6 +244,10 @@ pub(crate) struct Table {
     /// What reading the table did that a user should know (channels put on the master
     /// time grid).
     pub(crate) notes: Vec<String>,
+    /// Data rows read before the rows held (read in chunks: [`read_table_chunks`]).
+    pub(crate) rows_before: usize,
+    /// The time of the last row before the rows held (read in chunks).
+    pub(crate) time_before: Option<f64>,
 }
 
 impl Table {
@@ -270,7 +274,12 @@ impl Table {
         idx: usize,
         message: impl Into<String>,
     ) -> MeasuredError {
-        self.err(self.lines[r] as usize, r + 1, &self.labels[idx], message)
+        self.err(
+            self.lines[r] as usize,
+            self.rows_before + r + 1,
+            &self.labels[idx],
+            message,
+        )
     }
 
     pub(crate) fn rows(&self) -> usize {
@@ -465,8 +474,22 @@ fn cells_of(kind: Kind, header: &[String]) -> Vec<Cells> {
 /// no empty cell, increases strictly and spans at most [`limits::MAX_SPAN_S`].
 pub(crate) fn read_table<R: BufRead>(
     path: &Path,
+    input: R,
+    map: Option<&ChannelMap>,
+) -> Result<Table, MeasuredError> {
+    read_table_chunks(path, input, map, usize::MAX, |_| Ok(()))
+}
+
+/// [`read_table`] in chunks of `chunk_rows` rows, for files too large to hold: each full
+/// chunk is handed to `each` (the table holding those rows only; row numbers in errors
+/// count from the file's first row), then dropped; the table returned holds the last,
+/// partial chunk. Memory is bounded by the chunk, whatever the file's length.
+pub(crate) fn read_table_chunks<R: BufRead>(
+    path: &Path,
     mut input: R,
     map: Option<&ChannelMap>,
+    chunk_rows: usize,
+    mut each: impl FnMut(&mut Table) -> Result<(), MeasuredError>,
 ) -> Result<Table, MeasuredError> {
     let (metadata, header_text, header_line) = read_preamble(path, &mut input)?;
     let mut reader = csv::ReaderBuilder::new()
@@ -493,12 +516,17 @@ pub(crate) fn read_table<R: BufRead>(
     let mut record = csv::ByteRecord::new();
     let mut t_first = None;
     loop {
+        if table.lines.len() >= chunk_rows {
+            each(&mut table)?;
+            table.next_chunk(time);
+        }
         let r = table.lines.len();
         let more = reader.read_byte_record(&mut record).map_err(|e| {
             let line = e
                 .position()
                 .map_or(0, |p| p.line() as usize + header_line - 1);
-            table.err(line, r + 1, "", format!("malformed CSV row: {e}"))
+            let row = table.rows_before + r + 1;
+            table.err(line, row, "", format!("malformed CSV row: {e}"))
         })?;
         if !more {
             break;
@@ -539,6 +567,8 @@ impl Table {
             units: resolved.into_iter().map(|r| r.unit).collect(),
             lines: Vec::new(),
             notes: Vec::new(),
+            rows_before: 0,
+            time_before: None,
         })
     }
 
@@ -565,6 +595,18 @@ impl Table {
             return Err(self.row_err(r, idx, msg));
         }
         Ok(())
+    }
+
+    /// Drops the rows held (a chunk handed on), keeping what the checks of the next rows
+    /// need: the row count and the last time (`time`: the time column).
+    fn next_chunk(&mut self, time: Option<usize>) {
+        if let Some(Cells::Numeric(t, _)) = time.map(|i| &self.columns[i]) {
+            self.time_before = t.last().copied().or(self.time_before);
+        }
+        self.rows_before += self.lines.len();
+        self.lines.clear();
+        // Fresh columns: the chunk's were taken (moved out) by the caller.
+        self.columns = cells_of(self.kind, &self.header);
     }
 
     /// Reads one cell of data row `r` (0-based) into its column, checking it.
@@ -617,8 +659,13 @@ impl Table {
         if now.is_nan() {
             return Err(self.row_err(r, idx, "empty cell in a required column"));
         }
-        if r > 0 && !(now > t[r - 1]) {
-            let msg = format!("time does not increase ({now} after {})", t[r - 1]);
+        let before = if r > 0 {
+            Some(t[r - 1])
+        } else {
+            self.time_before
+        };
+        if let Some(before) = before.filter(|&b| !(now > b)) {
+            let msg = format!("time does not increase ({now} after {before})");
             return Err(self.row_err(r, idx, msg));
         }
         let t0 = *first.get_or_insert(now);

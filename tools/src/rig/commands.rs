@@ -68,6 +68,8 @@ pub fn command_name(c: &Command) -> &'static str {
         Command::Track(TrackCommand::Commit { .. }) => "track-commit",
         Command::Track(TrackCommand::Clear) => "track-clear",
         Command::Vehicle { .. } => "vehicle",
+        Command::Arm => "arm",
+        Command::Disarm => "disarm",
     }
 }
 
@@ -84,9 +86,18 @@ fn sensor_channels(faults: u16) -> Vec<String> {
 const SETUP_MISMATCH: &str =
     "the board's track/vehicle differs from what was sent: a frame was lost; resend";
 
+/// Why the board rejects a rig-mode `Start` while not armed
+/// (`hils_rig_core::rig::CommandError::NotArmed`).
+pub const NOT_ARMED: &str = "the board is not armed for a controller: `hils rig arm` first (or `start --arm`); it disarms at every stop, fault and reset";
+
 /// Why the board (`hils_rig_core::rig::Rig::command`) rejects `command` in the state the
-/// status frame `before` shows; `None` when no rule applies.
-pub fn rejection_reason(command: &Command, before: &StatusFrame) -> Option<String> {
+/// status frame `before` shows, and the arming the board last reported (`armed`, from
+/// `RIG_HEALTH`; `None`: not seen yet); `None` when no rule applies.
+pub fn rejection_reason(
+    command: &Command,
+    before: &StatusFrame,
+    armed: Option<bool>,
+) -> Option<String> {
     let running = before.state == RigState::Running;
     match command {
         Command::Start(StartCommand {
@@ -106,12 +117,22 @@ pub fn rejection_reason(command: &Command, before: &StatusFrame) -> Option<Strin
                     "sensor fault latched on channel(s) {}: clear faults first (`hils rig clear-faults`)",
                     sensor_channels(before.faults).join(", ")
                 ))
-            } else if *track {
-                Some(format!(
-                    "no track kept on the board (send its zones and commit it first, `--track FILE`), or {SETUP_MISMATCH}"
-                ))
+            } else if *mode == RigMode::Rig && armed == Some(false) {
+                Some(NOT_ARMED.into())
             } else {
-                Some(SETUP_MISMATCH.into())
+                // Not armed is a cause only while the board's arming is not known.
+                let arming = if *mode == RigMode::Rig && armed.is_none() {
+                    format!("{NOT_ARMED}; or ")
+                } else {
+                    String::new()
+                };
+                Some(if *track {
+                    format!(
+                        "{arming}no track kept on the board (send its zones and commit it first, `--track FILE`), or {SETUP_MISMATCH}"
+                    )
+                } else {
+                    format!("{arming}{SETUP_MISMATCH}")
+                })
             }
         }
         Command::TrackZone { index, .. } if *index as usize >= MAX_ZONES => Some(format!(
@@ -122,6 +143,13 @@ pub fn rejection_reason(command: &Command, before: &StatusFrame) -> Option<Strin
         )),
         // The first frame of a `start` (its default vehicle): the start's wording.
         Command::Vehicle { .. } if running => Some("a run is active: stop it first".into()),
+        Command::Arm if matches!(before.state, RigState::Running | RigState::Starting) => {
+            Some("a run is active: arm before the start".into())
+        }
+        Command::Arm => Some(
+            "faults latched or the board in fault: clear them first (`hils rig clear-faults`)"
+                .into(),
+        ),
         Command::Stop if !running => Some(format!(
             "no run to stop (state {})",
             state_name(before.state)
@@ -290,7 +318,25 @@ impl<T: Transport> Session<T> {
         let mut reason = None;
         let mut accepted = status.command_result == CommandResult::Accepted;
         if !accepted {
-            reason = rejection_reason(&command, &before);
+            let rig_start = matches!(
+                command,
+                Command::Start(StartCommand {
+                    mode: RigMode::Rig,
+                    ..
+                })
+            );
+            if rig_start && self.board.armed().is_none() {
+                // RIG_HEALTH (every 100 ms) says whether the board is armed: wait for one
+                // to name the reason exactly.
+                self.run_for(0.15, |b, _| {
+                    if b.armed().is_some() {
+                        Flow::Done
+                    } else {
+                        Flow::Continue
+                    }
+                })?;
+            }
+            reason = rejection_reason(&command, &before, self.board.armed());
             if reason.is_none() && first {
                 self.send(command)?;
                 status = self.next_status(2)?;

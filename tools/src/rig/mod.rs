@@ -19,7 +19,9 @@
 //! A rejected command, a lost board, a bus-off or a stuck alive counter ends the session
 //! (exit code 1) and what was recorded is written.
 
+pub mod agreement;
 pub mod commands;
+pub mod io_config;
 pub mod monitor;
 pub mod programme;
 pub mod record;
@@ -80,9 +82,9 @@ pub enum RigCommand {
     },
     /// Run a programme of runs on the rig, recording each (see `hils rig run --help`).
     ///
+    /// `--report DIR` (required): report.md, the plots and each run's log (NAME.csv).
     /// `--json FILE`: the per-run results (the `hils wsp-test --json` keys, with `on_rig`
-    /// and `end`). `--report DIR`: report.md, the plots and each run's log (NAME.csv);
-    /// without it the logs go to the current directory and no report is written.
+    /// and `end`).
     Run(programme::RunArgs),
 }
 
@@ -110,7 +112,14 @@ pub enum Line {
     },
     /// Clear latched faults whose cause is gone.
     ClearFaults,
-    /// Set the telemetry divider or the sensor-wheel teeth (no run active).
+    /// Arm the board for the controller on the rig: the pulse trains and wheel-speed frames
+    /// (and every controller output) go live in the following rig-mode runs. The board
+    /// disarms at every stop, fault and reset.
+    Arm,
+    /// Disarm: the outputs the controller reads go to their safe values at once.
+    Disarm,
+    /// Set the telemetry divider, the sensor-wheel teeth or the controller I/O (no run
+    /// active).
     #[command(subcommand)]
     Configure(ConfigKind),
     /// Print the board's status.
@@ -126,7 +135,9 @@ pub enum Line {
         every_s: f64,
     },
     /// Record the wheel-speed and status frames as a run log. Alone: until a run ends (or
-    /// `--for-s`); in a session: from here to the end of the session.
+    /// `--for-s`); in a session: from here to the end of the session or the next `record`
+    /// (which ends and writes this one first). The file's folder is checked before the
+    /// session sends anything.
     Record {
         /// Run-log file: CSV, or MDF4 when its name ends in `.mf4`.
         #[arg(long)]
@@ -135,7 +146,8 @@ pub enum Line {
         #[arg(long, value_parser = crate::flags::rig_for_s)]
         for_s: Option<f64>,
     },
-    /// Wait: `--for-s S`, or `--until-end` (a run was running and no longer is).
+    /// Wait: `--for-s S`, or `--until-end` (a run was running and no longer is; an error
+    /// when it has not ended after `--for-s` or 600 s of board time).
     Wait {
         /// Wait this long, s (0.001-86400).
         #[arg(long, value_parser = crate::flags::rig_for_s)]
@@ -165,6 +177,10 @@ pub struct StartArgs {
     /// Self-test: emergency brake at t = 0.
     #[arg(long)]
     pub eb: bool,
+    /// Rig mode: arm the board for the controller right before the start (`hils rig arm`):
+    /// the board refuses a rig-mode start while not armed.
+    #[arg(long)]
+    pub arm: bool,
 }
 
 #[derive(ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
@@ -223,7 +239,7 @@ pub enum SensorKindArg {
     Pressure,
 }
 /// `configure ...`: an item and its value.
-#[derive(Subcommand, Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Subcommand, Debug, Clone, PartialEq, Eq)]
 pub enum ConfigKind {
     /// Telemetry every STEPS plant steps: 1-10000.
     Divider {
@@ -235,6 +251,9 @@ pub enum ConfigKind {
         #[arg(value_parser = crate::flags::rig_teeth)]
         teeth: u16,
     },
+    /// The controller I/O from a file (valve inputs wired, demand PWM, air-spring signals;
+    /// format: docs/rig.md, "Controller I/O"): every value checked, then one frame each.
+    Io { file: PathBuf },
 }
 
 impl RailArg {
@@ -270,6 +289,9 @@ fn channel(c: u8) -> Result<u8> {
 /// is the digest of that setup ([`track::with_setup_digest`]).
 pub fn commands_of(line: &Line) -> Result<Vec<Command>> {
     let mut out = Vec::new();
+    if let Line::Configure(ConfigKind::Io { file }) = line {
+        return Ok(io_config::commands(&io_config::load(file)?));
+    }
     if let Line::Start(a) = line {
         out.push(Command::Vehicle {
             key: VehicleKey::Default,
@@ -286,6 +308,9 @@ pub fn commands_of(line: &Line) -> Result<Vec<Command>> {
     match command_of(line)? {
         Some(start @ Command::Start { .. }) => {
             let start = track::with_setup_digest(&out, start)?;
+            if matches!(line, Line::Start(a) if a.arm) {
+                out.push(Command::Arm);
+            }
             out.push(start);
         }
         c => out.extend(c),
@@ -348,9 +373,13 @@ fn command_of(line: &Line) -> Result<Option<Command>> {
             },
         },
         Line::ClearFaults => Command::ClearFaults,
-        Line::Configure(item) => Command::Configure(match *item {
-            ConfigKind::Divider { steps } => ConfigItem::TelemetryDivider(steps),
-            ConfigKind::Teeth { teeth } => ConfigItem::Teeth(teeth),
+        Line::Arm => Command::Arm,
+        Line::Disarm => Command::Disarm,
+        Line::Configure(item) => Command::Configure(match item {
+            ConfigKind::Divider { steps } => ConfigItem::TelemetryDivider(*steps),
+            ConfigKind::Teeth { teeth } => ConfigItem::Teeth(*teeth),
+            // Sent by `commands_of` (several frames).
+            ConfigKind::Io { .. } => return Ok(None),
         }),
         Line::Status | Line::Watch { .. } | Line::Record { .. } | Line::Wait { .. } => {
             return Ok(None);
@@ -468,6 +497,14 @@ pub fn run_line<T: Transport>(
             })?;
         }
         Line::Record { out, for_s } => {
+            if let Some(first) = recording.take() {
+                let end = format!(
+                    "a new recording (record --out {}) began at t = {:.3} s",
+                    out.display(),
+                    s.link.now_s()
+                );
+                finish(s, Some(first), &end)?;
+            }
             s.recorder = Some(Recorder::default());
             *recording = Some(Recording {
                 out: out.clone(),
@@ -491,21 +528,30 @@ pub fn run_line<T: Transport>(
                 end.seen_running = st.state == RigState::Running;
             }
             let limit = for_s.unwrap_or(if *until_end { WAIT_MAX_S } else { 0.0 });
+            let mut ended = false;
             s.run_for(limit, |_, seen| {
                 if *until_end && end.ended(seen) {
+                    ended = true;
                     Flow::Done
                 } else {
                     Flow::Continue
                 }
             })?;
-            if let Some(st) = s.board.status() {
-                println!(
-                    "wait: board {} at t = {:.3} s, {:.2} km/h",
+            let state = s.board.status().map(|st| {
+                format!(
+                    "board {} at t = {:.3} s, {:.2} km/h",
                     state_name(st.state),
                     s.link.now_s(),
                     st.vehicle_speed_kmh
-                );
+                )
+            });
+            let state = state.unwrap_or_else(|| "no status frame".into());
+            if *until_end && !ended {
+                return Err(Stop::Error(anyhow!(
+                    "wait --until-end: the run did not end within {limit} s of board time ({state})"
+                )));
             }
+            println!("wait: {state}");
         }
         _ => {}
     }
@@ -613,8 +659,32 @@ pub fn parse_script(path: &Path, text: &str) -> Result<Vec<Line>> {
     Ok(lines)
 }
 
-/// Runs lines in one session; the recording is written however it ends.
+/// Checks the output of every `record` line before the session sends anything: its folder
+/// exists and takes the file, and no two lines record into the same file.
+pub fn check_recordings(lines: &[Line]) -> Result<()> {
+    let mut seen = std::collections::BTreeSet::new();
+    for line in lines {
+        if let Line::Record { out, .. } = line {
+            crate::outputs::OutFile::check_file(
+                out,
+                "record --out",
+                "a run log goes to a file (the session prints its lines on standard output)",
+            )?;
+            if !seen.insert(out.clone()) {
+                bail!(
+                    "record --out {} appears twice: the second recording would replace the first",
+                    out.display()
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Runs lines in one session (the recordings' files checked first); each recording is
+/// written however the session ends.
 pub fn run_session<T: Transport>(s: &mut Session<T>, lines: &[Line], alone: bool) -> Result<()> {
+    check_recordings(lines)?;
     let mut recording = None;
     let mut result = Ok(());
     for line in lines {

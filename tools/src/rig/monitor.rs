@@ -8,8 +8,10 @@
 //! `WheelSpeedFrame`, `StatusFrame`, `DiagFrame`): no bit position is known here.
 
 use hils_rig_core::can::{
-    ClassicFrame, CommandFrame, DecodeError, DiagFrame, RigState, StatusFrame, WheelSpeedFrame,
+    BrakeDemandFrame, ClassicFrame, CommandFrame, DecodeError, DiagFrame, HealthFrame, RigState,
+    StatusFrame, WheelSpeedFrame,
 };
+use hils_rig_core::valves::ValveStates;
 
 use super::transport::{Received, TransportError};
 
@@ -19,6 +21,10 @@ pub enum Seen {
     WheelSpeed(WheelSpeedFrame),
     Status(StatusFrame),
     Diag(DiagFrame),
+    /// `RIG_BRAKE_DEMAND` (the board's demand as a frame, when configured).
+    BrakeDemand(BrakeDemandFrame),
+    /// `RIG_HEALTH`: the board's own health and its arming.
+    Health(HealthFrame),
     /// A `RIG_COMMAND` on the bus (another host's, or our own echoed by the interface).
     Command(CommandFrame),
     /// A frame of another identifier (not in `hils.dbc`; ignored, counted).
@@ -39,15 +45,19 @@ pub fn decode(frame: &ClassicFrame) -> Seen {
     pick(WheelSpeedFrame::decode(frame), Seen::WheelSpeed)
         .or_else(|| pick(StatusFrame::decode(frame), Seen::Status))
         .or_else(|| pick(DiagFrame::decode(frame), Seen::Diag))
+        .or_else(|| pick(BrakeDemandFrame::decode(frame), Seen::BrakeDemand))
+        .or_else(|| pick(HealthFrame::decode(frame), Seen::Health))
         .or_else(|| pick(CommandFrame::decode(frame), Seen::Command))
         .unwrap_or(Seen::Other)
 }
 
-/// The four wheelsets' speeds of one cycle: the `RIG_WHEEL_SPEED_12` and `_34` frames that
-/// carry the same alive counter.
+/// The four wheelsets' speeds and valve inputs of one cycle: the `RIG_WHEEL_SPEED_12` and
+/// `_34` frames that carry the same alive counter.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct WheelSpeeds {
     pub speeds_kmh: [Option<f32>; 4],
+    /// The valve inputs as the board sampled them in the frames' tick (not wired: not known).
+    pub valves: ValveStates,
     pub counter: u8,
 }
 
@@ -74,6 +84,12 @@ impl Pairing {
                     w.speeds_kmh[0],
                     w.speeds_kmh[1],
                 ],
+                valves: ValveStates {
+                    dump: f.valves.dump | w.valves.dump,
+                    hold: f.valves.hold | w.valves.hold,
+                    dump_known: f.valves.dump_known | w.valves.dump_known,
+                    hold_known: f.valves.hold_known | w.valves.hold_known,
+                },
                 counter: w.counter,
             }),
             other => {
@@ -162,6 +178,7 @@ pub struct Counts {
     pub wheel_speed: u64,
     pub status: u64,
     pub diag: u64,
+    pub health: u64,
     pub other: u64,
     /// Frames of `hils.dbc` that did not decode.
     pub bad: u64,
@@ -174,6 +191,7 @@ pub struct BoardView {
     pub wheel_pairing: Pairing,
     pub status: Option<(f64, StatusFrame)>,
     pub diag: Option<(f64, DiagFrame)>,
+    pub health: Option<(f64, HealthFrame)>,
     pub counts: Counts,
     pub wheel_alive: AliveCheck,
     pub status_alive: AliveCheck,
@@ -182,6 +200,12 @@ pub struct BoardView {
 }
 
 impl BoardView {
+    /// Whether the board last reported itself armed for a controller (`RIG_HEALTH`; `None`:
+    /// not seen yet).
+    pub fn armed(&self) -> Option<bool> {
+        self.health.map(|(_, h)| h.disarmed.is_none())
+    }
+
     /// Takes a received frame: what it is and, for the second frame of a wheel-speed
     /// cycle, the whole cycle; an alarm when an alive counter is stuck.
     pub fn feed(&mut self, r: &Received) -> Result<(Seen, Option<WheelSpeeds>), Alarm> {
@@ -206,7 +230,11 @@ impl BoardView {
                 self.counts.diag += 1;
                 self.diag = Some((r.t_s, d));
             }
-            Seen::Command(_) | Seen::Other => self.counts.other += 1,
+            Seen::Health(h) => {
+                self.counts.health += 1;
+                self.health = Some((r.t_s, h));
+            }
+            Seen::Command(_) | Seen::BrakeDemand(_) | Seen::Other => self.counts.other += 1,
             Seen::Bad(e) => {
                 self.counts.bad += 1;
                 self.last_bad = Some(e);
@@ -229,7 +257,36 @@ fn check_alive(a: &mut AliveCheck, counter: u8, frame: &'static str) -> Result<(
     Ok(())
 }
 
-/// Lower-case name of a run state (as `hils decode` writes it).
+/// The name of a run mode (`rig`, `self-test`).
+pub fn mode_name(m: hils_rig_core::can::RigMode) -> &'static str {
+    match m {
+        hils_rig_core::can::RigMode::Rig => "rig",
+        hils_rig_core::can::RigMode::SelfTest => "self-test",
+    }
+}
+
+/// The name of the last command's result (`none`, `accepted`, `rejected`).
+pub fn result_name(r: hils_rig_core::can::CommandResult) -> &'static str {
+    match r {
+        hils_rig_core::can::CommandResult::None => "none",
+        hils_rig_core::can::CommandResult::Accepted => "accepted",
+        hils_rig_core::can::CommandResult::Rejected => "rejected",
+    }
+}
+
+/// The name of a sensor fault (`open`, `short`, `out-of-range`, `stuck`, `adc-invalid`).
+pub fn sensor_fault_name(f: hils_rig_core::sensor::SensorFault) -> &'static str {
+    use hils_rig_core::sensor::SensorFault;
+    match f {
+        SensorFault::Open => "open",
+        SensorFault::Short => "short",
+        SensorFault::OutOfRange => "out-of-range",
+        SensorFault::Stuck => "stuck",
+        SensorFault::AdcInvalid => "adc-invalid",
+    }
+}
+
+/// The name of a run state.
 pub fn state_name(s: RigState) -> &'static str {
     match s {
         RigState::Idle => "idle",

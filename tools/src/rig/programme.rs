@@ -21,23 +21,31 @@
 //! # A run
 //!
 //! `brake release`, `--settle-s` (3 s: the controller vents the last run's brake), the
-//! vehicle and track frames, `start` (rig mode, on the track), the run's brake demand, then
-//! frames until the board leaves `running` (or `--max-run-s`, then `stop`).
+//! vehicle and track frames, `arm` (the board's outputs to the controller go live for the
+//! run; only with `--arm`, the operator's explicit arming, announced on the terminal:
+//! without it nothing is sent or written; the board disarms at every stop, fault and
+//! reset, so each run arms again),
+//! `start` (rig mode, on the track), the run's brake demand, then frames until the board
+//! leaves `running` (or `--max-run-s`, then `stop`).
 //!
 //! # Judging
 //!
 //! Each run's log (`NAME.csv`, the spec's run-log schema with `# run`, `# track`,
 //! `# demand` and `# speed_resolution_kmh`) is judged by the one path of
 //! `hils wsp-test --programme FILE --log NAME.csv` ([`crate::wsp::judge_log`]): the same
-//! recording gets the same verdict from both. The board does not see the controller's dump
-//! valves (no frame of `hils.dbc` carries them) but measures the cylinder pressures: the air
-//! consumption is estimated from their falls and the WSP timer actions (which need the hold
-//! states, shown by no pressure) are not measured, their criterion not judged and the run
-//! not passed (`crate::wsp::log`). Every run of the programme is also simulated in SIL
+//! recording gets the same verdict from both. The board reads the controller's dump and
+//! hold valve coils on its valve inputs (`hils_rig_core::valves`); the wheel-speed frames
+//! carry them every 1 ms and the log has them as `wsp1..4` (dump) and `hold1..4`
+//! ([`super::record`]): air and WSP timer actions are judged from them as a SIL run's from
+//! the simulated unit's valves (`crate::wsp::log`: the dump valve acts one pneumatic dead
+//! time after its coil). An input the rig's configuration says is not wired gives empty
+//! cells: the judge then estimates the vents from the pressure falls or says "not
+//! measured" (`crate::wsp::log`), the criterion not judged and the run not passed. Every run of the programme is also simulated in SIL
 //! ([`crate::wsp::run_one`]). `--json` holds one entry per run: the rig verdict's keys
 //! (those of `hils wsp-test --json`) with `on_rig` and `end`, or for a run not judged its
 //! `name`, `passed: false`, `on_rig` and `end` (why). `--report DIR` writes `report.md`
-//! (rig and SIL rows side by side, the `wsp-test` sections and plots of both:
+//! (rig and SIL rows side by side, the rig against SIL ([`super::agreement`]: also printed,
+//! and `against_sil` in each judged run's JSON entry), the `wsp-test` sections and plots of both:
 //! `NAME-rig-*.svg`, `NAME-sil-*.svg`) and the logs. A lost board, a bus-off, a stuck alive
 //! counter or a rejected command ends the programme: the runs so far, the partial log and
 //! the summary are written, and the exit code is non-zero.
@@ -45,14 +53,14 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, anyhow};
+use anyhow::{Result, anyhow, bail};
 use clap::Args;
 use hils_brake_unit::BrakeDemand;
 use hils_plant::Rail;
 use hils_rig_core::can::{
-    BrakeCommand, Command, RigMode, RigState, StartCommand, WHEEL_SPEED_MAX_KMH,
+    BrakeCommand, Command, ConfigItem, RigMode, RigState, StartCommand, WHEEL_SPEED_MAX_KMH,
 };
-use rayon::prelude::*;
+use hils_rig_core::controller_io::IoConfig;
 
 use super::commands::{Flow, Session};
 use super::monitor::Seen;
@@ -61,10 +69,11 @@ use super::record::{Recorder, RunMeta};
 use super::track;
 use super::transport::Transport;
 use super::{FrictionArg, RigArgs, Stop, open};
-use crate::wsp::log::VENT_FALL_PA_PER_S;
+use crate::outputs::OutDir;
+use crate::wsp::log::{VENT_FALL_PA_PER_S, VENT_WINDOW_S};
 use crate::wsp::metrics::Verdict;
 use crate::wsp::programme::{Criteria, Programme, Run, demand_text, track_layout};
-use crate::wsp::{Outcome, judge_log, report};
+use crate::wsp::{judge_log, report};
 
 /// Arguments of `hils rig run`.
 #[derive(Args, Debug, Clone)]
@@ -88,6 +97,16 @@ pub struct RunArgs {
     /// Only the runs whose name contains this.
     #[arg(long)]
     pub only: Option<String>,
+    /// Arm the board before each run's start (required): the runs drive the controller
+    /// under test (pulse trains, wheel speeds); the board disarms at every stop, fault and
+    /// reset, so each run is armed again.
+    #[arg(long)]
+    pub arm: bool,
+    /// The rig's controller I/O configuration, sent before the first run (`hils rig
+    /// configure io FILE`; format: docs/rig.md, "Controller I/O"). Without it the board
+    /// keeps what it has (the simulated board: every valve input wired).
+    #[arg(long)]
+    pub io: Option<PathBuf>,
 }
 
 /// What the board is sent for a run: the vehicle and track frames, then the brake command
@@ -131,7 +150,8 @@ fn board_plan(vehicle: Option<&str>, run: &Run) -> Result<Plan, String> {
         BrakeDemand::ServiceStep { step } if step > 0 => BrakeCommand::ServiceStep { step },
         other => {
             return Err(format!(
-                "demand {other:?}: the brake frame carries emergency, service 0-10 m/s^2 or a step 1-255"
+                "demand `{}`: the brake frame carries emergency, service 0-10 m/s^2 or a step 1-255",
+                demand_text(other)
             ));
         }
     };
@@ -144,9 +164,7 @@ pub fn load(path: &Path, friction: FrictionArg) -> Result<(Criteria, Vec<BoardRu
     let programme = Programme::load(path)?;
     let mut file = crate::params_file::params_or_default(None)?;
     file.plant.friction.model = friction.model();
-    let runs = programme
-        .runs(&file)
-        .with_context(|| format!("programme {}", path.display()))?;
+    let runs = programme.runs(&file)?;
     let runs = programme
         .run
         .iter()
@@ -159,25 +177,33 @@ pub fn load(path: &Path, friction: FrictionArg) -> Result<(Criteria, Vec<BoardRu
     Ok((programme.criteria, runs))
 }
 
-/// The rig's side of one run: its log, how it ended, its judged outcome.
+/// The rig's side of one run: how it ended, its verdict (its log and plots are written).
 pub struct RigRun {
     pub name: String,
     pub on_rig: bool,
     /// `finished`, `stopped`, `fault`, or why the run did not run or ended early.
     pub end: String,
-    pub outcome: Option<Outcome>,
+    pub verdict: Option<Verdict>,
 }
 
 impl RigRun {
-    /// The JSON entry (module doc).
-    fn json(&self) -> serde_json::Value {
-        let mut v = match &self.outcome {
-            Some(o) => serde_json::to_value(&o.verdict).unwrap_or_default(),
+    /// The JSON entry (module doc), with `against_sil` ([`super::agreement::Agreement`]) when
+    /// the rig run was judged.
+    fn json(&self, sil: &Verdict) -> serde_json::Value {
+        let mut v = match &self.verdict {
+            Some(verdict) => serde_json::to_value(verdict).unwrap_or_default(),
             None => serde_json::json!({ "name": self.name, "passed": false }),
         };
         if let Some(m) = v.as_object_mut() {
             m.insert("on_rig".into(), self.on_rig.into());
             m.insert("end".into(), self.end.clone().into());
+            if let Some(rig) = &self.verdict {
+                let a = super::agreement::agreement(rig, sil);
+                m.insert(
+                    "against_sil".into(),
+                    serde_json::to_value(a).unwrap_or_default(),
+                );
+            }
         }
         v
     }
@@ -219,8 +245,11 @@ fn run_one<T: Transport>(
         for c in &plan.setup {
             send(s, *c)?;
         }
-        send(s, super::track::with_setup_digest(&plan.setup, start)?)?;
+        send(s, Command::Arm)?;
+        // The run's demand is in force from its first step (t = 0), as a SIL run's: the
+        // board drives the brake command in force from the start (EB loop, service PWM).
         send(s, Command::Brake(demand))?;
+        send(s, super::track::with_setup_digest(&plan.setup, start)?)?;
         let mut running = true;
         s.run_for(args.max_run_s, |_, seen| match seen {
             Seen::Status(st) if st.state != RigState::Running => {
@@ -266,69 +295,87 @@ fn run_one<T: Transport>(
     (end, stop)
 }
 
-/// Runs a programme in a session and judges each run's log; what ended it early.
+/// Runs a programme in a session, recording each run's log into `dir` and judging it (its
+/// plots written into `dir` as it is judged: only the verdict is kept); what ended it early.
 pub fn run_programme<T: Transport>(
     s: &mut Session<T>,
     runs: &[BoardRun],
     criteria: &Criteria,
     args: &RunArgs,
-    log_dir: &Path,
+    dir: &OutDir,
 ) -> (Vec<RigRun>, Option<Stop>) {
     let mut out = Vec::new();
     let mut stopped: Option<Stop> = None;
+    if runs.iter().any(|r| r.plan.is_ok()) {
+        println!(
+            "arming the board before each run: its pulse trains and wheel speeds drive the controller on {} during the runs (docs/rig.md, Arming)",
+            s.link.describe()
+        );
+    }
     for BoardRun { run, plan } in runs {
         let mut rig = RigRun {
             name: run.name.clone(),
             on_rig: false,
             end: String::new(),
-            outcome: None,
+            verdict: None,
         };
         match (&stopped, plan) {
             (Some(e), _) => rig.end = format!("not run: the programme ended ({e})"),
             (None, Err(why)) => rig.end = format!("not run on the rig: {why}"),
             (None, Ok(plan)) => {
-                let log = log_dir.join(format!("{}.csv", run.name));
+                let log = match dir.file(&format!("{}.csv", run.name)) {
+                    Ok(log) => log,
+                    Err(e) => {
+                        rig.end = format!("not run: {e:#}");
+                        out.push(rig);
+                        continue;
+                    }
+                };
                 let (end, stop) = run_one(s, run, plan, args, &log);
                 rig.on_rig = true;
                 rig.end = end;
                 stopped = stop;
-                match judge_log(&log, run, criteria) {
-                    Ok(outcome) => rig.outcome = Some(outcome),
+                let judged = judge_log(&log, run, criteria).and_then(|o| {
+                    report::write_run_plots(dir, &format!("{}-rig", run.name), &o)?;
+                    Ok(o.verdict)
+                });
+                match judged {
+                    Ok(verdict) => rig.verdict = Some(verdict),
                     Err(e) => rig.end = format!("{}; not judged: {e:#}", rig.end),
                 }
             }
         }
-        println!("{}: {}", rig.name, rig.end);
+        crate::say!("{}: {}", rig.name, rig.end);
         out.push(rig);
     }
     (out, stopped)
 }
 
 /// The summary table: each run's rig row beside its SIL row, then the runs not judged.
-pub fn summary_table(rig: &[RigRun], sil: &[Outcome]) -> String {
+pub fn summary_table(rig: &[RigRun], sil: &[Verdict]) -> String {
     let mut rows: Vec<Verdict> = Vec::new();
     let mut not_judged = String::new();
     for (r, s) in rig.iter().zip(sil) {
-        match &r.outcome {
-            Some(o) => {
+        match &r.verdict {
+            Some(v) => {
                 rows.push(Verdict {
                     name: format!("{} (rig)", r.name),
-                    ..o.verdict.clone()
+                    ..v.clone()
                 });
-                let v = &o.verdict;
                 if !v.estimated_from_cylinder_pressure.is_empty() {
                     let _ = writeln!(
                         not_judged,
-                        "- {} (rig): estimated from the measured cylinder pressure falls (> {} bar/s counts as venting): {}",
+                        "- {} (rig): estimated from the measured cylinder pressure falls (a fall faster than {} bar/s over {} ms counts as venting): {}",
                         r.name,
                         VENT_FALL_PA_PER_S / 1e5,
+                        VENT_WINDOW_S * 1e3,
                         v.estimated_from_cylinder_pressure.join(", ")
                     );
                 }
                 if !v.not_measured.is_empty() {
                     let _ = writeln!(
                         not_judged,
-                        "- {} (rig): not measured, not judged (the log has no WSP valve states; a hold shows in no pressure): {}",
+                        "- {} (rig): not measured, not judged (a valve input or a cylinder pressure the log lacks: not wired, or no probe capture): {}",
                         r.name,
                         v.not_measured.join(", ")
                     );
@@ -339,8 +386,8 @@ pub fn summary_table(rig: &[RigRun], sil: &[Outcome]) -> String {
             }
         }
         rows.push(Verdict {
-            name: format!("{} (SIL)", s.verdict.name),
-            ..s.verdict.clone()
+            name: format!("{} (SIL)", s.name),
+            ..s.clone()
         });
     }
     let refs: Vec<&Verdict> = rows.iter().collect();
@@ -348,66 +395,104 @@ pub fn summary_table(rig: &[RigRun], sil: &[Outcome]) -> String {
     if !not_judged.is_empty() {
         let _ = write!(
             t,
-            "\nNot judged, not measured or estimated on the rig:\n\n{not_judged}"
+            "\nNot judged or not measured on the rig:\n\n{not_judged}"
         );
     }
     t
 }
 
-/// Renames an outcome's run (its plot files) to `NAME-suffix`.
-fn tagged(mut o: Outcome, suffix: &str) -> Outcome {
-    o.run.name = format!("{}-{suffix}", o.run.name);
-    o
+/// Telemetry divider of a programme: a record every 10 plant steps (1 kHz), so the
+/// cylinder pressures the air is judged from are logged at the valves' pace (at the
+/// default 100 Hz the pressure falls between records are interpolated and the air comes
+/// out 2-3 % low; docs/rig.md, "Controller I/O").
+pub const PROGRAMME_TELEMETRY_DIVIDER: u16 = 10;
+
+/// Before the runs: the controller I/O of `--io` (if given) and the programme's telemetry
+/// rate, each command accepted or an error.
+fn configure_board<T: Transport>(s: &mut Session<T>, io: Option<&IoConfig>) -> Result<()> {
+    let mut commands = io.map(super::io_config::commands).unwrap_or_default();
+    commands.push(Command::Configure(ConfigItem::TelemetryDivider(
+        PROGRAMME_TELEMETRY_DIVIDER,
+    )));
+    for c in commands {
+        let o = s.command(c).map_err(anyhow::Error::from)?;
+        if !o.accepted {
+            return Err(anyhow!("the board refused the configuration: {o}"));
+        }
+    }
+    Ok(())
 }
 
-/// `hils rig run`.
+/// `hils rig run`: `--report DIR` is required (each run's log is written there, with the
+/// report: nothing is written into the current folder unasked).
 pub fn main(rig: &RigArgs, args: &RunArgs) -> Result<()> {
+    if !args.arm {
+        return Err(anyhow!(
+            "hils rig run --programme drives the controller under test from each run's start: add --arm to arm the board before each run (docs/rig.md, Arming)"
+        ));
+    }
     let out = args.out.check()?;
+    let Some(dir) = out.report.clone() else {
+        bail!(
+            "hils rig run records each run's log (NAME.csv) and writes its report into \
+             --report DIR: give one (nothing was run)"
+        );
+    };
     let (criteria, mut runs) = load(&args.programme, args.friction)?;
     if let Some(only) = &args.only {
         runs.retain(|r| r.run.name.contains(only.as_str()));
     }
-    let log_dir = args
-        .out
-        .report
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("."));
-    std::fs::create_dir_all(&log_dir)
-        .with_context(|| format!("cannot create {}", log_dir.display()))?;
+    let io = args.io.as_deref().map(super::io_config::load).transpose()?;
+    dir.create()?;
     let mut s = Session::new(open(rig)?, rig.lost_after_s);
-    let (rig_runs, stopped) = run_programme(&mut s, &runs, &criteria, args, &log_dir);
-    let sil: Vec<Outcome> = runs
-        .par_iter()
-        .map(|r| crate::wsp::run_one(r.run.clone(), &criteria))
-        .collect::<Result<_>>()?;
-    let table = summary_table(&rig_runs, &sil);
-    println!("{table}");
+    configure_board(&mut s, io.as_ref())?;
+    let (rig_runs, stopped) = run_programme(&mut s, &runs, &criteria, args, &dir);
+    let sil = crate::wsp::judge_runs(
+        runs.iter().map(|r| r.run.clone()).collect(),
+        &criteria,
+        Some((&dir, "sil")),
+    )?;
+    let pairs: Vec<(&Verdict, &Verdict)> = rig_runs
+        .iter()
+        .zip(&sil)
+        .filter_map(|(r, s)| r.verdict.as_ref().map(|v| (v, s)))
+        .collect();
+    let table = format!(
+        "{}\n{}",
+        summary_table(&rig_runs, &sil),
+        super::agreement::table(&pairs)
+    );
+    crate::say!("{table}");
     let on_rig = rig_runs.iter().filter(|r| r.on_rig).count();
     let passed = rig_runs
         .iter()
-        .filter(|r| r.outcome.as_ref().is_some_and(|o| o.verdict.passed))
+        .filter(|r| r.verdict.as_ref().is_some_and(|v| v.passed))
         .count();
-    println!(
+    crate::say!(
         "{on_rig}/{} runs on the rig, {passed} passed",
         rig_runs.len()
     );
-    let json: Vec<serde_json::Value> = rig_runs.iter().map(RigRun::json).collect();
+    let json: Vec<serde_json::Value> = rig_runs.iter().zip(&sil).map(|(r, s)| r.json(s)).collect();
     out.write_json(&json)?;
     out.write_report(|dir| {
-        let dir = dir.path();
         let heading = format!(
             "# Rig runs of {}\n\nInterface: {}. Each run's log is `NAME.csv` here (spec run-log schema, `# run: NAME`), judged from its brake command as `hils wsp-test --programme {} --log NAME.csv` judges it; `(SIL)` rows: the same run simulated with the simulated brake unit.\n\n",
             args.programme.display(),
             s.link.describe(),
             args.programme.display()
         );
-        let mut outcomes = Vec::new();
-        for (r, o) in rig_runs.into_iter().zip(sil) {
-            outcomes.extend(r.outcome.map(|x| tagged(x, "rig")));
-            outcomes.push(tagged(o, "sil"));
-        }
-        report::write_with(dir, &heading, &table, &outcomes, &criteria)?;
-        Ok(vec![dir.join("report.md")])
+        let stems: Vec<(String, &Verdict)> = rig_runs
+            .iter()
+            .zip(&sil)
+            .flat_map(|(r, v)| {
+                let rig = r.verdict.as_ref().map(|x| (format!("{}-rig", r.name), x));
+                rig.into_iter().chain([(format!("{}-sil", v.name), v)])
+            })
+            .collect();
+        let sections: Vec<(&str, &Verdict)> = stems.iter().map(|(s, v)| (s.as_str(), *v)).collect();
+        Ok(vec![report::write_with(
+            dir, &heading, &table, &sections, &criteria,
+        )?])
     })?;
     match stopped {
         Some(e) => Err(anyhow!("programme ended early: {e}")),

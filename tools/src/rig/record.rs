@@ -15,12 +15,21 @@
 //! in force (the session's own commands and any seen on the bus). Diagnostic frames give
 //! `step_max_us`, `step_mean_us`, `overruns` (latest).
 //!
-//! # Brake inputs
+//! # Valves
+//!
+//! `wsp1..4` (dump coil) and `hold1..4` (hold coil) come from the wheel-speed frames of the
+//! row (the board's valve inputs in the frames' tick, debounced): 1 energised, 0 off, empty
+//! where the input is not wired (not measured); the columns are left out when no input is
+//! wired.
+//!
+//! # Brake inputs and what the board drove
 //!
 //! The frames of `hils.dbc` carry no brake input. With a probe capture (the simulated
 //! board's telemetry; on hardware, the defmt capture, not yet merged here) the board's
-//! measured cylinder pressures / clamp forces are interpolated to the rows' times. Without
-//! one the `p_cyl*_pa` cells are empty (the spec's "not measured") and the metadata says so.
+//! measured cylinder pressures / clamp forces are interpolated to the rows' times, and the
+//! controller outputs it drove (`eb_loop_closed`, `service_demand_mps2`,
+//! `air_spring1_pa`, `air_spring2_pa`) are the latest record's. Without one the
+//! `p_cyl*_pa` cells are empty (the spec's "not measured") and the metadata says so.
 
 use std::path::Path;
 
@@ -32,6 +41,7 @@ use hils_rig_core::can::{
     Command, DiagFrame, RigMode, RigState, StartCommand, StatusFrame, WHEEL_SPEED_RESOLUTION_KMH,
 };
 use hils_rig_core::hw::TelemetryEvent;
+use hils_rig_core::telemetry::TelemetryRecord;
 use hils_sil::Cmd;
 use hils_sil::record::Channel;
 use hils_sil::record::run_log::*;
@@ -167,7 +177,7 @@ impl Recorder {
             Seen::Diag(d) => self.diag.push((t_s, d)),
             Seen::Command(c) => self.commands.push((t_s, c.command)),
             Seen::Bad(_) => self.bad_frames += 1,
-            Seen::Other => {}
+            Seen::Health(_) | Seen::BrakeDemand(_) | Seen::Other => {}
         }
     }
 
@@ -201,6 +211,15 @@ impl Recorder {
                 TelemetryEvent::Record(r) => Some((p.t_s, core::array::from_fn(|j| r.surface(j)))),
                 _ => None,
             })
+            .collect()
+    }
+
+    /// The probe's records after `t_from`.
+    fn probe_records(&self, t_from: f64) -> Vec<(f64, TelemetryRecord)> {
+        self.probe
+            .iter()
+            .filter(|p| p.t_s > t_from)
+            .filter_map(|p| p.event.record().map(|r| (p.t_s, r)))
             .collect()
     }
 
@@ -295,6 +314,14 @@ impl Recorder {
             pressure: core::array::from_fn(|j| self.probe_series(j, true, t_from)),
             clamp: core::array::from_fn(|j| self.probe_series(j, false, t_from)),
             surfaces: self.probe_surfaces(t_from),
+            records: self.probe_records(t_from),
+            valves_known: self
+                .wheel_speed
+                .iter()
+                .filter(|(t, _)| *t > t_from)
+                .fold((0, 0), |(d, h), (_, w)| {
+                    (d | w.valves.dump_known, h | w.valves.hold_known)
+                }),
         }
     }
 
@@ -327,7 +354,10 @@ impl Recorder {
             let t_rel = t - *t0.get_or_insert(t);
             let diag = latest(&self.diag, t);
             let surface = latest(&s.surfaces, t);
+            let record = latest(&s.records, t);
             let num = |x: Option<f64>, d: usize| x.map_or(String::new(), |x| format!("{x:.d$}"));
+            let flag = |x: Option<bool>| x.map_or(String::new(), |on| (on as u8).to_string());
+            let finite = |x: f32| (x.is_finite()).then_some(x as f64);
             let row: Vec<String> = channels
                 .iter()
                 .flat_map(|&c: &Channel| (0..c.width()).map(move |j| (c, j)))
@@ -346,6 +376,12 @@ impl Recorder {
                     OVERRUNS => diag.map_or(String::new(), |d| d.overruns.to_string()),
                     SURFACE => surface.map_or("", |s| s[j].name()).to_string(),
                     MU_AVAIL => num(surface.map(|s| adhesion.at(s[j], v_ref)), 4),
+                    WSP => flag(w.valves.dump(j)),
+                    HOLD => flag(w.valves.hold(j)),
+                    EB_LOOP => flag(record.map(|r| r.driven & 1 != 0)),
+                    SERVICE_DEMAND => num(record.map(|r| r.service_demand as f64), 4),
+                    AIR_SPRING1 => num(record.and_then(|r| finite(r.air_spring[0])), 0),
+                    AIR_SPRING2 => num(record.and_then(|r| finite(r.air_spring[1])), 0),
                     _ => String::new(),
                 })
                 .collect();
@@ -418,19 +454,31 @@ impl Recorder {
     }
 
     /// `eb_command_s` and `brake_command_s`: the first emergency and the first brake
-    /// command after `t_from`, s from the first row `t0`.
+    /// command after `t_from`, s from the first row `t0`; a command in force at `t_from` (the
+    /// board drives it from the run's first step) counts at the first row.
     fn command_times(&self, t_from: f64, t0: f64) -> Vec<(&'static str, String)> {
+        let brakes = |t: f64| t > t_from;
         let first_brake = |code: Option<u8>| {
-            self.commands.iter().find(|(t, c)| {
-                *t > t_from
-                    && matches!(c, Command::Brake(b) if code.map_or(Cmd::of(*b) != Cmd::Release, |k| u8::from(Cmd::of(*b)) == k))
+            let is = |c: &Command| matches!(c, Command::Brake(b) if code.map_or(Cmd::of(*b) != Cmd::Release, |k| u8::from(Cmd::of(*b)) == k));
+            let in_force = self
+                .commands
+                .iter()
+                .filter(|(t, c)| *t <= t_from && matches!(c, Command::Brake(_)))
+                .next_back()
+                .filter(|(_, c)| is(c))
+                .map(|_| (t0, Command::Stop));
+            in_force.or_else(|| {
+                self.commands
+                    .iter()
+                    .find(|(t, c)| brakes(*t) && is(c))
+                    .copied()
             })
         };
         let mut meta = Vec::new();
-        if let Some(&(t_eb, _)) = first_brake(Some(Cmd::Emergency as u8)) {
+        if let Some((t_eb, _)) = first_brake(Some(Cmd::Emergency as u8)) {
             meta.push(("eb_command_s", format!("{:.4}", (t_eb - t0).max(0.0))));
         }
-        if let Some(&(t_b, _)) = first_brake(None) {
+        if let Some((t_b, _)) = first_brake(None) {
             meta.push(("brake_command_s", format!("{:.4}", (t_b - t0).max(0.0))));
         }
         meta
@@ -444,19 +492,33 @@ struct LiveSeries {
     pressure: [Vec<(f64, f64)>; WHEELSETS],
     clamp: [Vec<(f64, f64)>; WHEELSETS],
     surfaces: Vec<(f64, [Surface; WHEELSETS])>,
+    /// The probe's records (what the board drove).
+    records: Vec<(f64, TelemetryRecord)>,
+    /// Dump and hold inputs known (wired) in any frame.
+    valves_known: (u8, u8),
 }
 
 impl LiveSeries {
-    /// The run log's columns: f_clamp when the probe sent clamp forces, the surface and
-    /// the available adhesion when it sent surfaces.
+    /// The run log's columns: f_clamp when the probe sent clamp forces, `wsp` / `hold` when
+    /// a dump / hold input is wired, the surface and the available adhesion when the probe
+    /// sent surfaces, and what the board drove on the controller's lines with the probe.
     fn channels(&self) -> Vec<Channel> {
         let mut channels = vec![T, V_REF, OMEGA, P_CYL];
         if self.clamp.iter().any(|c| !c.is_empty()) {
             channels.push(F_CLAMP);
         }
+        if self.valves_known.0 != 0 {
+            channels.push(WSP);
+        }
+        if self.valves_known.1 != 0 {
+            channels.push(HOLD);
+        }
         channels.extend([A_X, CMD, STATE, FAULTS, STEP_MAX, STEP_MEAN, OVERRUNS]);
         if !self.surfaces.is_empty() {
             channels.extend([SURFACE, MU_AVAIL]);
+        }
+        if !self.records.is_empty() {
+            channels.extend([EB_LOOP, SERVICE_DEMAND, AIR_SPRING1, AIR_SPRING2]);
         }
         channels
     }

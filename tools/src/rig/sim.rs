@@ -6,19 +6,40 @@
 //! [`Rig::command_frame`] (and seen by the controller, as on a shared bus), the controller
 //! under test steps, [`Rig::step`] runs with a mock [`RigIo`], and the step is timed.
 //!
-//! * **The rig hardware** ([`SimIo`]): four brake cylinder pressure transducers. The ADC
+//! * **The rig hardware** ([`SimIo`]): four brake cylinder pressure transducers, the eight
+//!   valve inputs (all wired, active low), the EB loop relay, the demand PWM and the two
+//!   air-spring DACs. The ADC
 //!   reads each cylinder pressure of the controller through the transducer's nominal
 //!   characteristic (`SensorKind::PressureTransducer.default_calibration()`, inverted) with
 //!   +-2 counts of deterministic noise (a real ADC never reads the same sum for long; the
 //!   board's stuck-sensor check needs that). The board's channels are set to pressure
 //!   transducers at power-up, as a rig fitted with them would be calibrated.
 //! * **The controller under test** ([`SimController`]): the project's simulated brake unit
-//!   (`hils_brake_unit::BrakeUnit`, the one `hils simulate` runs, WSP on) at the plant step.
-//!   It reads the wheel speeds only from the `RIG_WHEEL_SPEED` frames on the bus (held
-//!   between frames, as an ECU's CAN input), and takes its brake demand from the
-//!   `RIG_COMMAND` brake frames it sees (standing in for the train line). While the speeds
-//!   are "not available" (board idle or in its safe state) it vents (no pressure); when
-//!   they come back it starts afresh (a new run).
+//!   (`hils_brake_unit::BrakeUnit`, the one `hils simulate` runs, WSP on) at the plant step,
+//!   wired to the board as a real controller would be, every signal through the rig-core
+//!   code the board runs:
+//!   - wheel speeds from the four axle-speed pulse trains, as a WSP unit's speed sensor
+//!     inputs read them ([`SpeedSensors`]): the frequency of the timer registers the board
+//!     wrote (`hils_rig_core::pulse::PulseTimer::frequency_of`) times the wheel
+//!     circumference over the teeth (its configuration: the `Configure Teeth` and `Vehicle`
+//!     frames it sees); a silent train is a wheel at rest;
+//!   - its brake demand from the train lines the board drives: the emergency brake loop
+//!     and the service demand PWM's registers, read through
+//!     `hils_rig_core::demand::{DemandConfig::decode_pwm, ControllerDemand}` (open loop or
+//!     no valid PWM = emergency brake);
+//!   - its load (load weighing, at each start) from the two air-spring DAC codes, read
+//!     through `hils_rig_core::load::LoadConfig::read_pa` as a transducer's signal: the
+//!     bogie forces give the carbody mass its EB pressure is set for (the other `[vehicle]`
+//!     values it takes from the `Vehicle` frames, as its configuration);
+//!   - its WSP valve coils (vent: dump and hold coils; hold: the hold coil) on the board's
+//!     valve inputs through `hils_rig_core::valves::ValveLevels::of_coils` (the interface
+//!     stage), which the board samples and debounces.
+//!
+//!   It keeps the same I/O configuration as the board (the `Configure` frames it sees).
+//!   At standstill (every train silent: the board idle, in its safe state, or a run
+//!   finished) it keeps its brake as the lines demand; a jump from standstill to a running
+//!   speed is the next run: it starts afresh (no WSP state, its cylinders empty) and weighs
+//!   the car.
 //! * **Step timing**: the host time of each [`Rig::step`] call, in cycles of the board's
 //!   170 MHz clock, so the diagnostic frame shows real (host) figures. Unless paced
 //!   (`--realtime`), board time is not wall time, so a step is capped just below the period
@@ -34,19 +55,21 @@
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
-use hils_brake_unit::{BrakeDemand, BrakeUnit, UnitConfig};
+use hils_brake_unit::{BrakeDemand, BrakeUnit, UnitConfig, Valve};
 use hils_plant::params::STEP_S;
 use hils_plant::{Params, WHEELSETS};
 use hils_rig_core::can::{
-    ClassicFrame, Command, CommandFrame, StatusFrame, VehicleKey, WheelSpeedFrame,
+    ClassicFrame, Command, CommandFrame, ConfigItem, StatusFrame, VehicleKey,
 };
+use hils_rig_core::controller_io::{DrivenOutputs, IoConfig};
+use hils_rig_core::demand::ControllerDemand;
 use hils_rig_core::hw::{RigIo, TelemetryEvent};
-use hils_rig_core::pulse::PulseRegisters;
+use hils_rig_core::pulse::{PulseRegisters, PulseTimer};
 use hils_rig_core::rig::{Rig, RigConfig};
 use hils_rig_core::sensor::{ADC_MAX_COUNTS, ADC_SEQUENCE_LEN, OVERSAMPLING, SensorKind};
-use hils_rig_core::{CHANNELS, KMH_PER_MPS, STEP_RATE_HZ};
+use hils_rig_core::valves::{ValveLevels, ValveWiring};
+use hils_rig_core::{CHANNELS, STEP_RATE_HZ};
 
-use super::monitor::Pairing;
 use super::transport::{ProbeEvent, Received, Transport, TransportError};
 
 /// Board time of one tick, s.
@@ -63,10 +86,45 @@ pub struct SimFaults {
     pub status_alive_frozen_at_s: Option<f64>,
 }
 
-/// The rig's measurement hardware as the board's step sees it.
+/// The four pulse trains as the controller's axle speed sensor inputs read them: the
+/// frequency the board set each train to in its last step (`PulseTimer::frequency_of` of
+/// the registers it wrote; a silent train is a wheel at rest). An ideal frequency input, as
+/// SIL's unit reads the plant's wheel speeds: a real unit measures the pulses' period, a
+/// period late (at most 2 ms above 30 km/h with 90 teeth), which the simulated unit does
+/// not model in SIL either.
+struct SpeedSensors {
+    timer: PulseTimer,
+    /// Registers as written by the step.
+    written: [PulseRegisters; WHEELSETS],
+}
+
+impl SpeedSensors {
+    fn new(timer: PulseTimer) -> Self {
+        Self {
+            timer,
+            written: [timer.silent(); WHEELSETS],
+        }
+    }
+
+    /// Wheel circumferential speeds, m/s, for `teeth` teeth on wheels of radius `r_m`.
+    fn speeds_mps(&self, teeth: u16, r_m: f64) -> [f32; WHEELSETS] {
+        self.written.map(|regs| {
+            (self.timer.frequency_of(&regs) * core::f64::consts::TAU * r_m / teeth.max(1) as f64)
+                as f32
+        })
+    }
+}
+
+/// The rig's hardware as the board's step sees it.
 struct SimIo {
     /// Cylinder pressures the transducers see, Pa.
     pressure_pa: [f32; CHANNELS],
+    /// The valve inputs' port (the controller's coils through the interface stage).
+    valve_levels: ValveLevels,
+    /// What the board drives on the controller's lines.
+    driven: DrivenOutputs,
+    /// The axle speed pulse trains.
+    pulses: SpeedSensors,
     noise: u32,
     frames: Vec<ClassicFrame>,
     telemetry: Vec<TelemetryEvent>,
@@ -104,7 +162,11 @@ impl RigIo for SimIo {
         Some(seq)
     }
 
-    fn set_pulse(&mut self, _: usize, _: &PulseRegisters) {}
+    fn set_pulse(&mut self, wheelset: usize, registers: &PulseRegisters) {
+        if let Some(w) = self.pulses.written.get_mut(wheelset) {
+            *w = *registers;
+        }
+    }
 
     fn queue_frame(&mut self, frame: ClassicFrame) -> bool {
         self.frames.push(frame);
@@ -115,85 +177,153 @@ impl RigIo for SimIo {
         self.telemetry.push(*event);
         true
     }
+
+    fn valve_levels(&mut self) -> ValveLevels {
+        self.valve_levels
+    }
+
+    fn set_controller_outputs(&mut self, outputs: &DrivenOutputs) {
+        self.driven = *outputs;
+    }
 }
 
-/// The brake controller under test: the simulated brake unit on the bus.
+/// The brake controller under test: the simulated brake unit on the bus and the train lines.
 pub struct SimController {
     params: Params,
+    /// Its I/O configuration (the board's, from the `Configure` frames it sees).
+    io: IoConfig,
+    /// Teeth of its speed sensors' phonic wheels (the board's, from `Configure Teeth`).
+    teeth: u16,
     unit: Option<BrakeUnit<f32>>,
     demand: BrakeDemand,
-    /// Wheel circumferential speeds of the last wheel-speed frame, m/s (None: not available).
-    speeds_mps: Option<[f32; WHEELSETS]>,
-    /// Pairs the two wheel-speed frames of a cycle.
-    wheel_pairing: Pairing,
     pressure_pa: [f32; WHEELSETS],
+    /// Every speed sensor read zero at the last step.
+    was_stopped: bool,
+    /// The carbody mass its load weighing found at the last start, kg (None: the air-spring
+    /// signals were not valid; it took the configured vehicle's).
+    weighed_carbody_kg: Option<f64>,
+}
+
+/// A wheel speed above this right after standstill is a new run, m/s (0.5 m/s within a
+/// 0.1 ms step is 5000 m/s^2: no braking or traction does it).
+const NEW_RUN_JUMP_MPS: f32 = 0.5;
+
+/// What the controller drives: its cylinder pressures and its valve coils.
+struct ControllerOut {
+    pressure_pa: [f32; WHEELSETS],
+    /// Dump and hold coils energised, per wheelset.
+    dump: [bool; WHEELSETS],
+    hold: [bool; WHEELSETS],
 }
 
 impl SimController {
-    fn new() -> Self {
+    fn new(io: IoConfig, teeth: u16) -> Self {
         Self {
             params: Params::default(),
+            io,
+            teeth,
             unit: None,
-            demand: BrakeDemand::Release,
-            speeds_mps: None,
-            wheel_pairing: Pairing::default(),
+            demand: BrakeDemand::Emergency,
             pressure_pa: [0.0; WHEELSETS],
+            was_stopped: true,
+            weighed_carbody_kg: None,
         }
     }
 
-    /// A frame on the bus: wheel speeds are its sensor input, brake commands its demand.
+    /// A frame on the bus: the board's configuration and vehicle frames are its own
+    /// configuration (a real unit is configured for its train).
     fn on_frame(&mut self, frame: &ClassicFrame) {
-        if let Ok(half) = WheelSpeedFrame::decode(frame) {
-            let Some(w) = self.wheel_pairing.take(half) else {
-                return;
-            };
-            let s = w.speeds_kmh;
-            self.speeds_mps = if s.iter().all(Option::is_some) {
-                Some(s.map(|v| v.unwrap_or(0.0) / KMH_PER_MPS))
-            } else {
-                None
-            };
-        } else if let Ok(c) = CommandFrame::decode(frame) {
-            match c.command {
-                Command::Brake(b) => {
-                    self.demand = b;
-                    if let Some(u) = &mut self.unit {
-                        u.set_demand(self.demand);
-                    }
-                }
-                // Load weighing: the controller takes the vehicle the board is told (a real
-                // unit measures it, e.g. from the air-suspension pressure); used from its
-                // next start (the board refuses the frame during a run).
-                Command::Vehicle { key, value } => match key {
-                    VehicleKey::Default => self.params.vehicle = Params::default().vehicle,
-                    key => key.apply(&mut self.params.vehicle, value),
-                },
-                _ => {}
+        let Ok(c) = CommandFrame::decode(frame) else {
+            return;
+        };
+        match c.command {
+            Command::Vehicle { key, value } => match key {
+                VehicleKey::Default => self.params.vehicle = Params::default().vehicle,
+                key => key.apply(&mut self.params.vehicle, value),
+            },
+            // The board refuses an inconsistent value; so does this copy.
+            Command::Configure(ConfigItem::Io(item, v)) => {
+                let _ = self.io.set(item, v);
             }
+            Command::Configure(ConfigItem::Teeth(t)) => self.teeth = t.max(1),
+            _ => {}
         }
     }
 
-    /// One plant step of the controller: its cylinder pressures, Pa.
-    fn step(&mut self) -> [f32; WHEELSETS] {
-        match self.speeds_mps {
-            None => {
-                self.unit = None;
-                self.pressure_pa = [0.0; WHEELSETS];
-            }
-            Some(speeds) => {
-                if self.unit.is_none() {
-                    // The reference configuration cannot fail to build (tested in brake-unit).
-                    self.unit = BrakeUnit::new(&self.params, &UnitConfig::new(STEP_S)).ok();
-                    if let Some(u) = &mut self.unit {
-                        u.set_demand(self.demand);
-                    }
-                }
-                if let Some(u) = &mut self.unit {
-                    self.pressure_pa = u.step(&speeds).cylinder_pressure_pa;
-                }
+    /// The demand on the train lines the board drives (loop and PWM).
+    fn read_demand(&self, lines: &DrivenOutputs) -> BrakeDemand {
+        ControllerDemand {
+            eb_loop_closed: lines.eb_loop_closed,
+            service_mps2: self.io.demand.decode_pwm(&lines.pwm),
+        }
+        .brake(&self.io.demand)
+    }
+
+    /// Load weighing: the carbody mass the two air-spring signals carry (their bogie
+    /// forces over g), kg; None when either signal is not valid.
+    fn weigh(&self, lines: &DrivenOutputs) -> Option<f64> {
+        let load = &self.io.load;
+        let force: Option<f64> = lines
+            .dac
+            .iter()
+            .map(|&code| load.read_pa(code).map(|p| load.force_n(p) as f64))
+            .sum();
+        force.map(|f| f / self.params.vehicle.g)
+    }
+
+    /// A unit for a new run: weighed, then built with the demand on the lines.
+    fn start_unit(&mut self, lines: &DrivenOutputs) {
+        self.weighed_carbody_kg = self.weigh(lines);
+        let mut params = self.params;
+        if let Some(m) = self.weighed_carbody_kg {
+            params.vehicle.carbody_mass = m;
+        }
+        // The reference unit builds for any vehicle the board accepts (tested in brake-unit).
+        self.unit = BrakeUnit::new(&params, &UnitConfig::new(STEP_S)).ok();
+        if let Some(u) = &mut self.unit {
+            u.set_demand(self.demand);
+        }
+    }
+
+    /// One plant step of the controller, reading the lines the board drove last and its
+    /// speed sensors.
+    fn step(&mut self, lines: &DrivenOutputs, sensors: &SpeedSensors) -> ControllerOut {
+        let demand = self.read_demand(lines);
+        if demand != self.demand {
+            self.demand = demand;
+            if let Some(u) = &mut self.unit {
+                u.set_demand(demand);
             }
         }
-        self.pressure_pa
+        let mut out = ControllerOut {
+            pressure_pa: [0.0; WHEELSETS],
+            dump: [false; WHEELSETS],
+            hold: [false; WHEELSETS],
+        };
+        // A jump from standstill (every train silent: the board idle, in its safe state or
+        // a run finished) to a running speed, which no braking or traction makes within a
+        // step, is a new run on the rig: the unit starts afresh and weighs the car. At
+        // standstill it keeps its brake as demanded.
+        let speeds = sensors.speeds_mps(self.teeth, self.params.vehicle.wheel_radius);
+        let stopped = speeds.iter().all(|&v| v <= 0.0);
+        let new_run = self.was_stopped && speeds.iter().any(|&v| v > NEW_RUN_JUMP_MPS);
+        self.was_stopped = stopped;
+        if self.unit.is_none() && stopped {
+            return out;
+        }
+        if self.unit.is_none() || new_run {
+            self.start_unit(lines);
+        }
+        if let Some(u) = &mut self.unit {
+            let o = u.step(&speeds);
+            self.pressure_pa = o.cylinder_pressure_pa;
+            for j in 0..WHEELSETS {
+                out.dump[j] = o.valves[j] == Valve::Vent;
+                out.hold[j] = o.valves[j] != Valve::Apply;
+            }
+        }
+        out.pressure_pa = self.pressure_pa;
+        out
     }
 }
 
@@ -214,7 +344,10 @@ pub struct SimBoard {
 
 impl SimBoard {
     pub fn new(faults: SimFaults, realtime: bool) -> Self {
-        let mut rig = Rig::new(RigConfig::nucleo_g474re());
+        // The simulated rig has every valve input wired (active low).
+        let mut config = RigConfig::nucleo_g474re();
+        config.io.valves = ValveWiring::ALL;
+        let mut rig = Rig::new(config);
         for s in &mut rig.sensors {
             s.set_kind(SensorKind::PressureTransducer);
         }
@@ -222,11 +355,14 @@ impl SimBoard {
             rig,
             io: SimIo {
                 pressure_pa: [0.0; CHANNELS],
+                valve_levels: ValveLevels::of_coils([false; 4], [false; 4], &config.io.valves),
+                driven: DrivenOutputs::safe(&config.pulse_timer),
+                pulses: SpeedSensors::new(config.pulse_timer),
                 noise: 0x2545_F491,
                 frames: Vec::new(),
                 telemetry: Vec::new(),
             },
-            controller: SimController::new(),
+            controller: SimController::new(config.io, config.teeth),
             tick: 0,
             to_board: VecDeque::new(),
             to_host: VecDeque::new(),
@@ -240,6 +376,11 @@ impl SimBoard {
     /// The board's logic (for tests that compare what the host saw with the board's state).
     pub fn rig(&self) -> &Rig {
         &self.rig
+    }
+
+    /// The carbody mass the controller's load weighing found at its last start, kg.
+    pub fn controller_weighed_carbody_kg(&self) -> Option<f64> {
+        self.controller.weighed_carbody_kg
     }
 
     fn reached(&self, at: Option<f64>) -> bool {
@@ -257,9 +398,13 @@ impl SimBoard {
         // The board's builder task (thread mode): a requested run is built and handed over
         // between two steps; a build error is in the status frame as on the board.
         let _ = self.rig.build_pending();
-        self.io.pressure_pa = self.controller.step();
+        let out = self.controller.step(&self.io.driven, &self.io.pulses);
+        self.io.pressure_pa = out.pressure_pa;
+        let wiring = self.rig.config().io.valves;
+        self.io.valve_levels = ValveLevels::of_coils(out.dump, out.hold, &wiring);
         let started = Instant::now();
         self.rig.step(&mut self.io);
+
         let cpu_hz = self.rig.config().cpu_hz as f64;
         let period = (cpu_hz / STEP_RATE_HZ as f64) as u64;
         let mut cycles = (started.elapsed().as_secs_f64() * cpu_hz).min(u32::MAX as f64) as u64;

@@ -79,8 +79,13 @@ pub fn track_commands(track: &Track, sets: &ContactSets) -> Result<Vec<Command>>
 pub fn with_setup_digest(setup: &[Command], mut start: Command) -> Result<Command> {
     let mut kept = KeptSetup::default();
     for c in setup {
-        kept.apply(c)
-            .map_err(|e| anyhow!("{c:?} would be refused by the board: {e:?}"))?;
+        kept.apply(c).map_err(|e| {
+            anyhow!(
+                "the {} frame would be refused by the board ({})",
+                super::commands::command_name(c),
+                refusal(e)
+            )
+        })?;
     }
     if let Command::Start(start) = &mut start {
         if start.track && kept.track().is_none() {
@@ -89,6 +94,19 @@ pub fn with_setup_digest(setup: &[Command], mut start: Command) -> Result<Comman
         start.setup_digest = kept.digest(start.track);
     }
     Ok(start)
+}
+
+/// Why the board's kept setup refuses a frame, in words.
+fn refusal(e: hils_rig_core::rig::CommandError) -> String {
+    use hils_rig_core::rig::CommandError;
+    match e {
+        CommandError::Track(t) => t.to_string(),
+        CommandError::TrackIncomplete { index } => {
+            format!("zone {} not received before the commit", index + 1)
+        }
+        CommandError::NoTrack => "no track kept".into(),
+        _ => "a setup frame out of place".into(),
+    }
 }
 
 /// The frames that set the board's vehicle to `vehicle` (the default vehicle, then each

@@ -8,8 +8,8 @@ use std::io::{IsTerminal, Write};
 
 use hils_rig_core::rig::Faults;
 
-use super::monitor::state_name;
 use super::monitor::{BoardView, Seen};
+use super::monitor::{mode_name, result_name, sensor_fault_name, state_name};
 
 /// The names of the fault bits set (sensor channels as `sensorN`, the other flags of
 /// `RIG_STATUS` by their [`Faults`] name in kebab case: `CAN_BUS_OFF` -> `can-bus-off`).
@@ -38,8 +38,8 @@ pub fn render(board: &BoardView, source: &str, t_s: f64) -> String {
                 s,
                 "state {:<9} mode {:<9} last command {}",
                 state_name(st.state),
-                format!("{:?}", st.mode).to_lowercase(),
-                format!("{:?}", st.command_result).to_lowercase()
+                mode_name(st.mode),
+                result_name(st.command_result)
             );
             let _ = writeln!(
                 s,
@@ -80,7 +80,7 @@ pub fn render(board: &BoardView, source: &str, t_s: f64) -> String {
                 .iter()
                 .enumerate()
                 .map(|(j, f)| match f {
-                    Some(f) => format!("{}:{f:?}", j + 1).to_lowercase(),
+                    Some(f) => format!("{}:{}", j + 1, sensor_fault_name(*f)),
                     None => format!("{}:ok", j + 1),
                 })
                 .collect();
@@ -95,6 +95,17 @@ pub fn render(board: &BoardView, source: &str, t_s: f64) -> String {
             let _ = write!(s, "bus: board bus-off count {}", d.bus_off_count);
         }
         None => s.push_str("bus: no diagnostic frame yet"),
+    }
+    if let Some((_, h)) = board.health {
+        let arming = match h.disarmed {
+            None => "armed (outputs to the controller live in rig-mode runs)".to_string(),
+            Some(why) => format!("disarmed ({})", disarm_name(why)),
+        };
+        let _ = write!(
+            s,
+            "\n{arming}  stack peak {} of {} B  rx lost at least {}  adc restarts {}  fault resets {}",
+            h.stack_peak_bytes, h.stack_size_bytes, h.rx_lost, h.adc_restarts, h.fault_resets
+        );
     }
     let c = &board.counts;
     let _ = writeln!(
@@ -179,5 +190,17 @@ mod tests {
         );
         assert_eq!(fault_names(0b10 | 0x0040), ["sensor2", "can-bus-off"]);
         assert!(fault_names(0).is_empty());
+    }
+}
+
+/// Why the board is disarmed, in words.
+pub fn disarm_name(why: hils_rig_core::arming::Disarm) -> &'static str {
+    use hils_rig_core::arming::Disarm;
+    match why {
+        Disarm::Reset => "since reset",
+        Disarm::Command => "by command",
+        Disarm::Fault => "by a fault",
+        Disarm::Stop => "by stop",
+        Disarm::SelfTest => "by a self-test start",
     }
 }

@@ -18,16 +18,28 @@
 //! track = "low"               # a [tracks.X] name
 //! vehicle = "tare"            # optional; the parameter file's vehicle when absent
 //! ```
+//!
+//! Every value is checked when the programme is read, before any run, and an error names
+//! the file, the table and the key ([`Programme::load`], [`Programme::runs`]): each
+//! criterion within its range ([`Criteria::validate`]); zone bounds finite, ordered, within
+//! [`ZONE_RANGE_M`]; contact sets and vehicle values within the parameter file's ranges;
+//! run names plain file names (they name the report's files:
+//! [`crate::outputs::safe_file_name`]) and unique; speeds in (5, 400] km/h; a service
+//! deceleration above 0 and at most the emergency brake's, a service step within the
+//! parameter file's steps; tracks and vehicles that exist.
 
 use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::{Context, Result, anyhow, bail};
 use hils_brake_unit::BrakeDemand;
+use hils_plant::params::{ParamError, check};
 use hils_plant::track::ContactSets;
 use hils_plant::{Surface, Track, Zone};
 use hils_sil::ParamFile;
 use serde::Deserialize;
+
+use crate::outputs::safe_file_name;
 
 /// Pass criteria and bench constants.
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
@@ -80,6 +92,25 @@ impl Default for Criteria {
 }
 
 impl Criteria {
+    /// Checks every criterion and bench constant against its range (NaN and inf fail); the
+    /// error names the key.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        let c = self;
+        check("max_distance_ratio", c.max_distance_ratio, 1.0, 10.0)?;
+        check("max_lock_s", c.max_lock_s, 0.0, 60.0)?;
+        check(
+            "max_wsp_timer_actions",
+            c.max_wsp_timer_actions as f64,
+            0.0,
+            1000.0,
+        )?;
+        check("max_air_consumption_l", c.max_air_consumption_l, 0.0, 1e5)?;
+        check("lock_speed_ratio", c.lock_speed_ratio, 0.01, 0.99)?;
+        check("cylinder_stroke_m", c.cylinder_stroke_m, 1e-3, 0.5)?;
+        check("pipe_volume_l", c.pipe_volume_l, 0.0, 100.0)?;
+        check("min_speed_mps", c.min_speed_mps, 0.0, 30.0)
+    }
+
     /// The bench constants that follow from the parameter file: the vented volume of a
     /// channel from `[brake]` and the WSP timer of the unit.
     pub fn for_file(mut self, file: &ParamFile) -> Self {
@@ -106,8 +137,21 @@ pub struct TrackSpec {
     pub sets: ContactSets,
 }
 
+/// Zone bounds a track may have, m from the leading wheelset at the brake command (the
+/// trailing wheelsets start 16.5 m behind it).
+pub const ZONE_RANGE_M: (f64, f64) = (-1000.0, 1.0e6);
+
 impl TrackSpec {
+    /// The track (zones checked: finite, in [`ZONE_RANGE_M`], ordered, disjoint) and its
+    /// contact sets checked.
     pub fn track(&self) -> Result<Track> {
+        for (i, z) in self.zone.iter().enumerate() {
+            for (key, x) in [("start_m", z.start_m), ("end_m", z.end_m)] {
+                check(key, x, ZONE_RANGE_M.0, ZONE_RANGE_M.1)
+                    .map_err(|e| anyhow!("zone {}: {e}", i + 1))?;
+            }
+        }
+        self.sets.validate().map_err(|e| anyhow!("{e}"))?;
         Track::new(self.base, &self.zone).map_err(|e| anyhow!("{e}"))
     }
 }
@@ -128,6 +172,9 @@ pub struct RunSpec {
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Programme {
+    /// The file it was read from (for messages).
+    #[serde(skip)]
+    pub path: std::path::PathBuf,
     #[serde(default)]
     pub criteria: Criteria,
     #[serde(default)]
@@ -149,8 +196,10 @@ pub struct Run {
     pub file: ParamFile,
 }
 
-/// Parses a demand: `emergency`, `service:<m/s^2>` or `step:<service brake step>`.
+/// Parses a demand: `emergency`, `service:<m/s^2>` or `step:<service brake step>` (the
+/// form only: [`check_demand`] checks its value against a parameter file).
 pub fn parse_demand(text: &str) -> Result<BrakeDemand> {
+    let text = text.trim();
     if text == "emergency" {
         return Ok(BrakeDemand::Emergency);
     }
@@ -160,7 +209,7 @@ pub fn parse_demand(text: &str) -> Result<BrakeDemand> {
             .parse::<u8>()
             .ok()
             .filter(|s| *s >= 1)
-            .ok_or_else(|| anyhow!("demand `{text}`: `step:<1..>`"))?;
+            .ok_or_else(|| anyhow!("`{text}`: a service step is `step:<1..255>`"))?;
         return Ok(BrakeDemand::ServiceStep { step });
     }
     let decel = text
@@ -168,11 +217,36 @@ pub fn parse_demand(text: &str) -> Result<BrakeDemand> {
         .and_then(|d| d.trim().parse::<f32>().ok())
         .filter(|d| d.is_finite() && *d > 0.0)
         .ok_or_else(|| {
-            anyhow!("demand `{text}`: `emergency`, `service:<m/s^2 > 0>` or `step:<n>`")
+            anyhow!("`{text}`: a demand is `emergency`, `service:<m/s^2 > 0>` or `step:<n>`")
         })?;
     Ok(BrakeDemand::Service {
         deceleration_mps2: decel,
     })
+}
+
+/// Checks a demand's value against the brake unit of `file`: a service deceleration at
+/// most the emergency brake's, a step within the service steps.
+pub fn check_demand(demand: BrakeDemand, file: &ParamFile) -> Result<()> {
+    let u = &file.brake_unit;
+    match demand {
+        BrakeDemand::Service { deceleration_mps2 } => {
+            let d = deceleration_mps2 as f64;
+            if d > u.eb_deceleration_mps2 {
+                bail!(
+                    "service deceleration {d} m/s^2 is above the emergency brake's {} m/s^2 \
+                     (brake_unit.eb_deceleration_mps2): at most that",
+                    u.eb_deceleration_mps2
+                );
+            }
+        }
+        BrakeDemand::ServiceStep { step } if step > u.service_steps => bail!(
+            "service step {step} of {} (brake_unit.service_steps): a step is 1-{}",
+            u.service_steps,
+            u.service_steps
+        ),
+        _ => {}
+    }
+    Ok(())
 }
 
 /// The demand as the programme writes it: `emergency`, `service:<m/s^2>`, `step:<n>`
@@ -206,71 +280,103 @@ fn apply_vehicle(file: &mut ParamFile, name: &str, keys: &BTreeMap<String, f64>)
             "bogie_mass" => &mut v.bogie_mass,
             "wheelset_mass" => &mut v.wheelset_mass,
             "wheel_radius" => &mut v.wheel_radius,
-            other => bail!("vehicle `{name}`: unknown key `{other}`"),
+            other => bail!("[vehicles.{name}] unknown key `{other}`"),
         };
         *slot = value;
     }
     file.validate()
-        .map_err(|e| anyhow!("vehicle `{name}`: {e}"))
+        .map_err(|e| anyhow!("[vehicles.{name}] {e}"))
 }
 
 impl Programme {
+    /// Reads and checks a programme (every value that does not depend on the parameter
+    /// file: criteria, tracks, run names); errors name the file, the table and the key.
     pub fn load(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("cannot read programme {}", path.display()))?;
-        let mut p: Programme = toml::from_str(&text)
-            .map_err(|e| anyhow!("{}: invalid programme: {e}", path.display()))?;
+        Self::parse(path, &text)
+    }
+
+    /// Parses and checks a programme's text ([`Programme::load`]; `path` names it).
+    pub fn parse(path: &Path, text: &str) -> Result<Self> {
+        let at = path.display();
+        let mut p: Programme =
+            toml::from_str(text).map_err(|e| anyhow!("{at}: invalid programme: {e}"))?;
+        p.path = path.to_path_buf();
+        p.criteria
+            .validate()
+            .map_err(|e| anyhow!("{at}: [criteria] {e}"))?;
         p.criteria = p.criteria.for_file(&ParamFile::default());
+        for (name, spec) in &p.tracks {
+            spec.track()
+                .map_err(|e| anyhow!("{at}: [tracks.{name}] {e}"))?;
+        }
         if p.run.is_empty() {
-            bail!("{}: the programme has no [[run]]", path.display());
+            bail!("{at}: the programme has no [[run]]");
+        }
+        let mut names = std::collections::BTreeSet::new();
+        for (i, r) in p.run.iter().enumerate() {
+            let run = format!("{at}: [[run]] {} `{}`", i + 1, r.name);
+            safe_file_name(&r.name).map_err(|why| {
+                anyhow!("{run}: `name` {why} (a run's name names its report files and log)")
+            })?;
+            if !names.insert(r.name.as_str()) {
+                bail!("{run}: `name` appears twice");
+            }
         }
         Ok(p)
     }
 
-    /// The runs on the parameter file `base`, checked (names unique, tracks and vehicles
-    /// known, speeds in range).
+    /// The runs on the parameter file `base`, checked (tracks and vehicles known, speeds
+    /// and demands in range, vehicle values within the parameter file's ranges); errors
+    /// name the file, the run and the key.
     pub fn runs(&self, base: &ParamFile) -> Result<Vec<Run>> {
-        let mut names = std::collections::BTreeSet::new();
         self.run
             .iter()
-            .map(|r| {
-                if !names.insert(r.name.as_str()) {
-                    bail!("run `{}` appears twice", r.name);
-                }
-                let spec = self
-                    .tracks
-                    .get(&r.track)
-                    .ok_or_else(|| anyhow!("run `{}`: no track `{}`", r.name, r.track))?;
-                let track = spec
-                    .track()
-                    .map_err(|e| anyhow!("track `{}`: {e}", r.track))?;
-                spec.sets
-                    .validate()
-                    .map_err(|e| anyhow!("track `{}`: {e}", r.track))?;
-                if !(r.speed_kmh > 5.0 && r.speed_kmh <= 400.0) {
-                    bail!(
-                        "run `{}`: speed_kmh {} not in (5, 400]",
-                        r.name,
-                        r.speed_kmh
-                    );
-                }
-                let mut file = *base;
-                if let Some(v) = &r.vehicle {
-                    let keys = self
-                        .vehicles
-                        .get(v)
-                        .ok_or_else(|| anyhow!("run `{}`: no vehicle `{v}`", r.name))?;
-                    apply_vehicle(&mut file, v, keys)?;
-                }
-                Ok(Run {
-                    name: r.name.clone(),
-                    speed_mps: r.speed_kmh / hils_sil::KMH_PER_MPS,
-                    demand: parse_demand(&r.demand).with_context(|| format!("run `{}`", r.name))?,
-                    track,
-                    sets: spec.sets,
-                    file,
+            .enumerate()
+            .map(|(i, r)| {
+                self.run_of(r, base).map_err(|e| {
+                    anyhow!(
+                        "{}: [[run]] {} `{}`: {e:#}",
+                        self.path.display(),
+                        i + 1,
+                        r.name
+                    )
                 })
             })
             .collect()
+    }
+
+    /// One run, checked ([`Programme::runs`]).
+    fn run_of(&self, r: &RunSpec, base: &ParamFile) -> Result<Run> {
+        let spec = self
+            .tracks
+            .get(&r.track)
+            .ok_or_else(|| anyhow!("`track` = \"{}\": no [tracks.{}]", r.track, r.track))?;
+        let track = spec
+            .track()
+            .map_err(|e| anyhow!("[tracks.{}] {e}", r.track))?;
+        if !(r.speed_kmh > 5.0 && r.speed_kmh <= 400.0) {
+            bail!("`speed_kmh` = {}: not in (5, 400] km/h", r.speed_kmh);
+        }
+        let mut file = *base;
+        if let Some(v) = &r.vehicle {
+            let keys = self
+                .vehicles
+                .get(v)
+                .ok_or_else(|| anyhow!("`vehicle` = \"{v}\": no [vehicles.{v}]"))?;
+            apply_vehicle(&mut file, v, keys)?;
+        }
+        let demand = parse_demand(&r.demand)
+            .and_then(|d| check_demand(d, &file).map(|()| d))
+            .map_err(|e| anyhow!("`demand` = \"{}\": {e:#}", r.demand))?;
+        Ok(Run {
+            name: r.name.clone(),
+            speed_mps: r.speed_kmh / hils_sil::KMH_PER_MPS,
+            demand,
+            track,
+            sets: spec.sets,
+            file,
+        })
     }
 }

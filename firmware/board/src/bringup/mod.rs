@@ -1,7 +1,11 @@
 //! The bring-up self-test (`cargo board-run --features bringup`): what a bare NUCLEO-G474RE
 //! can check alone, one check a function, each printing one `PASS`/`FAIL` line over defmt,
 //! then a summary. The pass/fail rules are `hils_rig_core::bringup` (host-tested); docs/rig.md
-//! "First flash" lists the expected output. The rig application does not start in this image.
+//! "First flash" lists the expected output. The checks measure what the application runs:
+//! SYSCLK against an independent clock (LSE, else LSI), the pulse timer and its break, and
+//! last the application itself (`crate::app`, CAN in internal loopback, the self-test paper
+//! scenario) with its own step in TIM3 under its real interrupt load. No check masks
+//! interrupts for longer than embassy's 16-bit time driver allows (32.8 ms).
 //!
 //! Wiring: one jumper wire from D7 (PA8, pulse train 1, TIM1_CH1) to D12 (PA6, TIM16_CH1)
 //! for the pulse check. Nothing else (no transceiver: FDCAN runs in internal loopback).
@@ -10,9 +14,11 @@ mod adc;
 mod clock;
 mod fdcan;
 mod pulse;
+mod reference;
 mod step_time;
 mod tim3;
 
+use embassy_executor::Spawner;
 use embassy_stm32::Peripherals;
 
 /// Counts the checks.
@@ -32,16 +38,34 @@ impl Tally {
     }
 }
 
-pub async fn run(p: Peripherals) {
+pub async fn run(spawner: Spawner, p: Peripherals) {
     defmt::println!("bringup: start (jumper D7-D12 for the pulse check)");
     let mut t = Tally::default();
     t.note(clock::clock_tree());
     t.note(clock::ccm_code());
-    t.note(tim3::step_timer_period(p.TIM3));
-    t.note(fdcan::loopback(p.FDCAN1, p.PA11, p.PA12).await);
-    t.note(adc::vrefint_and_temperature(p.ADC1).await);
-    t.note(pulse::pulse_through_jumper(p.TIM1, p.PA8, p.TIM16, p.PA6).await);
-    t.note(step_time::paper_steps());
+    // SAFETY (each clone below): the check's drivers are dropped before the application
+    // takes the same peripheral from `p`; nothing runs concurrently with a check.
+    t.note(reference::sysclk_against_reference(unsafe { p.TIM16.clone_unchecked() }).await);
+    t.note(tim3::step_timer_period(unsafe { p.TIM3.clone_unchecked() }));
+    t.note(
+        fdcan::loopback(
+            unsafe { p.FDCAN1.clone_unchecked() },
+            unsafe { p.PA11.clone_unchecked() },
+            unsafe { p.PA12.clone_unchecked() },
+        )
+        .await,
+    );
+    t.note(adc::vrefint_and_temperature(unsafe { p.ADC1.clone_unchecked() }).await);
+    t.note(
+        pulse::pulse_through_jumper(
+            unsafe { p.TIM1.clone_unchecked() },
+            unsafe { p.PA8.clone_unchecked() },
+            unsafe { p.TIM16.clone_unchecked() },
+            unsafe { p.PA6.clone_unchecked() },
+        )
+        .await,
+    );
+    t.note(step_time::application_step(spawner, p).await);
     defmt::println!("bringup: {=u32} PASS, {=u32} FAIL", t.pass, t.fail);
 }
 
