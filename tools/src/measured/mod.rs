@@ -375,6 +375,45 @@ t_s,v_ref_mps,omega1_radps,omega2_radps,omega3_radps,omega4_radps,p_cyl1_pa,p_cy
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
+    /// fit-friction's chunked reading goes through the channel map like the whole-file
+    /// reader: the same points (units converted), and an error past the first chunk names
+    /// the file's row (not the chunk's) and the column as the file and the map name it.
+    #[test]
+    fn chunks_read_through_the_map_like_the_whole_file() {
+        let dir = std::env::temp_dir().join(format!("hils-chunk-map-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let map_text = "[channels.v_friction_mps]\nfrom = \"Speed\"\nunit = \"km/h\"\n\
+                        [channels.t_disc_c]\nfrom = \"DiscTemp\"\nunit = \"degC\"\n[channels.mu]\nfrom = \"Mu\"\nunit = \"-\"\n";
+        let map = ChannelMap::parse(&dir.join("m.toml"), map_text).unwrap();
+        let rows = friction_test::CHUNK_ROWS + 10;
+        let mut text = String::from("# source: test\nSpeed,DiscTemp,Mu\n");
+        for r in 0..rows {
+            text += &format!("{},{},0.35\n", 36.0 + (r % 100) as f64, (r % 300) as f64);
+        }
+        let path = dir.join("f.csv");
+        std::fs::write(&path, &text).unwrap();
+        let open = || std::fs::File::open(&path).map(BufReader::new);
+        let (mut n, mut v0) = (0, f64::NAN);
+        let streamed = stream_friction_test_with(&path, Some(&map), open, |c| {
+            v0 = if n == 0 { c.v_friction_mps[0] } else { v0 };
+            n += c.mu.len();
+            Ok(())
+        })
+        .unwrap();
+        let whole = read_friction_test_with(&path, Some(&map)).unwrap();
+        assert_eq!((n, streamed.points, whole.mu.len()), (rows, rows, rows));
+        assert!((v0 - 10.0).abs() < 1e-12, "36 km/h read as {v0} m/s");
+        // Row CHUNK_ROWS + 5 (1-based) out of range: named by the file's row and label.
+        let bad_row = friction_test::CHUNK_ROWS + 5;
+        let mut lines: Vec<&str> = text.lines().collect();
+        lines[1 + bad_row] = "36,5000,0.35";
+        std::fs::write(&path, lines.join("\n") + "\n").unwrap();
+        let e = stream_friction_test_with(&path, Some(&map), open, |_| Ok(())).unwrap_err();
+        assert_eq!(e.row, bad_row, "{e}");
+        assert_eq!(e.column, "DiscTemp (t_disc_c)", "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     /// The doc's limits table is the reader's table.
     #[test]
     fn limits_doc_is_the_readers_table() {
