@@ -6,7 +6,7 @@
 //! input low while the coil is energised, a pull-up holds it high otherwise, so a coil signal
 //! is *active low* at the pin ([`ValveWiring::active_high`] for a stage that drives the pin
 //! high instead). The eight inputs sit on one port (GPIOC: dump 1-4 on PC2-PC5, hold 1-4 on
-//! PC8-PC11, [`DUMP_BITS`], [`HOLD_BITS`]), so the step reads them with one load of GPIOC_IDR
+//! PC9-PC12, [`DUMP_BITS`], [`HOLD_BITS`]; PC8 is the interface stage's output enable), so the step reads them with one load of GPIOC_IDR
 //! ([`ValveLevels`]).
 //!
 //! **Debounce** (integrator per input, [`DEBOUNCE_TICKS`]): a tick with the input active
@@ -31,8 +31,9 @@ pub const DEBOUNCE_TICKS: u8 = 3;
 
 /// Bit of each wheelset's dump-coil input in the port read ([`ValveLevels`]): PC2-PC5.
 pub const DUMP_BITS: [u8; WHEELSETS] = [2, 3, 4, 5];
-/// Bit of each wheelset's hold-coil input in the port read: PC8-PC11.
-pub const HOLD_BITS: [u8; WHEELSETS] = [8, 9, 10, 11];
+/// Bit of each wheelset's hold-coil input in the port read: PC9-PC12 (PC8, the next free
+/// bit, is the output enable of issue 22).
+pub const HOLD_BITS: [u8; WHEELSETS] = [9, 10, 11, 12];
 
 /// Which valve inputs are wired and how the interface stage drives the pins.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

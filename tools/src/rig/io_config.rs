@@ -74,6 +74,34 @@ struct Load {
     air_spring_area_m2: Option<f64>,
 }
 
+/// Which rule an I/O configuration in range breaks, with its values (`IoConfig::check`).
+fn inconsistency(c: &IoConfig) -> String {
+    let (d, l) = (&c.demand, &c.load);
+    let reach_mv = hils_rig_core::load::DAC_VREF_MV as f64 * l.stage_gain_permille as f64 / 1e3;
+    if d.duty_release_permille >= d.duty_full_permille {
+        format!(
+            "the release duty ({} %) must be below the full-scale duty ({} %)",
+            d.duty_release_permille as f64 / 10.0,
+            d.duty_full_permille as f64 / 10.0
+        )
+    } else if l.zero_mv >= l.full_mv {
+        format!(
+            "the signal at 0 bar ({} V) must be below the signal at the full scale ({} V)",
+            l.zero_mv as f64 / 1e3,
+            l.full_mv as f64 / 1e3
+        )
+    } else if l.full_mv as f64 > reach_mv {
+        format!(
+            "the signal at the full scale ({} V) is beyond the stage's reach (3.3 V x gain {} = {} V)",
+            l.full_mv as f64 / 1e3,
+            l.stage_gain_permille as f64 / 1e3,
+            reach_mv / 1e3
+        )
+    } else {
+        "inconsistent with the other values".to_string()
+    }
+}
+
 /// The wheelset bits of a list of wheelsets 1-4.
 pub fn wheelset_bits(key: &str, list: &[u8]) -> Result<u8> {
     list.iter().try_fold(0u8, |bits, &w| {
@@ -179,14 +207,8 @@ pub fn parse(text: &str) -> Result<IoConfig> {
         c.assign(item, raw as u16);
     }
     c.demand.frame = d.frame.unwrap_or(false);
-    c.check().map_err(|e| {
-        anyhow!(
-            "`{}`: inconsistent with the other values (the release duty below the full duty; \
-             the transducer's zero below its full scale, the full scale within the stage \
-             gain x 3.3 V)",
-            key_of(e.0)
-        )
-    })?;
+    c.check()
+        .map_err(|e| anyhow!("`{}`: {}", key_of(e.0), inconsistency(&c)))?;
     Ok(c)
 }
 

@@ -10,8 +10,9 @@
 //! from the first such frame; `eb_command_s` / `brake_command_s` metadata: the first
 //! emergency / any non-release brake command after it. `omega*_radps` = frame speed / wheel radius of the
 //! board's plant. `v_ref_mps` and `a_x_mps2` come from `RIG_STATUS` (10 ms) of a live run
-//! (running or finished), linearly interpolated to the row's time; rows outside those
-//! frames' span are left out (and counted). `state` and `faults` are the latest status frame's. `cmd` is the brake command
+//! (running or finished), linearly interpolated to the row's time, or with a probe capture
+//! from its records (the plant's own, from the run's first step: the status frames start up
+//! to 10 ms into the run); rows outside those samples' span are left out (and counted). `state` and `faults` are the latest status frame's. `cmd` is the brake command
 //! in force (the session's own commands and any seen on the bus). Diagnostic frames give
 //! `step_max_us`, `step_mean_us`, `overruns` (latest).
 //!
@@ -28,7 +29,9 @@
 //! board's telemetry; on hardware, the defmt capture, not yet merged here) the board's
 //! measured cylinder pressures / clamp forces are interpolated to the rows' times, and the
 //! controller outputs it drove (`eb_loop_closed`, `service_demand_mps2`,
-//! `air_spring1_pa`, `air_spring2_pa`) are the latest record's. Without one the
+//! `air_spring1_pa`, `air_spring2_pa`) are the latest record's; `t_disc*_c` (the plant's
+//! disc temperature rise, which the judge's allowed stop takes for the pad friction of
+//! Eq (2)) and the vehicle speed are the records' interpolated. Without one the
 //! `p_cyl*_pa` cells are empty (the spec's "not measured") and the metadata says so.
 
 use std::path::Path;
@@ -302,19 +305,37 @@ impl Recorder {
                 *t > t_from && matches!(s.state, RigState::Running | RigState::Finished)
             })
             .collect();
+        // The probe's records carry the plant's speed and acceleration at their tick, from
+        // the run's first step on (its t = 0 record): they come before the first status
+        // frame (up to 10 ms in), so the log starts with the run.
+        let records = self.probe_records(t_from);
+        let probe_v = records.iter().map(|(t, r)| (*t, r.v_ref as f64)).collect();
+        let probe_a = records.iter().map(|(t, r)| (*t, r.a_x as f64)).collect();
+        let v = live
+            .iter()
+            .map(|(t, s)| (*t, s.vehicle_speed_kmh as f64 / KMH_PER_MPS as f64))
+            .collect();
+        let a = live
+            .iter()
+            .map(|(t, s)| (*t, -s.deceleration_mps2 as f64))
+            .collect();
+        let disc_temp_c = core::array::from_fn(|j| {
+            records
+                .iter()
+                .map(|(t, r)| (*t, r.t_disc[j] as f64))
+                .collect()
+        });
         LiveSeries {
-            v: live
-                .iter()
-                .map(|(t, s)| (*t, s.vehicle_speed_kmh as f64 / KMH_PER_MPS as f64))
-                .collect(),
-            a: live
-                .iter()
-                .map(|(t, s)| (*t, -s.deceleration_mps2 as f64))
-                .collect(),
+            disc_temp_c,
+            probe_v,
+            probe_a,
+            v,
+            a,
+            status: live.iter().map(|&&x| x).collect(),
             pressure: core::array::from_fn(|j| self.probe_series(j, true, t_from)),
             clamp: core::array::from_fn(|j| self.probe_series(j, false, t_from)),
             surfaces: self.probe_surfaces(t_from),
-            records: self.probe_records(t_from),
+            records,
             valves_known: self
                 .wheel_speed
                 .iter()
@@ -344,9 +365,9 @@ impl Recorder {
                 continue;
             };
             let (Some(v_ref), Some(a_x), Some(status)) = (
-                interpolate(&s.v, t),
-                interpolate(&s.a, t),
-                latest(&self.status, t),
+                interpolate(&s.probe_v, t).or_else(|| interpolate(&s.v, t)),
+                interpolate(&s.probe_a, t).or_else(|| interpolate(&s.a, t)),
+                latest(&s.status, t).or(s.status.first().map(|f| f.1)),
             ) else {
                 written.outside_status += 1;
                 continue;
@@ -367,6 +388,7 @@ impl Recorder {
                     OMEGA => format!("{:.5}", speeds[j] as f64 / KMH_PER_MPS as f64 / r_w),
                     P_CYL => num(interpolate(&s.pressure[j], t), 1),
                     F_CLAMP => num(interpolate(&s.clamp[j], t), 2),
+                    T_DISC => num(interpolate(&s.disc_temp_c[j], t), 2),
                     A_X => format!("{a_x:.4}"),
                     CMD => self.cmd_at(t).map_or("", Cmd::text).to_string(),
                     STATE => state_name(status.state).to_string(),
@@ -487,7 +509,16 @@ impl Recorder {
 
 /// The recorded series interpolated to the rows (live status frames, probe records).
 struct LiveSeries {
+    /// Vehicle speed and acceleration of the probe's records, m/s, m/s^2 (empty without).
+    probe_v: Vec<(f64, f64)>,
+    probe_a: Vec<(f64, f64)>,
+    /// Disc temperature rise of the probe's records, degC (the allowed stop's pad friction).
+    disc_temp_c: [Vec<(f64, f64)>; WHEELSETS],
+    /// Vehicle speed of the live status frames, m/s.
     v: Vec<(f64, f64)>,
+    /// The live status frames (a row before the first, in the run's first 10 ms, has its
+    /// state).
+    status: Vec<(f64, StatusFrame)>,
     a: Vec<(f64, f64)>,
     pressure: [Vec<(f64, f64)>; WHEELSETS],
     clamp: [Vec<(f64, f64)>; WHEELSETS],
@@ -506,6 +537,9 @@ impl LiveSeries {
         let mut channels = vec![T, V_REF, OMEGA, P_CYL];
         if self.clamp.iter().any(|c| !c.is_empty()) {
             channels.push(F_CLAMP);
+        }
+        if !self.records.is_empty() {
+            channels.push(T_DISC);
         }
         if self.valves_known.0 != 0 {
             channels.push(WSP);

@@ -30,6 +30,7 @@ pub mod compare;
 pub mod cycles;
 pub mod emulator;
 pub mod fidelity;
+pub mod latency;
 pub mod parse;
 pub mod report;
 
@@ -100,6 +101,8 @@ pub struct RigCost {
     pub max_tick: u32,
     pub rejected_commands: u32,
     pub machine: &'static str,
+    /// Input-to-output latencies ([`latency`]).
+    pub latency: Vec<latency::Path>,
 }
 
 /// The rig's figures from the emulator's output.
@@ -123,6 +126,7 @@ pub fn rig_cost(text: &str) -> Result<RigCost> {
         max_tick: r.max_tick,
         rejected_commands: r.rejected_commands,
         machine: "QEMU mps2-an386 (Cortex-M4F), -icount shift=0",
+        latency: latency::measure(r.max),
     })
 }
 
@@ -329,6 +333,7 @@ pub fn main(args: TargetCostArgs) -> Result<()> {
                 if c.within_budget { "within" } else { "OVER" },
                 c.rig_step_instructions_mean
             );
+            print!("{}", latency::text(&c.latency, c.rig_step_instructions_max));
         }
         return Ok(());
     }
