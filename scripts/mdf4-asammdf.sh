@@ -32,7 +32,7 @@ fixture=firmware/rig-fixture/fixture
 "$hils" decode "$fixture/telemetry.defmt" --elf "$fixture/rig-fixture.elf" --run 1 -o "$out/decoded.mf4" > /dev/null
 $py written "$out/decoded.mf4" "$out/decoded.csv"
 for ext in csv mf4; do
-    printf 'record --out %s\nstart --speed-kmh 60 --rail wet --friction variable\nbrake eb\nwait --until-end\n' \
+    printf 'record --out %s\nstart --arm --speed-kmh 60 --rail wet --friction variable\nbrake eb\nwait --until-end\n' \
         "$out/recorded.$ext" > "$out/session-$ext.txt"
     "$hils" rig --interface sim session "$out/session-$ext.txt" > /dev/null
 done
