@@ -9,7 +9,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 limit="-max_total_time=${1:-30}"
 if [ "${1:-}" = "--runs" ]; then limit="-runs=${2:?--runs N}"; fi
-targets=(reader params can_rig decode plant)
+targets=(reader mdf4 params can_rig decode plant)
 command -v cargo-fuzz >/dev/null || cargo install --locked cargo-fuzz
 export RUSTC_BOOTSTRAP=1
 # No sanitizer (safe Rust); debug assertions and overflow checks on (-a).

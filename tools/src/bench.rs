@@ -35,7 +35,11 @@ pub struct BenchArgs {
     /// Instead of the plant: time and peak memory of reading this measured file.
     #[arg(long)]
     pub reader: Option<std::path::PathBuf>,
-    /// With --reader: first write a synthetic run log of about this many MB to the file.
+    /// With --reader: the channel map to read the file with.
+    #[arg(long, requires = "reader", value_name = "FILE")]
+    pub map: Option<std::path::PathBuf>,
+    /// With --reader: first write a synthetic run log of about this many MB to the file
+    /// (MDF4 when the file name ends in `.mf4`, else CSV).
     #[arg(long, requires = "reader", value_parser = crate::flags::log_mb)]
     pub write_log_mb: Option<f64>,
     /// With --reader: first write a synthetic friction test of this many points (Eq 2 of
@@ -213,7 +217,7 @@ pub fn main(args: BenchArgs) -> Result<()> {
             )?;
             crate::outputs::write_atomic(path, |w| write_friction_test(w, n))?;
         }
-        return bench_reader(path, args.json);
+        return bench_reader_with(path, args.map.as_deref(), args.json);
     }
     let params = ParamFile::default();
     let f = measure(&params, args.steps.max(1), args.repeat.max(1))?;
@@ -248,9 +252,10 @@ pub fn main(args: BenchArgs) -> Result<()> {
 }
 
 /// Writes a synthetic braking run log of about `mb` MB (the spec's columns, values
-/// formatted like `hils decode`'s f32 cells), streaming (small memory).
+/// formatted like `hils decode`'s f32 cells): CSV streaming (small memory), or MDF4 when
+/// the file name ends in `.mf4` (through the one run-log writer).
 pub fn write_log(path: &std::path::Path, mb: f64) -> Result<()> {
-    crate::outputs::write_atomic(path, |w| write_log_to(w, mb))
+    crate::outputs::write_atomic(path, |w| write_log_to(w, path, mb))
 }
 
 /// Noise of the synthetic friction test's mu (one standard deviation).
@@ -295,56 +300,70 @@ pub fn write_friction_test(w: &mut dyn std::io::Write, n: u64) -> Result<()> {
     Ok(())
 }
 
-/// The synthetic run log of [`write_log`].
-fn write_log_to(w: &mut dyn std::io::Write, mb: f64) -> Result<()> {
-    writeln!(w, "# source: hils bench --write-log-mb {mb}\n# rail: dry")?;
-    let mut header = vec!["t_s".to_string(), "v_ref_mps".to_string()];
-    for stem in ["omega", "p_cyl", "f_clamp", "f_brake", "t_disc", "wsp"] {
-        for j in 1..=4 {
-            let unit = match stem {
-                "omega" => "_radps",
-                "p_cyl" => "_pa",
-                "f_clamp" | "f_brake" => "_n",
-                "t_disc" => "_c",
-                _ => "",
-            };
-            header.push(format!("{stem}{j}{unit}"));
-        }
-    }
-    header.extend(["a_x_mps2".to_string(), "cmd".to_string()]);
-    writeln!(w, "{}", header.join(","))?;
+/// The synthetic run log of [`write_log`], in the format of `path`'s extension.
+fn write_log_to(w: &mut dyn std::io::Write, path: &std::path::Path, mb: f64) -> Result<()> {
+    let meta = vec![
+        ("source", format!("hils bench --write-log-mb {mb}")),
+        ("rail", "dry".to_string()),
+    ];
+    let header = synthetic_header();
     let target = (mb * 1e6) as u64;
+    let format = crate::runlog::Format::of_path(path);
+    if format == crate::runlog::Format::Mf4 {
+        // Bytes per record: 8 per number, 4 for the command's code.
+        let per_row = 8 * (header.len() as u64 - 1) + 4;
+        let rows = (0..target.div_ceil(per_row)).map(synthetic_row);
+        return crate::runlog::write_table_as(format, w, &meta, &header, rows);
+    }
+    for (k, v) in &meta {
+        writeln!(w, "# {k}: {v}")?;
+    }
+    writeln!(w, "{}", header.join(","))?;
     let (mut written, mut k) = (0u64, 0u64);
-    let mut line = String::new();
     while written < target {
-        use std::fmt::Write as _;
-        line.clear();
-        let t = k as f64 * 1e-4;
-        let v = (41.7 - 1.39 * (t % 30.0)) as f32;
-        write!(line, "{t},{v}")?;
-        for j in 0..4 {
-            let slip = 0.01 * ((k + j) % 17) as f32;
-            write!(line, ",{}", (v - slip) / 0.43)?;
-        }
-        for x in [
-            250_000.0f32,
-            20_000.0,
-            7_600.0,
-            20.0 + (t % 30.0) as f32 * 3.3,
-        ] {
-            for j in 0..4 {
-                write!(line, ",{}", x * (1.0 + 0.001 * ((k + j) % 7) as f32))?;
-            }
-        }
-        for j in 0..4 {
-            write!(line, ",{}", ((k / 500 + j) % 2))?;
-        }
-        writeln!(line, ",{},EB", -1.39f32 + 0.001 * (k % 11) as f32)?;
+        let line = synthetic_row(k).join(",") + "\n";
         w.write_all(line.as_bytes())?;
         written += line.len() as u64;
         k += 1;
     }
     Ok(())
+}
+
+/// The columns of the synthetic log.
+fn synthetic_header() -> Vec<String> {
+    use hils_sil::record::run_log::{
+        A_X, CMD, F_BRAKE, F_CLAMP, OMEGA, P_CYL, T, T_DISC, V_REF, WSP,
+    };
+    crate::runlog::column_names(&[
+        T, V_REF, OMEGA, P_CYL, F_CLAMP, F_BRAKE, T_DISC, WSP, A_X, CMD,
+    ])
+}
+
+/// Row `k` of the synthetic log (10 kHz).
+fn synthetic_row(k: u64) -> Vec<String> {
+    let t = k as f64 * 1e-4;
+    let v = (41.7 - 1.39 * (t % 30.0)) as f32;
+    let mut row = vec![format!("{t}"), format!("{v}")];
+    for j in 0..4 {
+        let slip = 0.01 * ((k + j) % 17) as f32;
+        row.push(format!("{}", (v - slip) / 0.43));
+    }
+    for x in [
+        250_000.0f32,
+        20_000.0,
+        7_600.0,
+        20.0 + (t % 30.0) as f32 * 3.3,
+    ] {
+        for j in 0..4 {
+            row.push(format!("{}", x * (1.0 + 0.001 * ((k + j) % 7) as f32)));
+        }
+    }
+    for j in 0..4 {
+        row.push(format!("{}", (k / 500 + j) % 2));
+    }
+    row.push(format!("{}", -1.39f32 + 0.001 * (k % 11) as f32));
+    row.push("EB".to_string());
+    row
 }
 
 /// The process's peak resident memory, bytes (Linux `VmHWM`; 0 where unknown).
@@ -376,10 +395,20 @@ pub struct ReaderFigures {
 
 /// Times reading a measured file and prints the peak memory against its size.
 pub fn bench_reader(path: &std::path::Path, json: bool) -> Result<()> {
+    bench_reader_with(path, None, json)
+}
+
+/// [`bench_reader`] of a file (CSV or MDF4) read through a channel map.
+pub fn bench_reader_with(
+    path: &std::path::Path,
+    map: Option<&std::path::Path>,
+    json: bool,
+) -> Result<()> {
     let file_bytes = std::fs::metadata(path)?.len();
+    let map = crate::measured::load_map(map)?;
     let before = peak_rss_bytes();
     let started = Instant::now();
-    let m = crate::measured::read(path)?;
+    let m = crate::measured::read_with(path, map.as_ref())?;
     let read_s = started.elapsed().as_secs_f64();
     let rows = match &m {
         crate::measured::Measured::Run(r) => r.len(),

@@ -43,8 +43,9 @@ pub struct DecodeArgs {
     /// Firmware ELF whose defmt table decodes a raw capture (target/thumbv7em-none-eabihf/release/board).
     #[arg(long)]
     pub elf: Option<PathBuf>,
-    /// Output CSV file (`-`: standard output, one run); with several runs in the log, `-N`
-    /// is added before the extension unless --run picks one.
+    /// Output file: CSV, or MDF4 when its name ends in `.mf4` (`-`: standard output, one
+    /// run); with several runs in the log, `-N` is added before the extension unless --run
+    /// picks one.
     #[arg(short, long)]
     pub out: PathBuf,
     /// Decode only this run of the log (1 = the first).
@@ -416,6 +417,11 @@ impl Run {
     /// Writes the run as a run-log CSV (an error, before anything is written, when a
     /// value is implausible).
     pub fn write_csv<W: Write>(&self, out: W, source: &str) -> Result<()> {
+        self.write_as(runlog::Format::Csv, out, source)
+    }
+
+    /// Writes the run as a run log in `format` (CSV or MDF4; the same columns).
+    pub fn write_as<W: Write>(&self, format: runlog::Format, out: W, source: &str) -> Result<()> {
         let channels = self.channels();
         self.check_plausible(&channels)?;
         let rows = self.records.iter().map(|r| {
@@ -424,7 +430,7 @@ impl Run {
                 .flat_map(|&c| (0..c.width()).map(move |j| self.cell(r, c, j)))
                 .collect()
         });
-        runlog::write_table(out, &self.metadata(source), &self.columns(), rows)
+        runlog::write_table_as(format, out, &self.metadata(source), &self.columns(), rows)
     }
 }
 
@@ -488,7 +494,9 @@ pub fn main(args: DecodeArgs) -> Result<()> {
         // Written whole once it is complete (atomically): a run refused half-way leaves no
         // file.
         let mut csv = Vec::new();
-        run.write_csv(&mut csv, &source)
+        // The format by the name's extension (`-`, standard output: CSV).
+        let format = runlog::Format::of_path(&args.out);
+        run.write_as(format, &mut csv, &source)
             .with_context(|| format!("{}", args.input.display()))?;
         out.write(csv)?;
         let last = run.records.last().map(|r| run.time_s(r)).unwrap_or(0.0);

@@ -67,7 +67,7 @@ use clap::Args;
 use hils_plant::Params;
 
 use crate::figures::list_text;
-use crate::measured::{RunLog, read_run_log};
+use crate::measured::{RunLog, read_run_log_with};
 use crate::params_file::load_params;
 pub use json::{Finding, Gain, Report, Slides, Tried};
 pub use outcome::Outcome;
@@ -87,7 +87,11 @@ pub struct DiagnoseArgs {
     /// see docs/diagnosis.md).
     #[arg(long, default_value_t = replay::REPLAY_STEP_S, value_parser = crate::flags::step_s)]
     pub step_s: f64,
-    /// Run logs (spec/measured-data.md, section 1).
+    /// Channel map (TOML): which of the files' channels or columns is which spec column,
+    /// their units, and metadata (docs/mdf4.md). Without it the spec's names are expected.
+    #[arg(long, value_name = "FILE")]
+    pub map: Option<PathBuf>,
+    /// Run logs (spec/measured-data.md, section 1): CSV or MDF4 (.mf4).
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
 }
@@ -134,9 +138,15 @@ pub fn diagnose(
 
 /// Reads the runs of `files`.
 pub fn read_logs(files: &[PathBuf]) -> Result<Vec<RunLog>> {
+    read_logs_with(files, None)
+}
+
+/// Reads the runs of `files` (CSV or MDF4) through the channel map at `map`, if any.
+pub fn read_logs_with(files: &[PathBuf], map: Option<&std::path::Path>) -> Result<Vec<RunLog>> {
+    let map = crate::measured::load_map(map)?;
     files
         .iter()
-        .map(|f| read_run_log(f).map_err(anyhow::Error::from))
+        .map(|f| read_run_log_with(f, map.as_ref()).map_err(anyhow::Error::from))
         .collect()
 }
 
@@ -144,7 +154,7 @@ pub fn read_logs(files: &[PathBuf]) -> Result<Vec<RunLog>> {
 pub fn main(args: DiagnoseArgs) -> Result<()> {
     let outputs = args.out.check()?;
     let baseline = load_params(&args.baseline)?;
-    let logs = read_logs(&args.files)?;
+    let logs = read_logs_with(&args.files, args.map.as_deref())?;
     let name = args.baseline.display().to_string();
     let out = diagnose(&baseline.plant, &name, &logs, args.step_s)?;
     print_summary(&out);

@@ -37,7 +37,7 @@ use crate::diagnose::lsq::{self, ParamSpec};
 use indicatif::ProgressBar;
 
 use crate::figures::{list_text, round_dp, round_sig};
-use crate::measured::{FrictionTest, stream_friction_test};
+use crate::measured::{ChannelMap, FrictionTest, stream_friction_test_with};
 use crate::params_file::params_or_default;
 use crate::plots::{Chart, Series, Style};
 
@@ -50,7 +50,11 @@ pub struct FitFrictionArgs {
     /// Parameter file whose `friction.correction_c` is used (default: the reference values).
     #[arg(long)]
     pub params: Option<PathBuf>,
-    /// Friction-test CSV files (spec measured-data.md, section 2).
+    /// Channel map (TOML): which of the files' channels or columns is which spec column,
+    /// their units, and metadata (docs/mdf4.md). Without it the spec's names are expected.
+    #[arg(long, value_name = "FILE")]
+    pub map: Option<PathBuf>,
+    /// Friction-test files (spec measured-data.md, section 2): CSV or MDF4 (.mf4).
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
 }
@@ -464,12 +468,41 @@ fn progress(show: bool, template: &str) -> ProgressBar {
     bar
 }
 
+/// Reads friction test `f` (CSV in chunks, MDF4 whole) through the channel `map`, adding
+/// its points to `gathered`; `bar` counts the bytes read.
+fn read_into(
+    f: &Path,
+    map: Option<&ChannelMap>,
+    bar: &ProgressBar,
+    gathered: &mut gather::Gathered,
+) -> Result<FrictionTest, crate::measured::MeasuredError> {
+    stream_friction_test_with(
+        f,
+        map,
+        || {
+            let file = std::fs::File::open(f)?;
+            bar.inc_length(file.metadata()?.len());
+            Ok(std::io::BufReader::with_capacity(
+                1 << 16,
+                bar.wrap_read(file),
+            ))
+        },
+        |chunk| {
+            for i in 0..chunk.mu.len() {
+                gathered.add(chunk.v_friction_mps[i], chunk.t_disc_c[i], chunk.mu[i]);
+            }
+            Ok(())
+        },
+    )
+}
+
 /// `hils fit-friction`.
 pub fn main(args: FitFrictionArgs) -> Result<()> {
     let started = std::time::Instant::now();
     let out = args.out.check()?;
     let params = params_or_default(args.params.as_deref())?;
     let c = params.plant.friction.correction_c;
+    let map = crate::measured::load_map(args.map.as_deref())?;
     let bytes: u64 = args
         .files
         .iter()
@@ -484,23 +517,7 @@ pub fn main(args: FitFrictionArgs) -> Result<()> {
     let mut gathered = gather::Gathered::default();
     let mut skipped = 0;
     for f in &args.files {
-        let test = stream_friction_test(
-            f,
-            || {
-                let file = std::fs::File::open(f)?;
-                bar.inc_length(file.metadata()?.len());
-                Ok(std::io::BufReader::with_capacity(
-                    1 << 16,
-                    bar.wrap_read(file),
-                ))
-            },
-            |chunk| {
-                for i in 0..chunk.mu.len() {
-                    gathered.add(chunk.v_friction_mps[i], chunk.t_disc_c[i], chunk.mu[i]);
-                }
-                Ok(())
-            },
-        )?;
+        let test = read_into(f, map.as_ref(), &bar, &mut gathered)?;
         for note in &test.notes {
             crate::say!("{}: {note}", f.display());
         }

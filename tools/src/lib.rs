@@ -14,6 +14,7 @@ pub mod diagnose;
 pub mod figures;
 pub mod fit_friction;
 pub mod flags;
+pub mod mdf4;
 pub mod measured;
 pub mod outputs;
 pub mod params_file;

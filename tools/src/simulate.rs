@@ -12,7 +12,7 @@ use crate::figures::list_text;
 use crate::outputs::OutDir;
 use crate::params_file::params_or_default;
 use crate::plots::{Chart, Series, Style};
-use crate::runlog::write_run_log;
+use crate::runlog::{Format, write_run_log_as};
 use crate::scenario::{EbOptions, Run, Summary, run_eb};
 
 #[derive(Clone, Copy, Debug, ValueEnum, PartialEq, Eq)]
@@ -88,6 +88,10 @@ pub struct SimulateArgs {
     /// Skip the figures (and the overlay run they need).
     #[arg(long)]
     pub no_plots: bool,
+    /// Run-log format: `csv` (run.csv, spec/measured-data.md) or `mf4` (run.mf4, ASAM MDF
+    /// 4.10: the same columns and names, with units, comments and the run's metadata).
+    #[arg(long, value_enum, default_value = "csv")]
+    pub format: Format,
 }
 
 /// Builds the parameters and options of a run from the arguments.
@@ -172,8 +176,9 @@ pub fn main(args: SimulateArgs) -> Result<()> {
                 .unwrap_or("built-in".into()),
         ),
     ];
-    let csv_path = out.write_with("run.csv", |w| {
-        write_run_log(w, &metadata, &main_run.samples)
+    let run_name = format!("run.{}", args.format.extension());
+    let csv_path = out.write_with(&run_name, |w| {
+        write_run_log_as(args.format, w, &metadata, &main_run.samples)
     })?;
     let summary = main_run.summary.rounded();
     let summary_path = out.write_json("summary.json", &summary)?;

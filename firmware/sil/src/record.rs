@@ -54,6 +54,24 @@ impl Channel {
         if self.per_wheelset { WHEELSETS } else { 1 }
     }
 
+    /// The SI unit of the channel's values as a symbol (`rad/s` for `_radps`, `degC` for
+    /// `_c`, empty for a dimensionless quantity or a text): what a file that stores units
+    /// (MDF4) writes beside the column, and what a stored unit converts to.
+    pub fn unit_symbol(self) -> &'static str {
+        match self.unit {
+            "_s" => "s",
+            "_mps" => "m/s",
+            "_radps" => "rad/s",
+            "_pa" => "Pa",
+            "_n" => "N",
+            "_c" => "degC",
+            "_m" => "m",
+            "_mps2" => "m/s^2",
+            "_us" => "us",
+            _ => "",
+        }
+    }
+
     /// The channel and wheelset (0-based) of a column name, among `channels`.
     pub fn find(channels: &[Channel], name: &str) -> Option<(Channel, usize)> {
         channels.iter().find_map(|c| {

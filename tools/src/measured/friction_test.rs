@@ -141,6 +141,7 @@ fn points_of(table: &mut Table, clamp_max: f64) -> Result<(FrictionTest, Skipped
             kept_t.push(t[r]);
         }
     }
+    out.notes.extend(std::mem::take(&mut table.notes));
     out.points = out.mu.len();
     if time.is_some() {
         out.t_s = Some(kept_t);
@@ -155,10 +156,12 @@ pub const CHUNK_ROWS: usize = 1 << 16;
 /// (tens of millions of points): `each` gets each chunk's points (rows numbered from the
 /// file's first), which are then dropped. The same checks and the same points as
 /// [`super::read_friction_test`]; mu from the forces needs the file's largest clamp force
-/// first, so such a file is read twice. `open` opens the input (once or twice). Returns the
+/// first, so such a file is read twice. `open` opens the input (once or twice). Columns
+/// are named and units converted by the channel `map` (None: the spec's names). Returns the
 /// file's description without points (metadata, notes, rows skipped, `points` counted).
 pub fn stream_friction_test<R: std::io::BufRead>(
     path: &std::path::Path,
+    map: Option<&super::ChannelMap>,
     mut open: impl FnMut() -> std::io::Result<R>,
     mut each: impl FnMut(&FrictionTest) -> Result<(), MeasuredError>,
 ) -> Result<FrictionTest, MeasuredError> {
@@ -170,6 +173,7 @@ pub fn stream_friction_test<R: std::io::BufRead>(
         skipped.empty += s.empty;
         skipped.released += s.released;
         total.points += chunk.points;
+        total.notes.extend(chunk.notes.iter().cloned());
         total.unknown_columns.clone_from(&chunk.unknown_columns);
         each(&chunk)
     };
@@ -188,16 +192,17 @@ pub fn stream_friction_test<R: std::io::BufRead>(
             Ok(())
         }
     };
-    let mut last = read_table_chunks(path, input()?, CHUNK_ROWS, &mut first_pass)?;
+    let mut last = read_table_chunks(path, input()?, map, CHUNK_ROWS, &mut first_pass)?;
     first_pass(&mut last)?;
     if last.rows_before + last.rows() == 0 {
         return Err(last.err(last.header_line, 0, "", "no data rows"));
     }
     if !direct(&last) {
         let max = clamp_max.get();
-        last = read_table_chunks(path, input()?, CHUNK_ROWS, |t| take(t, max))?;
+        last = read_table_chunks(path, input()?, map, CHUNK_ROWS, |t| take(t, max))?;
         take(&mut last, max)?;
     }
+    super::check_metadata(&mut last, map)?;
     total.path = last.path.clone();
     total.metadata = last.metadata.clone();
     skipped.finish(&mut total, &last)?;

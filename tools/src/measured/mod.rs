@@ -26,14 +26,18 @@
 
 pub mod friction_test;
 pub mod limits;
+pub mod map;
+mod mdf;
 pub mod run_log;
 pub mod table;
+pub mod units;
 
-use std::io::BufReader;
+use std::io::{BufRead, BufReader};
 use std::path::Path;
 
 pub use friction_test::{FrictionTest, RELEASED_SHARE, stream_friction_test};
 pub use limits::{Limit, MAX_SPAN_S, plausible_range};
+pub use map::ChannelMap;
 pub use run_log::{PerWheelset, RunLog};
 pub use table::{MeasuredError, Metadata, TextColumn, noise_sigma};
 
@@ -49,9 +53,26 @@ pub enum Measured {
 /// Reads a measured file of either kind (decided by its columns: `v_friction_mps` makes a
 /// friction test, `v_ref_mps` a run log), streaming: the file is never held whole.
 pub fn read(path: &Path) -> Result<Measured, MeasuredError> {
+    read_with(path, None)
+}
+
+/// Reads a measured file, CSV or MDF4 (told apart by the file's first bytes), its columns
+/// named and its units converted by the channel `map` (None: the spec's names).
+pub fn read_with(path: &Path, map: Option<&ChannelMap>) -> Result<Measured, MeasuredError> {
     let file =
         std::fs::File::open(path).map_err(|e| file_error(path, format!("cannot read: {e}")))?;
-    from_table(read_table(path, BufReader::with_capacity(1 << 16, file))?)
+    let mut input = BufReader::with_capacity(1 << 16, file);
+    let head = input
+        .fill_buf()
+        .map_err(|e| file_error(path, format!("cannot read: {e}")))?;
+    not_mdf_under_an_mdf_name(path, head)?;
+    if crate::mdf4::is_mdf(head) {
+        let file = input.into_inner();
+        let src = crate::mdf4::blocks::FileSource::new(file)
+            .map_err(|e| file_error(path, format!("cannot read: {e}")))?;
+        return from_table(mdf::read_table(path, &src, map)?, map);
+    }
+    from_table(read_table(path, input, map)?, map)
 }
 
 /// Parses the text of a measured file of either kind (`path` names it in messages).
@@ -61,14 +82,66 @@ pub fn parse(path: &Path, text: &str) -> Result<Measured, MeasuredError> {
 
 /// Parses the bytes of a measured file of either kind (`path` names it in messages).
 pub fn parse_bytes(path: &Path, bytes: &[u8]) -> Result<Measured, MeasuredError> {
-    from_table(read_table(path, bytes)?)
+    parse_bytes_with(path, bytes, None)
 }
 
-fn from_table(table: Table) -> Result<Measured, MeasuredError> {
+/// Parses the bytes of a measured file, CSV or MDF4, with a channel map.
+pub fn parse_bytes_with(
+    path: &Path,
+    bytes: &[u8],
+    map: Option<&ChannelMap>,
+) -> Result<Measured, MeasuredError> {
+    not_mdf_under_an_mdf_name(path, bytes)?;
+    if crate::mdf4::is_mdf(bytes) {
+        let src = crate::mdf4::blocks::Memory(bytes);
+        return from_table(mdf::read_table(path, &src, map)?, map);
+    }
+    from_table(read_table(path, bytes, map)?, map)
+}
+
+/// A file named as an MDF file (`.mf4`, `.mdf`) whose first bytes are not an MDF
+/// identification: an error saying so (it is not read as a CSV).
+fn not_mdf_under_an_mdf_name(path: &Path, head: &[u8]) -> Result<(), MeasuredError> {
+    let mdf_name = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("mf4") || e.eq_ignore_ascii_case("mdf"));
+    if mdf_name && !crate::mdf4::is_mdf(head) {
+        let shown: String = head
+            .iter()
+            .take(8)
+            .map(|&b| if b.is_ascii_graphic() { b as char } else { '.' })
+            .collect();
+        return Err(file_error(
+            path,
+            format!(
+                "not an MDF file: it starts with `{shown}`, an MDF file with `MDF     ` (a \
+                 damaged file, or another format under an MDF name)"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+fn from_table(mut table: Table, map: Option<&ChannelMap>) -> Result<Measured, MeasuredError> {
+    check_metadata(&mut table, map)?;
     match table.kind {
         Kind::Friction => friction_test::from_table(table).map(Measured::Friction),
         Kind::Run => run_log::from_table(table).map(Measured::Run),
     }
+}
+
+/// Checks the table's metadata (no key given twice with different values) and adds the
+/// channel `map`'s (a key both give must agree).
+fn check_metadata(table: &mut Table, map: Option<&ChannelMap>) -> Result<(), MeasuredError> {
+    table.metadata.check_repeats(&table.path)?;
+    if let Some(map) = map {
+        let origin = format!("the channel map {}", map.path.display());
+        table
+            .metadata
+            .merge(&table.path, map.metadata_pairs(), &origin)?;
+    }
+    Ok(())
 }
 
 impl Measured {
@@ -111,9 +184,55 @@ pub fn parse_run_log(path: &Path, text: &str) -> Result<RunLog, MeasuredError> {
     parse(path, text)?.expect(path, Measured::run, NOT_A_RUN_LOG)
 }
 
+/// Reads a run log, CSV or MDF4, through a channel map.
+pub fn read_run_log_with(path: &Path, map: Option<&ChannelMap>) -> Result<RunLog, MeasuredError> {
+    read_with(path, map)?.expect(path, Measured::run, NOT_A_RUN_LOG)
+}
+
 /// Reads a friction test (an error if the file is a run log).
 pub fn read_friction_test(path: &Path) -> Result<FrictionTest, MeasuredError> {
     read(path)?.expect(path, Measured::friction, NOT_A_FRICTION_TEST)
+}
+
+/// Reads a friction test, CSV or MDF4, through a channel map.
+pub fn read_friction_test_with(
+    path: &Path,
+    map: Option<&ChannelMap>,
+) -> Result<FrictionTest, MeasuredError> {
+    read_with(path, map)?.expect(path, Measured::friction, NOT_A_FRICTION_TEST)
+}
+
+/// The channel map of a `--map FILE` flag (None without one).
+pub fn load_map(path: Option<&Path>) -> Result<Option<ChannelMap>, MeasuredError> {
+    path.map(ChannelMap::load).transpose()
+}
+
+/// Reads a friction test, CSV or MDF4, through a channel map, handing its points to `each`:
+/// a CSV in chunks ([`stream_friction_test`], memory bounded whatever its length; `open`
+/// opens its bytes, once or twice), an MDF4 file whole (its records are read per channel,
+/// not in row chunks: docs/mdf4.md). Returns the test without points (`points` counted).
+pub fn stream_friction_test_with<R: BufRead>(
+    path: &Path,
+    map: Option<&ChannelMap>,
+    open: impl FnMut() -> std::io::Result<R>,
+    mut each: impl FnMut(&FrictionTest) -> Result<(), MeasuredError>,
+) -> Result<FrictionTest, MeasuredError> {
+    let mut head = Vec::with_capacity(8);
+    std::fs::File::open(path)
+        .and_then(|f| std::io::Read::read_to_end(&mut std::io::Read::take(f, 8), &mut head))
+        .map_err(|e| file_error(path, format!("cannot read: {e}")))?;
+    not_mdf_under_an_mdf_name(path, &head)?;
+    if !crate::mdf4::is_mdf(&head) {
+        return stream_friction_test(path, map, open, each);
+    }
+    let mut test = read_friction_test_with(path, map)?;
+    each(&test)?;
+    test.v_friction_mps = Vec::new();
+    test.t_disc_c = Vec::new();
+    test.mu = Vec::new();
+    test.rows = Vec::new();
+    test.t_s = None;
+    Ok(test)
 }
 
 /// Parses a friction test's text.
@@ -253,6 +372,45 @@ t_s,v_ref_mps,omega1_radps,omega2_radps,omega3_radps,omega4_radps,p_cyl1_pa,p_cy
         let cmd = a.cmd.unwrap();
         assert_eq!((cmd.len(), cmd.values.len()), (2, 1));
         assert_eq!(cmd[1], "EB");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// fit-friction's chunked reading goes through the channel map like the whole-file
+    /// reader: the same points (units converted), and an error past the first chunk names
+    /// the file's row (not the chunk's) and the column as the file and the map name it.
+    #[test]
+    fn chunks_read_through_the_map_like_the_whole_file() {
+        let dir = std::env::temp_dir().join(format!("hils-chunk-map-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let map_text = "[channels.v_friction_mps]\nfrom = \"Speed\"\nunit = \"km/h\"\n\
+                        [channels.t_disc_c]\nfrom = \"DiscTemp\"\nunit = \"degC\"\n[channels.mu]\nfrom = \"Mu\"\nunit = \"-\"\n";
+        let map = ChannelMap::parse(&dir.join("m.toml"), map_text).unwrap();
+        let rows = friction_test::CHUNK_ROWS + 10;
+        let mut text = String::from("# source: test\nSpeed,DiscTemp,Mu\n");
+        for r in 0..rows {
+            text += &format!("{},{},0.35\n", 36.0 + (r % 100) as f64, (r % 300) as f64);
+        }
+        let path = dir.join("f.csv");
+        std::fs::write(&path, &text).unwrap();
+        let open = || std::fs::File::open(&path).map(BufReader::new);
+        let (mut n, mut v0) = (0, f64::NAN);
+        let streamed = stream_friction_test_with(&path, Some(&map), open, |c| {
+            v0 = if n == 0 { c.v_friction_mps[0] } else { v0 };
+            n += c.mu.len();
+            Ok(())
+        })
+        .unwrap();
+        let whole = read_friction_test_with(&path, Some(&map)).unwrap();
+        assert_eq!((n, streamed.points, whole.mu.len()), (rows, rows, rows));
+        assert!((v0 - 10.0).abs() < 1e-12, "36 km/h read as {v0} m/s");
+        // Row CHUNK_ROWS + 5 (1-based) out of range: named by the file's row and label.
+        let bad_row = friction_test::CHUNK_ROWS + 5;
+        let mut lines: Vec<&str> = text.lines().collect();
+        lines[1 + bad_row] = "36,5000,0.35";
+        std::fs::write(&path, lines.join("\n") + "\n").unwrap();
+        let e = stream_friction_test_with(&path, Some(&map), open, |_| Ok(())).unwrap_err();
+        assert_eq!(e.row, bad_row, "{e}");
+        assert_eq!(e.column, "DiscTemp (t_disc_c)", "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

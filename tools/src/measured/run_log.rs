@@ -187,8 +187,33 @@ fn rail_of(table: &Table) -> Result<Option<Rail>, MeasuredError> {
     }
 }
 
+/// Every required quantity the table lacks, named at once with the file's columns.
+fn check_required(table: &Table) -> Result<(), MeasuredError> {
+    let mut missing: Vec<String> = Vec::new();
+    let mut need = |name: String| {
+        if table.column(&name).is_none() {
+            missing.push(name);
+        }
+    };
+    need(T.name(0).to_string());
+    need(V_REF.name(0).to_string());
+    for j in 0..WHEELSETS {
+        need(OMEGA.name(j).to_string());
+    }
+    for j in 0..WHEELSETS {
+        if table.index(P_CYL.name(j)).is_none() && table.index(F_CLAMP.name(j)).is_none() {
+            missing.push(format!("{} or {}", P_CYL.name(j), F_CLAMP.name(j)));
+        }
+    }
+    if missing.is_empty() {
+        return Ok(());
+    }
+    Err(table.missing_err(&missing, KIND))
+}
+
 /// A run log from its table (every cell already checked against its column's limits).
 pub(crate) fn from_table(table: Table) -> Result<RunLog, MeasuredError> {
+    check_required(&table)?;
     table.require_rows()?;
     let rail = rail_of(&table)?;
     let path = table.path.clone();
@@ -222,14 +247,10 @@ pub(crate) fn from_table(table: Table) -> Result<RunLog, MeasuredError> {
     };
     let unknown_columns = taken.unknown();
     let missing = taken.missing;
-    let notes = missing
-        .iter()
-        .map(|(col, n)| {
-            format!(
-                "{col}: {n} empty cell(s) (not measured at those samples; left out, not invented)"
-            )
-        })
-        .collect();
+    let mut notes: Vec<String> = std::mem::take(&mut taken.table.notes);
+    notes.extend(missing.iter().map(|(col, n)| {
+        format!("{col}: {n} empty cell(s) (not measured at those samples; left out, not invented)")
+    }));
     Ok(RunLog {
         path,
         metadata: taken.table.metadata,

@@ -10,6 +10,8 @@ use hils_sil::record::ColumnName;
 use hils_sil::record::{friction_test as ft, run_log as rl};
 
 use super::limits::{self, Limit};
+use super::map::{ChannelMap, Resolved, resolve};
+use super::units::ToSi;
 
 /// A reading error that names the file, the line, the data row and the column.
 #[derive(Clone, Debug, PartialEq)]
@@ -56,6 +58,62 @@ impl Metadata {
             .map(|(_, v)| v.as_str())
     }
 
+    /// Fails when a key a tool may read is given twice with different values (`# rail:
+    /// wet` and `# rail: dry`): the error names the key and both values. The same value
+    /// repeated is fine; free texts (`comment`, `notes`) may repeat.
+    pub fn check_repeats(&self, file: &Path) -> Result<(), MeasuredError> {
+        for (i, (k, v)) in self.0.iter().enumerate() {
+            if FREE_TEXT_KEYS.iter().any(|f| k.eq_ignore_ascii_case(f)) {
+                continue;
+            }
+            if let Some((_, w)) = self.0[..i]
+                .iter()
+                .find(|(k2, w)| k2.eq_ignore_ascii_case(k) && !same_value(v, w))
+            {
+                return Err(MeasuredError {
+                    column: k.clone(),
+                    ..file_error(
+                        file,
+                        format!(
+                            "metadata `{k}` is given twice with different values: `{w}` and `{v}`"
+                        ),
+                    )
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Adds `extra` (from `origin`, e.g. the channel map) to the file's metadata. A key the
+    /// file also gives is refused when the values differ (neither wins: the error names the
+    /// key and both values); an equal value is kept once.
+    pub fn merge(
+        &mut self,
+        file: &Path,
+        extra: Vec<(String, String)>,
+        origin: &str,
+    ) -> Result<(), MeasuredError> {
+        for (k, v) in extra {
+            match self.get(&k) {
+                Some(w) if !same_value(&v, w) => {
+                    return Err(MeasuredError {
+                        column: k.clone(),
+                        ..file_error(
+                            file,
+                            format!(
+                                "metadata `{k}`: the file says `{w}`, {origin} says `{v}`; \
+                                 remove one (neither wins)"
+                            ),
+                        )
+                    });
+                }
+                Some(_) => {}
+                None => self.0.push((k, v)),
+            }
+        }
+        Ok(())
+    }
+
     /// A numeric value; an error naming the file and key when present but not a number.
     pub fn number(&self, key: &str, file: &Path) -> Result<Option<f64>, MeasuredError> {
         match self.get(key) {
@@ -68,6 +126,19 @@ impl Metadata {
                 )),
             },
         }
+    }
+}
+
+/// Metadata keys that hold free text and may repeat with different values.
+const FREE_TEXT_KEYS: [&str; 2] = ["comment", "notes"];
+
+/// Two metadata values are the same: equal numbers, or equal texts ignoring case and
+/// surrounding blanks.
+fn same_value(a: &str, b: &str) -> bool {
+    let (a, b) = (a.trim(), b.trim());
+    match (a.parse::<f64>(), b.parse::<f64>()) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => a.eq_ignore_ascii_case(b),
     }
 }
 
@@ -111,7 +182,7 @@ impl TextColumn {
     pub fn is_empty(&self) -> bool {
         self.codes.is_empty()
     }
-    fn push(&mut self, text: &str) {
+    pub fn push(&mut self, text: &str) {
         let code = match self.values.iter().position(|v| v == text) {
             Some(c) => c,
             None => {
@@ -162,8 +233,17 @@ pub(crate) struct Table {
     pub(crate) header_line: usize,
     pub(crate) kind: Kind,
     pub(crate) columns: Vec<Cells>,
-    /// 1-based file line of each data row.
+    /// Each column's conversion to SI (a unit from the file or the channel map).
+    pub(crate) to_si: Vec<ToSi>,
+    /// Each column as messages name it: the file's name, with the spec column it fills.
+    pub(crate) labels: Vec<String>,
+    /// Each column's unit converted from (empty: the spec's own), for messages.
+    pub(crate) units: Vec<String>,
+    /// 1-based file line of each data row (0: a file without lines, MDF4).
     pub(crate) lines: Vec<u32>,
+    /// What reading the table did that a user should know (channels put on the master
+    /// time grid).
+    pub(crate) notes: Vec<String>,
     /// Data rows read before the rows held (read in chunks: [`read_table_chunks`]).
     pub(crate) rows_before: usize,
     /// The time of the last row before the rows held (read in chunks).
@@ -197,7 +277,7 @@ impl Table {
         self.err(
             self.lines[r] as usize,
             self.rows_before + r + 1,
-            &self.header[idx],
+            &self.labels[idx],
             message,
         )
     }
@@ -217,14 +297,29 @@ impl Table {
 
     /// A required column of a file kind (`kind` names the spec section), or the error.
     pub(crate) fn required(&self, name: ColumnName, kind: &str) -> Result<usize, MeasuredError> {
-        self.index(name).ok_or_else(|| {
-            self.err(
-                self.header_line,
-                0,
-                &name.to_string(),
-                format!("required column is missing (see measured-data.md, {kind})"),
-            )
-        })
+        self.index(name)
+            .ok_or_else(|| self.missing_err(&[name.to_string()], kind))
+    }
+
+    /// The error for required quantities the file lacks: which, and which columns it has.
+    pub(crate) fn missing_err(&self, missing: &[String], kind: &str) -> MeasuredError {
+        let names: Vec<String> = self
+            .labels
+            .iter()
+            .map(|l| l.split(" (").next().unwrap_or(l).to_string())
+            .collect();
+        self.err(
+            self.header_line,
+            0,
+            &missing[0],
+            format!(
+                "required column is missing (see measured-data.md, {kind}): {} missing; the \
+                 file's columns: {} (a channel map, --map FILE, names the file's columns \
+                 for the spec's)",
+                missing.join(", "),
+                super::map::list_names(&names)
+            ),
+        )
     }
 
     /// Fails on a file without data rows.
@@ -329,7 +424,7 @@ fn check_header(path: &Path, header: &[String], line: usize) -> Result<(), Measu
 
 /// The file's kind from its header (`v_friction_mps`: friction test; `v_ref_mps` or
 /// `omega1_radps`: run log), or the error.
-fn kind_of(path: &Path, header: &[String], line: usize) -> Result<Kind, MeasuredError> {
+pub(crate) fn kind_of(path: &Path, header: &[String], line: usize) -> Result<Kind, MeasuredError> {
     let has = |c: ColumnName| header.iter().any(|h| *h == c.to_string());
     if has(ft::V_FRICTION.name(0)) {
         Ok(Kind::Friction)
@@ -340,8 +435,13 @@ fn kind_of(path: &Path, header: &[String], line: usize) -> Result<Kind, Measured
             line,
             ..file_error(
                 path,
-                "neither a run log (needs `t_s`, `v_ref_mps`, `omega1_radps`..) nor a friction \
-                 test (needs `v_friction_mps`, `t_disc_c`, `mu` or `f_clamp_n` + `f_friction_n`)",
+                format!(
+                    "neither a run log (needs `t_s`, `v_ref_mps`, `omega1_radps`..) nor a \
+                     friction test (needs `v_friction_mps`, `t_disc_c`, `mu` or `f_clamp_n` + \
+                     `f_friction_n`); the file's columns: {} (a channel map, --map FILE, names \
+                     the file's columns for the spec's)",
+                    super::map::list_names(header)
+                ),
             )
         })
     }
@@ -372,8 +472,12 @@ fn cells_of(kind: Kind, header: &[String]) -> Vec<Cells> {
 /// typed columns (no `String` per cell). Every numeric cell is checked as it is read: a
 /// number, finite, within its column's plausible range ([`limits`]); the time column has
 /// no empty cell, increases strictly and spans at most [`limits::MAX_SPAN_S`].
-pub(crate) fn read_table<R: BufRead>(path: &Path, input: R) -> Result<Table, MeasuredError> {
-    read_table_chunks(path, input, usize::MAX, |_| Ok(()))
+pub(crate) fn read_table<R: BufRead>(
+    path: &Path,
+    input: R,
+    map: Option<&ChannelMap>,
+) -> Result<Table, MeasuredError> {
+    read_table_chunks(path, input, map, usize::MAX, |_| Ok(()))
 }
 
 /// [`read_table`] in chunks of `chunk_rows` rows, for files too large to hold: each full
@@ -383,6 +487,7 @@ pub(crate) fn read_table<R: BufRead>(path: &Path, input: R) -> Result<Table, Mea
 pub(crate) fn read_table_chunks<R: BufRead>(
     path: &Path,
     mut input: R,
+    map: Option<&ChannelMap>,
     chunk_rows: usize,
     mut each: impl FnMut(&mut Table) -> Result<(), MeasuredError>,
 ) -> Result<Table, MeasuredError> {
@@ -402,18 +507,11 @@ pub(crate) fn read_table_chunks<R: BufRead>(
         .map(|h| h.trim().to_string())
         .collect();
     check_header(path, &header, header_line)?;
-    let kind = kind_of(path, &header, header_line)?;
-    let mut table = Table {
-        path: path.to_path_buf(),
-        metadata: Metadata(metadata),
-        columns: cells_of(kind, &header),
-        header,
-        header_line,
-        kind,
-        lines: Vec::new(),
-        rows_before: 0,
-        time_before: None,
-    };
+    let resolved = resolve(map, path, &header, &[]).map_err(|e| MeasuredError {
+        line: header_line,
+        ..e
+    })?;
+    let mut table = Table::new(path, Metadata(metadata), resolved, header_line)?;
     let time = table.column(&rl::T.name(0).to_string());
     let mut record = csv::ByteRecord::new();
     let mut t_first = None;
@@ -448,6 +546,57 @@ pub(crate) fn read_table_chunks<R: BufRead>(
 }
 
 impl Table {
+    /// An empty table of the `resolved` columns (its kind from their spec names).
+    pub(crate) fn new(
+        path: &Path,
+        metadata: Metadata,
+        resolved: Vec<Resolved>,
+        header_line: usize,
+    ) -> Result<Table, MeasuredError> {
+        let header: Vec<String> = resolved.iter().map(|r| r.target.clone()).collect();
+        let kind = kind_of(path, &header, header_line)?;
+        Ok(Table {
+            path: path.to_path_buf(),
+            metadata,
+            columns: cells_of(kind, &header),
+            header,
+            header_line,
+            kind,
+            to_si: resolved.iter().map(|r| r.to_si).collect(),
+            labels: resolved.iter().map(Resolved::label).collect(),
+            units: resolved.into_iter().map(|r| r.unit).collect(),
+            lines: Vec::new(),
+            notes: Vec::new(),
+            rows_before: 0,
+            time_before: None,
+        })
+    }
+
+    /// Checks value `x` (SI) of data row `r` in column `idx`: finite, within its limit.
+    pub(crate) fn check_value(
+        &self,
+        r: usize,
+        idx: usize,
+        x: f64,
+        limit: Limit,
+    ) -> Result<(), MeasuredError> {
+        if !x.is_finite() {
+            return Err(self.row_err(r, idx, format!("{x} is not finite")));
+        }
+        if !limit.contains(x) {
+            let from = match self.units[idx].as_str() {
+                "" => String::new(),
+                u => format!(" (converted from {u})"),
+            };
+            let msg = format!(
+                "{x}{from} is outside the plausible range [{}, {}] ({}; docs/measured-data-limits.md)",
+                limit.min, limit.max, limit.basis
+            );
+            return Err(self.row_err(r, idx, msg));
+        }
+        Ok(())
+    }
+
     /// Drops the rows held (a chunk handed on), keeping what the checks of the next rows
     /// need: the row count and the last time (`time`: the time column).
     fn next_chunk(&mut self, time: Option<usize>) {
@@ -485,17 +634,11 @@ impl Table {
             }
         };
         let x = match x {
-            Ok(x) if x.is_finite() => x,
+            Ok(x) if x.is_finite() => self.to_si[idx].apply(x),
             Ok(x) => return Err(self.row_err(r, idx, format!("`{cell}` is not finite ({x})"))),
             Err(_) => return Err(self.row_err(r, idx, format!("`{cell}` is not a number"))),
         };
-        if !limit.contains(x) {
-            let msg = format!(
-                "{x} is outside the plausible range [{}, {}] ({}; docs/measured-data-limits.md)",
-                limit.min, limit.max, limit.basis
-            );
-            return Err(self.row_err(r, idx, msg));
-        }
+        self.check_value(r, idx, x, limit)?;
         if let Cells::Numeric(v, _) = &mut self.columns[idx] {
             v.push(x);
         }
@@ -503,7 +646,7 @@ impl Table {
     }
 
     /// The time of row `r`: measured, above the previous row's, within the span limit.
-    fn check_time(
+    pub(crate) fn check_time(
         &self,
         r: usize,
         idx: usize,

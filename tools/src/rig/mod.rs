@@ -139,6 +139,7 @@ pub enum Line {
     /// (which ends and writes this one first). The file's folder is checked before the
     /// session sends anything.
     Record {
+        /// Run-log file: CSV, or MDF4 when its name ends in `.mf4`.
         #[arg(long)]
         out: PathBuf,
         /// Record at most this long, s (0.001-86400).

@@ -241,19 +241,30 @@ impl Recorder {
             .collect()
     }
 
-    /// Writes the run log to `path` (atomically: complete or not at all); `end` says why
-    /// the recording ended.
+    /// Writes the run log to `path` (MDF4 when its name ends in `.mf4`, else CSV;
+    /// atomically: complete or not at all); `end` says why the recording ended.
     pub fn write(&self, path: &Path, meta: &RunMeta) -> Result<Written> {
         let mut written = None;
+        let format = runlog::Format::of_path(path);
         crate::outputs::write_atomic(path, |w| {
-            written = Some(self.write_to(w, meta)?);
+            written = Some(self.write_to_as(format, w, meta)?);
             Ok(())
         })?;
         written.ok_or_else(|| anyhow::anyhow!("{}: nothing written", path.display()))
     }
 
-    /// Writes the run log.
+    /// Writes the run log as CSV.
     pub fn write_to<W: std::io::Write>(&self, out: W, m: &RunMeta) -> Result<Written> {
+        self.write_to_as(runlog::Format::Csv, out, m)
+    }
+
+    /// Writes the run log in `format`.
+    pub fn write_to_as<W: std::io::Write>(
+        &self,
+        format: runlog::Format,
+        out: W,
+        m: &RunMeta,
+    ) -> Result<Written> {
         let r_w = m
             .wheel_radius_m
             .unwrap_or(Params::default().vehicle.wheel_radius);
@@ -270,7 +281,7 @@ impl Recorder {
         written.rows = rows.len();
         let meta = self.metadata(m, t_from, t0, &written);
         let header = runlog::column_names(&channels);
-        runlog::write_table(out, &meta, &header, rows)?;
+        runlog::write_table_as(format, out, &meta, &header, rows)?;
         Ok(written)
     }
 

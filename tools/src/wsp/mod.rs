@@ -51,6 +51,10 @@ pub struct WspTestArgs {
     /// The programme's run a `--log` is judged as.
     #[arg(long)]
     pub run: Option<String>,
+    /// Channel map (TOML): which of the files' channels or columns is which spec column,
+    /// their units, and metadata (docs/mdf4.md). Without it the spec's names are expected.
+    #[arg(long, value_name = "FILE")]
+    pub map: Option<PathBuf>,
 }
 
 /// A judged run with its trace (for the report).
@@ -239,7 +243,8 @@ fn judge_one_log(
     criteria: &Criteria,
     out: &crate::outputs::Checked,
 ) -> Result<()> {
-    let log = crate::measured::read_run_log(log).map_err(|e| anyhow!("{e}"))?;
+    let map = crate::measured::load_map(args.map.as_deref())?;
+    let log = crate::measured::read_run_log_with(log, map.as_ref()).map_err(|e| anyhow!("{e}"))?;
     let named = log.metadata.get("run").map(str::to_string);
     let name = args.run.clone().or(named).ok_or_else(|| {
         anyhow!(

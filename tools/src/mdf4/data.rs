@@ -1,0 +1,695 @@
+//! The records of a channel group: the data group's blocks (DT, DL lists, HL headers, DZ
+//! deflate with or without transposition) as one byte stream read piecewise, split into
+//! records (by record id in an unsorted group), and the asked channels decoded.
+
+use super::blocks::{Blocks, HEADER_BYTES};
+use super::convert::Phys;
+use super::{ChannelInfo, Group, Mdf4};
+use crate::measured::TextColumn;
+
+/// Most distinct texts a text channel may hold (as the CSV reader's text columns).
+const MAX_DISTINCT_TEXTS: usize = 1024;
+
+/// Bytes read from a DT block at a time.
+const CHUNK_BYTES: u64 = 1 << 20;
+
+/// Largest inflated DZ block: 1 GiB (tools write blocks of a few MiB).
+const MAX_INFLATED_BYTES: u64 = 1 << 30;
+
+/// A piece of the data stream.
+#[derive(Clone, Debug)]
+enum Piece {
+    /// Raw bytes at an address.
+    Raw { addr: u64, len: u64 },
+    /// A DZ block: its compressed bytes, how they were packed, the inflated length.
+    Zipped {
+        addr: u64,
+        len: u64,
+        zip_type: u8,
+        columns: u32,
+        inflated: u64,
+    },
+}
+
+/// The pieces of the data stream that starts at `addr` (DT, DV, DZ, DL, HL).
+fn pieces(blocks: &Blocks, addr: u64) -> Result<Vec<Piece>, String> {
+    let mut out = Vec::new();
+    if addr == 0 {
+        return Ok(out);
+    }
+    let head = blocks.header(addr, &[b"DT", b"DV", b"DZ", b"DL", b"HL"])?;
+    match &head.id {
+        b"HL" => {
+            let hl = blocks.block(addr, &[b"HL"])?;
+            return pieces_of_list(blocks, hl.link(0), &mut out).map(|_| out);
+        }
+        b"DL" => pieces_of_list(blocks, addr, &mut out)?,
+        _ => out.push(piece(blocks, addr)?),
+    }
+    Ok(out)
+}
+
+/// The pieces of a DL list (and the lists it links to).
+fn pieces_of_list(blocks: &Blocks, first: u64, out: &mut Vec<Piece>) -> Result<(), String> {
+    for dl in blocks.chain(first, &[b"DL"], 0, "data lists")? {
+        for &a in dl.links.iter().skip(1) {
+            if a != 0 {
+                out.push(piece(blocks, a)?);
+            }
+        }
+    }
+    Ok(())
+}
+
+/// One DT/DV/DZ block as a piece.
+fn piece(blocks: &Blocks, addr: u64) -> Result<Piece, String> {
+    let h = blocks.header(addr, &[b"DT", b"DV", b"DZ"])?;
+    let start = addr + HEADER_BYTES + 8 * h.links.len() as u64;
+    let len = h.length - HEADER_BYTES - 8 * h.links.len() as u64;
+    if &h.id != b"DZ" {
+        return Ok(Piece::Raw { addr: start, len });
+    }
+    let d = blocks.block(addr, &[b"DZ"])?;
+    d.need(24)?;
+    let (org, zip_type) = (&d.data[0..2], d.data[2]);
+    if org != b"DT" && org != b"DV" {
+        return Err(format!(
+            "DZ block at {addr:#x}: holds a `{}` block, not record data",
+            String::from_utf8_lossy(org)
+        ));
+    }
+    let inflated = d.uint(8, 8);
+    let zipped = d.uint(16, 8);
+    if zipped > len - 24 || inflated > MAX_INFLATED_BYTES || zip_type > 1 {
+        return Err(format!(
+            "DZ block at {addr:#x}: zip type {zip_type}, {zipped} bytes packed into {} ({inflated} \
+             unpacked): not a deflate block this reader takes",
+            len - 24
+        ));
+    }
+    Ok(Piece::Zipped {
+        addr: start + 24,
+        len: zipped,
+        zip_type,
+        columns: d.uint(4, 4) as u32,
+        inflated,
+    })
+}
+
+/// Inflates a DZ piece and undoes its transposition.
+fn inflate(blocks: &Blocks, p: &Piece) -> Result<Vec<u8>, String> {
+    let Piece::Zipped {
+        addr,
+        len,
+        zip_type,
+        columns,
+        inflated,
+    } = *p
+    else {
+        return Ok(Vec::new());
+    };
+    let packed = blocks.bytes(addr, len, "DZ data")?;
+    let out =
+        miniz_oxide::inflate::decompress_to_vec_zlib_with_limit(&packed, inflated as usize)
+            .map_err(|e| format!("DZ block at {addr:#x}: deflate data does not unpack ({e:?})"))?;
+    if out.len() as u64 != inflated {
+        return Err(format!(
+            "DZ block at {addr:#x}: unpacks to {} bytes, the block says {inflated}",
+            out.len()
+        ));
+    }
+    if zip_type == 1 && columns > 0 {
+        return Ok(untranspose(&out, columns as usize));
+    }
+    Ok(out)
+}
+
+/// Undoes MDF4's transposition: the first `rows * columns` bytes were stored column by
+/// column (`columns` = record length); the rest as it was.
+pub fn untranspose(data: &[u8], columns: usize) -> Vec<u8> {
+    let rows = data.len() / columns.max(1);
+    if rows == 0 {
+        return data.to_vec();
+    }
+    let n = rows * columns;
+    let mut out = vec![0u8; data.len()];
+    for c in 0..columns {
+        for r in 0..rows {
+            out[r * columns + c] = data[c * rows + r];
+        }
+    }
+    out[n..].copy_from_slice(&data[n..]);
+    out
+}
+
+/// The data stream of a data group, read piece by piece.
+struct Stream<'b, 'a> {
+    blocks: &'b Blocks<'a>,
+    pieces: Vec<Piece>,
+    next_piece: usize,
+    /// Offset within the current raw piece.
+    raw_at: u64,
+    buf: Vec<u8>,
+    pos: usize,
+}
+
+impl<'b, 'a> Stream<'b, 'a> {
+    fn new(blocks: &'b Blocks<'a>, addr: u64) -> Result<Self, String> {
+        Ok(Self {
+            blocks,
+            pieces: pieces(blocks, addr)?,
+            next_piece: 0,
+            raw_at: 0,
+            buf: Vec::new(),
+            pos: 0,
+        })
+    }
+
+    /// Appends the next chunk to the buffer (false at the end of the stream).
+    fn refill(&mut self) -> Result<bool, String> {
+        let Some(p) = self.pieces.get(self.next_piece).cloned() else {
+            return Ok(false);
+        };
+        let chunk = match p {
+            Piece::Raw { addr, len } => {
+                let n = (len - self.raw_at).min(CHUNK_BYTES);
+                let c = self.blocks.bytes(addr + self.raw_at, n, "record data")?;
+                self.raw_at += n;
+                if self.raw_at >= len {
+                    self.next_piece += 1;
+                    self.raw_at = 0;
+                }
+                c
+            }
+            Piece::Zipped { .. } => {
+                self.next_piece += 1;
+                inflate(self.blocks, &p)?
+            }
+        };
+        self.buf.drain(..self.pos);
+        self.pos = 0;
+        self.buf.extend_from_slice(&chunk);
+        Ok(true)
+    }
+
+    /// The next `n` bytes (None at the end; an error when the stream ends inside them).
+    fn take(&mut self, n: usize) -> Result<Option<&[u8]>, String> {
+        while self.buf.len() - self.pos < n {
+            if !self.refill()? {
+                if self.buf.len() == self.pos {
+                    return Ok(None);
+                }
+                return Err(format!(
+                    "the record data ends inside a record ({} of {n} bytes): a truncated file",
+                    self.buf.len() - self.pos
+                ));
+            }
+        }
+        let s = &self.buf[self.pos..self.pos + n];
+        self.pos += n;
+        Ok(Some(s))
+    }
+}
+
+/// Decoded values of one channel: numbers (NaN where invalid) or texts (interned: each
+/// distinct text once).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Values {
+    Num(Vec<f64>),
+    Text(TextColumn),
+}
+
+impl Values {
+    pub fn len(&self) -> usize {
+        match self {
+            Values::Num(v) => v.len(),
+            Values::Text(v) => v.len(),
+        }
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// An error about one channel (its name) or the group (empty name).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChannelError {
+    pub channel: String,
+    pub message: String,
+}
+
+fn group_err(g: &Group, message: impl Into<String>) -> ChannelError {
+    ChannelError {
+        channel: String::new(),
+        message: format!("{}: {}", g.label(), message.into()),
+    }
+}
+
+impl Mdf4<'_> {
+    /// The time of every record of group `g` (s, from its master channel's values) and the
+    /// values of its channels `wanted` (indices into `g.channels`).
+    pub fn read_group(
+        &self,
+        g: usize,
+        wanted: &[usize],
+    ) -> Result<(Vec<f64>, Vec<Values>), ChannelError> {
+        let group = &self.groups[g];
+        let master = group
+            .time_master()
+            .ok_or_else(|| group_err(group, "no time master channel"))?;
+        let mut idx = vec![master];
+        idx.extend_from_slice(wanted);
+        let decoders = idx
+            .iter()
+            .map(|&i| Decoder::new(group, &group.channels[i]))
+            .collect::<Result<Vec<_>, _>>()?;
+        // Room for the group's records (its count, bounded by what the file can hold).
+        let record = (group.data_bytes + group.inval_bytes).max(1) as u64;
+        let room = group.cycle_count.min(self.blocks.src.size() / record) as usize;
+        let mut out: Vec<Values> = decoders.iter().map(|d| d.empty(room)).collect();
+        let sizes = self.record_sizes(group.dg);
+        let mut stream =
+            Stream::new(&self.blocks, group.data_addr).map_err(|e| group_err(group, e))?;
+        let id_bytes = group.rec_id_size as usize;
+        let own = (group.data_bytes + group.inval_bytes) as usize;
+        let mut index = 0u64;
+        loop {
+            let rid = if id_bytes == 0 {
+                group.record_id
+            } else {
+                match stream.take(id_bytes).map_err(|e| group_err(group, e))? {
+                    None => break,
+                    Some(b) => le(b),
+                }
+            };
+            let size = if id_bytes == 0 {
+                own
+            } else {
+                self.size_of(&sizes, rid, &mut stream)
+                    .map_err(|e| group_err(group, e))?
+            };
+            let Some(rec) = stream.take(size).map_err(|e| group_err(group, e))? else {
+                break;
+            };
+            if rid != group.record_id {
+                continue;
+            }
+            for (d, o) in decoders.iter().zip(out.iter_mut()) {
+                d.push(rec, index, o);
+                if let Values::Text(t) = o {
+                    if t.values.len() > MAX_DISTINCT_TEXTS {
+                        return Err(ChannelError {
+                            channel: d.ch.name.clone(),
+                            message: format!(
+                                "more than {MAX_DISTINCT_TEXTS} distinct texts: not a command \
+                                 or state channel"
+                            ),
+                        });
+                    }
+                }
+            }
+            index += 1;
+        }
+        if index != group.cycle_count {
+            return Err(group_err(
+                group,
+                format!(
+                    "{index} records in the data, the group says {}: a truncated or damaged file",
+                    group.cycle_count
+                ),
+            ));
+        }
+        let time = match out.remove(0) {
+            Values::Num(t) => t,
+            Values::Text(_) => return Err(group_err(group, "the time master is a text")),
+        };
+        Ok((time, out))
+    }
+
+    /// Record sizes of the groups of data group `dg` by record id (None: a VLSD group,
+    /// whose records carry their length).
+    fn record_sizes(&self, dg: usize) -> Vec<(u64, Option<usize>)> {
+        self.groups
+            .iter()
+            .filter(|g| g.dg == dg)
+            .map(|g| {
+                let size = (!g.is_vlsd()).then_some((g.data_bytes + g.inval_bytes) as usize);
+                (g.record_id, size)
+            })
+            .collect()
+    }
+
+    /// The size of the record with id `rid` (a VLSD record's from its length prefix).
+    fn size_of(
+        &self,
+        sizes: &[(u64, Option<usize>)],
+        rid: u64,
+        stream: &mut Stream,
+    ) -> Result<usize, String> {
+        match sizes.iter().find(|(id, _)| *id == rid) {
+            Some((_, Some(n))) => Ok(*n),
+            Some((_, None)) => match stream.take(4)? {
+                Some(b) => Ok(le(b) as usize),
+                None => Err("the record data ends inside a record: a truncated file".into()),
+            },
+            None => Err(format!(
+                "record id {rid} belongs to no channel group of the data group"
+            )),
+        }
+    }
+}
+
+/// An MDF4 data type (`cn_data_type`) for messages.
+fn data_type_name(data_type: u8) -> &'static str {
+    match data_type {
+        0 | 1 => "unsigned integer",
+        2 | 3 => "signed integer",
+        4 | 5 => "float",
+        6 => "Latin-1 string",
+        7 => "UTF-8 string",
+        8 | 9 => "UTF-16 string",
+        10 => "byte array",
+        11 | 12 => "MIME sample or stream",
+        13 | 14 => "CANopen date or time",
+        15 | 16 => "complex number",
+        _ => "value of an unknown data type",
+    }
+}
+
+/// A little-endian unsigned integer of up to 8 bytes.
+fn le(b: &[u8]) -> u64 {
+    b.iter().rev().fold(0u64, |v, &x| (v << 8) | x as u64)
+}
+
+/// How one channel's value is taken out of a record.
+struct Decoder<'c> {
+    ch: &'c ChannelInfo,
+    /// Byte range of the value in the record.
+    start: usize,
+    bytes: usize,
+    /// Invalidation bit (byte, mask) in the record.
+    invalid: Option<(usize, u8)>,
+    all_invalid: bool,
+    text: bool,
+}
+
+impl<'c> Decoder<'c> {
+    fn new(g: &Group, ch: &'c ChannelInfo) -> Result<Self, ChannelError> {
+        let err = |m: String| ChannelError {
+            channel: ch.name.clone(),
+            message: m,
+        };
+        let supported = match ch.data_type {
+            0..=3 => ch.bit_count >= 1 && ch.bit_count <= 64,
+            4 | 5 => ch.bit_count == 32 || ch.bit_count == 64,
+            6..=9 => ch.bit_count % 8 == 0 && ch.bit_count > 0,
+            _ => false,
+        };
+        if ch.cn_type == 1 {
+            return Err(err(format!(
+                "a variable-length {} (VLSD signal data) is not read by this reader: store it \
+                 as fixed-length, or as numbers with a value-to-text conversion",
+                data_type_name(ch.data_type)
+            )));
+        }
+        if !supported {
+            return Err(err(format!(
+                "a {} of {} bits (MDF4 data type {}) is not read by this reader",
+                data_type_name(ch.data_type),
+                ch.bit_count,
+                ch.data_type
+            )));
+        }
+        if let super::convert::Conversion::Unsupported(t) = ch.conversion {
+            return Err(err(format!(
+                "its conversion, {} (MDF4 conversion type {t}), is not read by this reader",
+                super::convert::type_name(t)
+            )));
+        }
+        let be_unaligned =
+            matches!(ch.data_type, 1 | 3 | 5) && (ch.bit_offset != 0 || ch.bit_count % 8 != 0);
+        if be_unaligned {
+            return Err(err(
+                "big-endian value not on byte boundaries: not read".into()
+            ));
+        }
+        // The format's bit offset is 0-7; floats and strings start on a byte.
+        if ch.bit_offset > 7 || (ch.data_type >= 4 && ch.bit_offset != 0) {
+            return Err(err(format!(
+                "bit offset {} for data type {}: not a valid channel",
+                ch.bit_offset, ch.data_type
+            )));
+        }
+        let bytes = (ch.bit_offset as usize + ch.bit_count as usize).div_ceil(8);
+        let start = ch.byte_offset as usize;
+        let virtual_ch = ch.cn_type == 3 || ch.cn_type == 6;
+        if !virtual_ch && start + bytes > g.data_bytes as usize {
+            return Err(err(format!(
+                "its value (bytes {start}..{}) lies outside the group's {}-byte records",
+                start + bytes,
+                g.data_bytes
+            )));
+        }
+        let invalid = (ch.flags & 2 != 0 && g.inval_bytes > 0).then(|| {
+            (
+                g.data_bytes as usize + (ch.inval_bit_pos / 8) as usize,
+                1u8 << (ch.inval_bit_pos % 8),
+            )
+        });
+        if let Some((b, _)) = invalid {
+            if b >= (g.data_bytes + g.inval_bytes) as usize {
+                return Err(err("invalidation bit outside the record".into()));
+            }
+        }
+        let text = matches!(ch.data_type, 6..=9) || ch.conversion.is_text();
+        Ok(Self {
+            ch,
+            start,
+            bytes,
+            invalid,
+            all_invalid: ch.flags & 1 != 0,
+            text,
+        })
+    }
+
+    fn empty(&self, room: usize) -> Values {
+        if self.text {
+            Values::Text(TextColumn::default())
+        } else {
+            Values::Num(Vec::with_capacity(room))
+        }
+    }
+
+    /// Decodes the channel's value of record `rec` (number `index`) into `out`.
+    fn push(&self, rec: &[u8], index: u64, out: &mut Values) {
+        let invalid = self.all_invalid || self.invalid.is_some_and(|(b, m)| rec[b] & m != 0);
+        // Not measured: empty, never a conversion's default value or text.
+        let phys = if invalid && self.text {
+            Phys::Text(String::new())
+        } else if invalid {
+            Phys::Num(f64::NAN)
+        } else if self.ch.cn_type == 3 || self.ch.cn_type == 6 {
+            self.ch.conversion.apply(index as f64)
+        } else {
+            match self.raw(&rec[self.start..self.start + self.bytes]) {
+                Raw::Num(x) => self.ch.conversion.apply(x),
+                Raw::Text(s) => Phys::Text(s),
+            }
+        };
+        match (out, phys) {
+            (Values::Num(v), Phys::Num(x)) => v.push(x),
+            (Values::Text(v), Phys::Text(s)) => v.push(&s),
+            (Values::Text(v), Phys::Num(x)) => v.push(&if x.is_nan() {
+                String::new()
+            } else {
+                format!("{x}")
+            }),
+            (Values::Num(v), Phys::Text(_)) => v.push(f64::NAN),
+        }
+    }
+
+    /// The raw value in the channel's bytes.
+    fn raw(&self, b: &[u8]) -> Raw {
+        let ch = self.ch;
+        match ch.data_type {
+            0 | 2 => Raw::Num(self.int(le_u128(b))),
+            1 | 3 => Raw::Num(self.int(be_u128(b))),
+            4 | 5 => {
+                let bits = if ch.data_type == 4 {
+                    le_u128(b)
+                } else {
+                    be_u128(b)
+                };
+                Raw::Num(if ch.bit_count == 32 {
+                    f32::from_bits(bits as u32) as f64
+                } else {
+                    f64::from_bits(bits as u64)
+                })
+            }
+            6 | 7 => {
+                let end = b.iter().position(|&c| c == 0).unwrap_or(b.len());
+                Raw::Text(String::from_utf8_lossy(&b[..end]).into_owned())
+            }
+            _ => Raw::Text(utf16(b, ch.data_type == 8)),
+        }
+    }
+
+    /// An integer of `bit_count` bits at `bit_offset` of `v` (signed types sign-extended).
+    fn int(&self, v: u128) -> f64 {
+        let ch = self.ch;
+        let v = v >> ch.bit_offset;
+        let n = ch.bit_count;
+        let mask = if n >= 128 {
+            u128::MAX
+        } else {
+            (1u128 << n) - 1
+        };
+        let u = v & mask;
+        if ch.data_type >= 2 && n > 0 && (u >> (n - 1)) & 1 == 1 {
+            (u as i128 - (1i128 << n)) as f64
+        } else {
+            u as f64
+        }
+    }
+}
+
+enum Raw {
+    Num(f64),
+    Text(String),
+}
+
+fn le_u128(b: &[u8]) -> u128 {
+    b.iter()
+        .take(16)
+        .rev()
+        .fold(0u128, |v, &x| (v << 8) | x as u128)
+}
+
+fn be_u128(b: &[u8]) -> u128 {
+    b.iter().take(16).fold(0u128, |v, &x| (v << 8) | x as u128)
+}
+
+fn utf16(b: &[u8], little: bool) -> String {
+    let units: Vec<u16> = b
+        .chunks_exact(2)
+        .map(|c| {
+            if little {
+                u16::from_le_bytes([c[0], c[1]])
+            } else {
+                u16::from_be_bytes([c[0], c[1]])
+            }
+        })
+        .take_while(|&u| u != 0)
+        .collect();
+    String::from_utf16_lossy(&units)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::convert::Conversion;
+    use super::*;
+
+    fn channel(conversion: Conversion) -> ChannelInfo {
+        ChannelInfo {
+            name: "x".into(),
+            unit: String::new(),
+            comment: String::new(),
+            cn_type: 0,
+            sync_type: 0,
+            data_type: 0,
+            bit_offset: 0,
+            byte_offset: 0,
+            bit_count: 8,
+            flags: 2,
+            inval_bit_pos: 0,
+            conversion,
+        }
+    }
+
+    fn group() -> Group {
+        Group {
+            dg: 0,
+            cg: 0,
+            data_addr: 0,
+            rec_id_size: 0,
+            record_id: 0,
+            cycle_count: 2,
+            flags: 0,
+            data_bytes: 1,
+            inval_bytes: 1,
+            acq_name: String::new(),
+            comment: String::new(),
+            channels: Vec::new(),
+        }
+    }
+
+    /// An invalid sample is not measured: empty, whatever its conversion's default (a
+    /// range table's default value, a text table's default text) would make of it.
+    #[test]
+    fn invalid_samples_stay_empty_through_every_conversion() {
+        let ranges = Conversion::Ranges {
+            ranges: vec![(0.0, 10.0, 1.0)],
+            default: -1.0,
+        };
+        let texts = Conversion::Texts {
+            keys: vec![(0.0, 0.0)],
+            texts: vec!["REL".into()],
+            default: "?".into(),
+        };
+        let g = group();
+        let (cr, ct) = (channel(ranges), channel(texts));
+        let (dr, dt) = (
+            Decoder::new(&g, &cr).unwrap(),
+            Decoder::new(&g, &ct).unwrap(),
+        );
+        let (mut vr, mut vt) = (dr.empty(2), dt.empty(2));
+        for rec in [[5u8, 0], [5u8, 1]] {
+            dr.push(&rec, 0, &mut vr);
+            dt.push(&rec, 0, &mut vt);
+        }
+        let Values::Num(v) = vr else { panic!() };
+        assert_eq!(v[0], 1.0);
+        assert!(v[1].is_nan(), "invalid sample read as {}", v[1]);
+        let Values::Text(t) = vt else { panic!() };
+        let text = |i: usize| t.values[t.codes[i] as usize].clone();
+        assert_eq!((text(0), text(1)), ("?".to_string(), String::new()));
+    }
+
+    /// What is not read is named in words: the data type, the conversion.
+    #[test]
+    fn unread_channels_are_named_in_words() {
+        let g = group();
+        let message = |ch: ChannelInfo| match Decoder::new(&g, &ch) {
+            Err(e) => e.message,
+            Ok(_) => panic!("read"),
+        };
+        let bytes = ChannelInfo {
+            data_type: 10,
+            bit_count: 24,
+            ..channel(Conversion::Identity)
+        };
+        assert!(message(bytes).contains("a byte array of 24 bits"));
+        let half = ChannelInfo {
+            data_type: 4,
+            bit_count: 16,
+            ..channel(Conversion::Identity)
+        };
+        assert!(message(half).contains("a float of 16 bits"));
+        let vlsd = ChannelInfo {
+            cn_type: 1,
+            data_type: 7,
+            bit_count: 64,
+            ..channel(Conversion::Identity)
+        };
+        assert!(message(vlsd).contains("variable-length UTF-8 string"));
+        assert!(message(channel(Conversion::Unsupported(3))).contains("algebraic formula"));
+    }
+
+    #[test]
+    fn untranspose_restores_records() {
+        // Three records of 2 bytes, stored column by column, and one byte left over.
+        let original = [1u8, 2, 3, 4, 5, 6, 7];
+        let transposed = [1u8, 3, 5, 2, 4, 6, 7];
+        assert_eq!(untranspose(&transposed, 2), original);
+    }
+}
