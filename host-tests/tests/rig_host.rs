@@ -260,6 +260,8 @@ fn eb_run_over_the_bus_matches_sil_and_its_log_is_diagnosed() {
             report: None,
         },
         step_s: hils::diagnose::replay::REPLAY_STEP_S,
+        // The board's log has the spec's column names: no channel map.
+        map: None,
         files: vec![csv],
     })
     .expect("hils diagnose reads the rig log");
