@@ -14,6 +14,7 @@ use super::json::{Report, Tried};
 use super::outcome::Outcome;
 use super::replay::{Group, Prepared, Quantity, Replay};
 use crate::plots::{Chart, Series, Style};
+use crate::figures::list_text;
 
 fn words_for(a: &RunAnalysis) -> String {
     let mut s = String::new();
@@ -136,11 +137,11 @@ pub fn cause_paragraph(out: &Outcome) -> String {
         let _ = write!(
             s,
             " The baseline misses the wheel slide of wheelset(s) {}; the extended model {}.",
-            wheelset_list(&missed),
+            list_text(&missed),
             if missed.iter().all(|j| r.slides.extended.contains(j)) {
                 "reproduces it".to_string()
             } else {
-                format!("shows slides on {}", wheelset_list(&r.slides.extended))
+                format!("shows slides on {}", list_text(&r.slides.extended))
             }
         );
     }
@@ -168,17 +169,6 @@ fn wheelset_differences(r: &Report) -> String {
     } else {
         format!(" where it sits: {};", found.join("; "))
     }
-}
-
-/// Wheelsets (1-based) as people read them: `2, 4`, or `none`.
-pub fn wheelset_list(ws: &[usize]) -> String {
-    if ws.is_empty() {
-        return "none".into();
-    }
-    ws.iter()
-        .map(|w| w.to_string())
-        .collect::<Vec<_>>()
-        .join(", ")
 }
 
 fn t_series(run: &Prepared, y: &[f64], scale: f64) -> Vec<(f64, f64)> {
@@ -342,9 +332,9 @@ fn result_section(r: &Report) -> String {
         r.gain.reduction,
         r.gain.speed_rms_mps["baseline"],
         r.gain.speed_rms_mps["extended"],
-        wheelset_list(&r.slides.measured),
-        wheelset_list(&r.slides.baseline),
-        wheelset_list(&r.slides.extended)
+        list_text(&r.slides.measured),
+        list_text(&r.slides.baseline),
+        list_text(&r.slides.extended)
     );
     if !r.findings.is_empty() {
         md += "| effect | parameter | value | 95 % CI | gain alone |\n|---|---|---|---|---|\n";
