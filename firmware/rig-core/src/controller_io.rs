@@ -239,12 +239,23 @@ impl IoConfig {
         brake: BrakeDemand,
         air_spring_n: [f32; BOGIES],
     ) -> DrivenOutputs {
+        self.driven_in(self.demand.pwm_period(timer), brake, air_spring_n)
+    }
+
+    /// [`Self::driven`] with the PWM's period computed once for this configuration
+    /// ([`DemandConfig::pwm_period`]): what the 10 kHz step calls.
+    pub fn driven_in(
+        &self,
+        pwm_period: PulseRegisters,
+        brake: BrakeDemand,
+        air_spring_n: [f32; BOGIES],
+    ) -> DrivenOutputs {
         let service_mps2 = self.demand.service_mps2(brake);
         let air_spring_pa = air_spring_n.map(|f| self.load.pressure_pa(f));
         DrivenOutputs {
             eb_loop_closed: brake != BrakeDemand::Emergency,
             service_mps2,
-            pwm: self.demand.pwm(timer, service_mps2),
+            pwm: self.demand.pwm_in(pwm_period, service_mps2),
             air_spring_pa,
             dac: air_spring_pa.map(|p| self.load.dac_code(p)),
         }

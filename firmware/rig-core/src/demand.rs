@@ -104,9 +104,20 @@ impl DemandConfig {
 
     /// The PWM timer's registers for a service deceleration (m/s^2).
     pub fn pwm(&self, timer: &PulseTimer, service_mps2: f32) -> PulseRegisters {
-        let mut r = timer.registers(self.pwm_frequency_hz as f32);
-        let period = r.arr as f32 + 1.0;
-        r.ccr = ((self.duty(service_mps2) * period + 0.5) as u32).min(r.arr);
+        self.pwm_in(self.pwm_period(timer), service_mps2)
+    }
+
+    /// The PWM's prescaler and period at the configured frequency: they depend on the
+    /// configuration only, so the step computes them once per configuration.
+    pub fn pwm_period(&self, timer: &PulseTimer) -> PulseRegisters {
+        timer.registers(self.pwm_frequency_hz as f32)
+    }
+
+    /// [`Self::pwm`] in a period from [`Self::pwm_period`]: the duty's compare value only.
+    pub fn pwm_in(&self, period: PulseRegisters, service_mps2: f32) -> PulseRegisters {
+        let mut r = period;
+        let counts = r.arr as f32 + 1.0;
+        r.ccr = ((self.duty(service_mps2) * counts + 0.5) as u32).min(r.arr);
         r
     }
 

@@ -458,6 +458,9 @@ pub struct Rig<S: SimStore = Simulation> {
     valves: ValveInputs,
     /// The controller outputs as last driven.
     driven: DrivenOutputs,
+    /// The service-demand PWM's prescaler and period for the configuration in force
+    /// (`DemandConfig::pwm_period`: set at construction and by `Configure`, not per tick).
+    pwm_period: PulseRegisters,
     wheel_speed_kmh: [Option<f32>; WHEELSETS],
     pulses: [PulseRegisters; WHEELSETS],
     /// Sensor channels with a condition present but not latched (this tick).
@@ -629,6 +632,7 @@ impl<S: SimStore> Rig<S> {
             diag_window: DiagWindow::default(),
             valves: ValveInputs::new(config.io.valves),
             driven: DrivenOutputs::safe(&config.pulse_timer),
+            pwm_period: config.io.demand.pwm_period(&config.pulse_timer),
             wheel_speed_kmh: [None; WHEELSETS],
             pulses: [silent; WHEELSETS],
             pending: [false; CHANNELS],
@@ -1085,6 +1089,8 @@ impl<S: SimStore> Rig<S> {
                             .io
                             .set(item, v)
                             .map_err(CommandError::IoConfig)?;
+                        self.pwm_period =
+                            self.config.io.demand.pwm_period(&self.config.pulse_timer);
                         if item == IoItem::ValveWiring {
                             self.valves.set_wiring(self.config.io.valves);
                         }
@@ -1456,8 +1462,8 @@ impl<S: SimStore> Rig<S> {
             None
         };
         let driven = match plant {
-            Some(p) => self.config.io.driven(
-                &timer,
+            Some(p) => self.config.io.driven_in(
+                self.pwm_period,
                 self.brake.unwrap_or(BrakeCommand::Release),
                 p.air_spring_forces(),
             ),
