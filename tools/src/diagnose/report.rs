@@ -13,8 +13,8 @@ use super::analysis::{RunAnalysis, UNITS, VARIABLES};
 use super::json::{Report, Tried};
 use super::outcome::Outcome;
 use super::replay::{Group, Prepared, Quantity, Replay};
-use crate::plots::{Chart, Series, Style};
 use crate::figures::list_text;
+use crate::plots::{Chart, Series, Style};
 
 fn words_for(a: &RunAnalysis) -> String {
     let mut s = String::new();
