@@ -6,7 +6,7 @@
 # is at the bottom of SRAM. Needs llvm-size (Debian package llvm).
 #   bash firmware/board/size.sh [ELF]     (default: the image last built by `cargo board ...`)
 set -euo pipefail
-elf="${1:-${CARGO_TARGET_DIR:-target}/thumbv7em-none-eabihf/release/board}"
+elf="${1:-${CARGO_TARGET_DIR:-target}/thumbv7em-none-eabihf/firmware/board}"
 size_tool="$(command -v llvm-size || command -v rust-size || command -v arm-none-eabi-size || true)"
 if [ -z "$size_tool" ]; then
     echo "size.sh: no llvm-size (apt-get install llvm)" >&2

@@ -9,7 +9,7 @@ cd "$(dirname "$0")/../.."
 out="${1:-firmware/rig-fixture/fixture}"
 mkdir -p "$out"
 cargo rig-fixture
-elf="${CARGO_TARGET_DIR:-target}/thumbv7em-none-eabihf/release/rig-fixture"
+elf="${CARGO_TARGET_DIR:-target}/thumbv7em-none-eabihf/firmware/rig-fixture"
 objcopy="$(command -v llvm-objcopy || command -v rust-objcopy)"
 "$objcopy" --strip-debug "$elf" "$out/rig-fixture.elf"
 timeout 300 qemu-system-arm -M netduinoplus2 -nographic -monitor none -serial none \

@@ -40,7 +40,7 @@ use crate::runlog;
 pub struct DecodeArgs {
     /// The captured log: raw defmt bytes (with --elf) or text (probe-rs / defmt-print output).
     pub input: PathBuf,
-    /// Firmware ELF whose defmt table decodes a raw capture (target/thumbv7em-none-eabihf/release/board).
+    /// Firmware ELF whose defmt table decodes a raw capture (target/thumbv7em-none-eabihf/firmware/board).
     #[arg(long)]
     pub elf: Option<PathBuf>,
     /// Output file: CSV, or MDF4 when its name ends in `.mf4` (`-`: standard output, one

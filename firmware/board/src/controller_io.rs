@@ -48,7 +48,8 @@ pub struct ControllerIo {
 impl ControllerIo {
     /// Sets everything up, outputs safe: clocks, the eight valve inputs (input, pull-up), PB5
     /// output low, TIM17 (as the pulse timers, break on lockup) silent before PA7 goes to
-    /// AF1, the DACs at code 0 with their output buffer. `dac2`: the bring-up image leaves
+    /// AF1, the DACs at code 0 (0 V) with their output buffer off (the interface stage's
+    /// op-amp buffers them). `dac2`: the bring-up image leaves
     /// DAC2 off (PA6 high impedance: its pulse-check jumper to PA8 sits there).
     pub fn new(silent: &PulseRegisters, dac2: bool) -> Self {
         pac::RCC.ahb2enr().modify(|w| {
@@ -92,7 +93,9 @@ impl ControllerIo {
             dac.cr().modify(|w| w.set_en(0, false));
             dac.mcr().modify(|w| {
                 w.set_hfsel(DAC_HFSEL_ABOVE_160_MHZ);
-                w.set_mode(0, DacMode::NORMAL_EXT_BUFEN);
+                // Buffer off (MODE1 = 010): 0 V .. VREF+, code 0 = 0 V, below the
+                // transducer's live zero; the x2 op-amp stage buffers it (docs/rig.md).
+                w.set_mode(0, DacMode::NORMAL_EXT_BUFDIS);
             });
             dac.dhr12r(0).write(|w| w.set_dhr(0));
             // No trigger (TEN1 = 0): DHR goes to DOR one APB clock after each write.

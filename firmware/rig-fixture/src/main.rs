@@ -6,7 +6,7 @@
 //! cargo rig-fixture
 //! qemu-system-arm -M netduinoplus2 -nographic -monitor none -serial none \
 //!   -semihosting-config enable=on,target=native \
-//!   -kernel target/thumbv7em-none-eabihf/release/rig-fixture > telemetry.defmt
+//!   -kernel target/thumbv7em-none-eabihf/firmware/rig-fixture > telemetry.defmt
 //! ```
 //!
 //! stdout then holds the raw defmt stream; with this ELF's table, `hils decode` turns it

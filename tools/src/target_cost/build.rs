@@ -20,7 +20,7 @@ pub fn emulator_features() -> &'static [&'static str] {
     }
 }
 
-/// Builds the emulator binary (release, thumbv7em-none-eabihf, the host's math) with
+/// Builds the emulator binary (profile `firmware`, as the board image; thumbv7em-none-eabihf, the host's math) with
 /// cargo and returns the ELF's path (as cargo reports it).
 pub fn build_elf() -> Result<PathBuf> {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
@@ -28,7 +28,8 @@ pub fn build_elf() -> Result<PathBuf> {
         .current_dir(workspace_root())
         .args([
             "build",
-            "--release",
+            "--profile",
+            "firmware",
             "-p",
             "hils-qemu",
             "--target",
