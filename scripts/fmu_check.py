@@ -27,6 +27,14 @@ from fmpy.validation import validate_fmu
 UNIT_OUTPUTS = ("p_cyl_unit", "wsp", "v_ref_est")
 
 
+def wheelset_list(numbers):
+    """Wheelset numbers as people write them: "2 and 4", "1, 2 and 3", "none"."""
+    names = [str(n) for n in numbers]
+    if not names:
+        return "none"
+    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+
+
 def load_reference(directory):
     with open(f"{directory}/reference.json") as f:
         meta = json.load(f)
@@ -74,10 +82,11 @@ def check_paper_eb(fmu, md, meta, ref):
     i = int(np.argmax(v <= 0.01))
     slides = [j for j in range(1, 5) if result[f"wsp{j}"].any()]
     if slides != meta["slides"]:
-        sys.exit(f"FMPy paper EB: WSP acted on {slides}, hils simulate on {meta['slides']}")
+        sys.exit(f"FMPy paper EB: WSP acted on wheelsets {wheelset_list(slides)}, "
+                 f"hils simulate on {wheelset_list(meta['slides'])}")
     print(f"FMPy simulate_fmu, paper EB in closed loop at 1 ms: {len(idx)} communication points x "
           f"{len(names)} outputs bit-identical to hils simulate; stop {result['time'][i]:.2f} s, "
-          f"{result['x_m'][i]:.1f} m; WSP on wheelsets {slides} ({wall:.1f} s)")
+          f"{result['x_m'][i]:.1f} m; WSP on wheelsets {wheelset_list(slides)} ({wall:.1f} s)")
 
 
 def check_plant(fmu, md, meta, ref):
