@@ -24,7 +24,7 @@ pub enum Conversion {
         values: Vec<f64>,
         interpolate: bool,
     },
-    /// Ranges [lo, hi] -> value, with a default.
+    /// Ranges [lo, hi] (integers) or [lo, hi) (floats) -> value, with a default.
     Ranges {
         ranges: Vec<(f64, f64, f64)>,
         default: f64,
@@ -52,8 +52,17 @@ impl Conversion {
         matches!(self, Conversion::Texts { .. })
     }
 
-    /// The physical value of `x` (NaN stays NaN).
+    /// The physical value of an integer raw value `x` (NaN stays NaN).
     pub fn apply(&self, x: f64) -> Phys {
+        self.apply_raw(x, false)
+    }
+
+    /// The physical value of raw value `x`; `float_raw`: the channel stores floats, whose
+    /// ranges (range to value 6, range to text 8) exclude their upper bound, lower <= x <
+    /// upper, where an integer's include it (ASAM MDF 4.1, CC_R2V and CC_R2T; asammdf reads
+    /// them so). NaN stays NaN.
+    pub fn apply_raw(&self, x: f64, float_raw: bool) -> Phys {
+        let within = |lo: f64, hi: f64| x >= lo && (x < hi || (!float_raw && x == hi));
         Phys::Num(match self {
             Conversion::Identity | Conversion::Unsupported(_) => x,
             Conversion::Linear { offset, factor } => offset + factor * x,
@@ -68,7 +77,7 @@ impl Conversion {
             Conversion::Ranges { .. } if x.is_nan() => x,
             Conversion::Ranges { ranges, default } => ranges
                 .iter()
-                .find(|(lo, hi, _)| x >= *lo && x <= *hi)
+                .find(|(lo, hi, _)| within(*lo, *hi))
                 .map_or(*default, |r| r.2),
             Conversion::Texts {
                 keys,
@@ -77,7 +86,7 @@ impl Conversion {
             } => {
                 let t = keys
                     .iter()
-                    .position(|(lo, hi)| x >= *lo && x <= *hi)
+                    .position(|&(lo, hi)| within(lo, hi) || (lo == hi && x == lo))
                     .map_or(default.as_str(), |i| texts[i].as_str());
                 return Phys::Text(t.to_string());
             }
@@ -273,5 +282,30 @@ mod tests {
         };
         assert_eq!(t.apply(1.0), Phys::Text("EB".into()));
         assert_eq!(t.apply(7.0), Phys::Text("?".into()));
+    }
+
+    /// ASAM MDF 4.1 (CC_R2V, CC_R2T): an integer's range includes its upper bound, a
+    /// float's excludes it, so adjacent float ranges [0, 10), [10, 20) do not overlap.
+    #[test]
+    fn float_ranges_exclude_their_upper_bound() {
+        let r = Conversion::Ranges {
+            ranges: vec![(0.0, 10.0, 1.0), (10.0, 20.0, 2.0)],
+            default: -1.0,
+        };
+        assert_eq!(r.apply_raw(10.0, false), Phys::Num(1.0));
+        assert_eq!(r.apply_raw(10.0, true), Phys::Num(2.0));
+        assert_eq!(r.apply_raw(20.0, false), Phys::Num(2.0));
+        assert_eq!(r.apply_raw(20.0, true), Phys::Num(-1.0));
+        assert_eq!(r.apply_raw(19.999, true), Phys::Num(2.0));
+        let t = Conversion::Texts {
+            keys: vec![(0.0, 0.5), (0.5, 1.0), (3.0, 3.0)],
+            texts: vec!["low".into(), "high".into(), "three".into()],
+            default: "?".into(),
+        };
+        assert_eq!(t.apply_raw(0.5, true), Phys::Text("high".into()));
+        assert_eq!(t.apply_raw(0.5, false), Phys::Text("low".into()));
+        assert_eq!(t.apply_raw(1.0, true), Phys::Text("?".into()));
+        // A single value (lower = upper) still matches itself in a float channel.
+        assert_eq!(t.apply_raw(3.0, true), Phys::Text("three".into()));
     }
 }

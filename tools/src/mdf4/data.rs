@@ -492,7 +492,10 @@ impl<'c> Decoder<'c> {
             self.ch.conversion.apply(index as f64)
         } else {
             match self.raw(&rec[self.start..self.start + self.bytes]) {
-                Raw::Num(x) => self.ch.conversion.apply(x),
+                Raw::Num(x) => self
+                    .ch
+                    .conversion
+                    .apply_raw(x, matches!(self.ch.data_type, 4 | 5)),
                 Raw::Text(s) => Phys::Text(s),
             }
         };
