@@ -1419,7 +1419,7 @@ impl<S: SimStore> Rig<S> {
             let w = core::mem::take(&mut self.diag_window);
             let (max, n) = (w.max_cycles, w.steps);
             let mean = if n > 0 {
-                (w.sum_cycles / n as u64) as u32
+                crate::pulse::div_u64(w.sum_cycles, n as u64) as u32
             } else {
                 0
             };
