@@ -1003,7 +1003,9 @@ impl<S: SimStore> Rig<S> {
         Ok(())
     }
 
-    /// Carries out a command (also from the board's user button).
+    /// Carries out a command (also from the board's user button). Out of line: the board
+    /// runs it from flash, on the tick of a command only (firmware/board/ccm.x).
+    #[inline(never)]
     pub fn command(&mut self, command: Command) -> Result<(), CommandError> {
         match command {
             Command::Start(start) => self.start(start),
