@@ -36,8 +36,8 @@ fi
 
 # Step placement (ccm.x): the step interrupt runs from CCM SRAM, masks no interrupt
 # globally (no CPSID in CCM code: its critical sections are BASEPRI ceilings), and leaves
-# CCM only for cold paths (panics, defmt, the construction of a run, the Configure and
-# setup-for-the-next-run commands: IoConfig::set, KeptSetup::apply; a Start's setup_digest
+# CCM only for cold paths (panics, defmt, the construction of a run, the commands:
+# Rig::command on a command tick, IoConfig::set, KeptSetup::apply; a Start's setup_digest
 # and a Calibrate frame's decode_calibration).
 objdump_tool="$(command -v llvm-objdump || command -v arm-none-eabi-objdump || true)"
 nm_tool="$(command -v llvm-nm || command -v arm-none-eabi-nm || true)"
