@@ -13,6 +13,10 @@ use std::path::PathBuf;
 fn main() {
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rerun-if-changed=mps2-an386.x");
+    // The optimisation level this image is built at, for its `H` line (`hils target-cost`
+    // checks it against the board image's, Cargo.toml).
+    let opt_level = env::var("OPT_LEVEL").unwrap_or_default();
+    println!("cargo:rustc-env=HILS_QEMU_OPT_LEVEL={opt_level}");
     let target = env::var("TARGET").unwrap_or_default();
     if !(target.starts_with("thumbv7em-") && target.ends_with("-eabihf")) {
         // Host build: the binary is a stub, nothing to link specially.

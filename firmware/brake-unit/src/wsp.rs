@@ -792,17 +792,8 @@ fn fill_cycles<F: Real>(k: &WspConstants<F>, p: F, p_d: F, target: F) -> u32 {
     cycles_of(k.fill_tau_cycles * ((p_d - p) / (p_d - target)).ln())
 }
 
-/// A duration in control cycles (rounded, at least 1; NaN gives 1, huge values the
-/// largest count).
+/// A duration in control cycles (rounded half up, at least 1; NaN gives 1, huge values the
+/// largest count). In the float type itself: no soft double on the Cortex-M4F.
 fn cycles_of<F: Real>(x: F) -> u32 {
-    let c = x.to_f64() + 0.5;
-    if c >= 1.0 {
-        if c < u32::MAX as f64 {
-            c as u32
-        } else {
-            u32::MAX
-        }
-    } else {
-        1
-    }
+    x.round_u32().max(1)
 }

@@ -53,6 +53,12 @@ pub trait Real:
     /// |x| (clears the sign bit).
     fn abs(self) -> Self;
 
+    /// Rounded half up to a whole number, as u32: `trunc(self + 0.5)` without the
+    /// addition's rounding (the same for an f32 value computed in f32 or f64), by the FPU's
+    /// conversion (no f64 on the Cortex-M4F). NaN and values below 0.5 give 0, values
+    /// from `u32::MAX` on give `u32::MAX`.
+    fn round_u32(self) -> u32;
+
     /// The smaller of two values; `other` if `self` is NaN.
     #[inline(always)]
     fn min(self, other: Self) -> Self {
@@ -115,6 +121,16 @@ macro_rules! impl_real {
             fn is_nan(self) -> bool {
                 <$t>::is_nan(self)
             }
+            #[inline]
+            fn round_u32(self) -> u32 {
+                // Truncates, saturates, NaN -> 0; `self - whole` is exact below 2^32.
+                let whole = self as u32;
+                if self - whole as $t >= 0.5 {
+                    whole.saturating_add(1)
+                } else {
+                    whole
+                }
+            }
             #[inline(always)]
             fn abs(self) -> $t {
                 <$t>::from_bits(self.to_bits() & $abs_mask)
@@ -125,3 +141,37 @@ macro_rules! impl_real {
 
 impl_real! { f32, [exp = math::exp_f32, ln = math::ln_f32, atan = math::atan_f32, atan_over_x = math::atan_over_x_f32, sqrt = math::sqrt_f32], 0x7f80_0000, 0x7fff_ffff }
 impl_real! { f64, [exp = math::exp_f64, ln = math::ln_f64, atan = math::atan_f64, atan_over_x = math::atan_over_x_f64, sqrt = math::sqrt_f64], 0x7ff0_0000_0000_0000, 0x7fff_ffff_ffff_ffff }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `round_u32` against `trunc(x + 0.5)` in f64 (exact for every f32 and saturating, NaN
+    /// to 0), over f32 bit patterns of every sign and exponent and the edges of the
+    /// rounding: just below halves, odd integers above 2^23 where `x + 0.5` in f32 would
+    /// round to even, the top of the u32 range.
+    #[test]
+    fn round_u32_is_round_half_up_of_the_exact_value() {
+        let edges = [
+            0.5f32.next_down(),
+            0.5,
+            1.5f32.next_down(),
+            1.5,
+            8_388_609.0,
+            16_777_215.0,
+            4_294_967_040.0,
+            4_294_967_296.0,
+            -0.25,
+            -0.0,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+        ];
+        let strided = (0..u32::MAX).step_by(7_919).map(f32::from_bits);
+        for x in edges.into_iter().chain(strided) {
+            assert_eq!(x.round_u32(), (x as f64 + 0.5) as u32, "f32 {x:e}");
+            let y = x as f64 * 1.000_000_1;
+            assert_eq!(y.round_u32(), (y + 0.5) as u32, "f64 {y:e}");
+        }
+    }
+}

@@ -25,7 +25,8 @@
 //! Under `-icount shift=0` QEMU advances its virtual clock by 2^0 = 1 ns per executed
 //! instruction, and the mps2-an386 core clock is 25 MHz, so SysTick (processor clock source)
 //! counts down one tick every 40 instructions; the program measures that ratio itself at
-//! start (`H ... instructions_per_tick=`). A measurement starts right after a tick edge
+//! start (`H ... instructions_per_tick=`; the `H` line also names the math and the
+//! optimisation level the image is built at, `opt_level=`). A measurement starts right after a tick edge
 //! (spinning on the counter) and ends by counting spin iterations (4 instructions each) up
 //! to the next edge, which resolves a duration to a few instructions instead of 40; the
 //! constant overhead of the measurement is calibrated and removed, and the `K` lines check
@@ -307,8 +308,9 @@ mod emulator {
         let overhead = u32::try_from((total + 2 * reps) / (4 * reps)).unwrap_or(0);
         timer.overhead = overhead;
         host.line(format_args!(
-            "H hils-qemu math={} instructions_per_tick={} ticks_for_2000000={} overhead={} spin={}",
+            "H hils-qemu math={} opt_level={} instructions_per_tick={} ticks_for_2000000={} overhead={} spin={}",
             hils_plant::math::IMPLEMENTATION,
+            env!("HILS_QEMU_OPT_LEVEL"),
             timer.instructions_per_tick,
             ticks,
             overhead,

@@ -172,42 +172,54 @@ impl core::fmt::Display for DecodeError {
     }
 }
 
+/// CRC-4/G-704 (reflected, polynomial x^4 + x + 1 as 0x0C) of `bits` more bits of `crc`,
+/// one bit at a time: the definition [`CRC4_BYTE`] is built from.
+const fn crc4_bits(mut crc: u8, bits: u32) -> u8 {
+    let mut k = 0;
+    while k < bits {
+        crc = if crc & 1 != 0 {
+            (crc >> 1) ^ 0x0C
+        } else {
+            crc >> 1
+        };
+        k += 1;
+    }
+    crc
+}
+
+/// The CRC-4 register after a whole byte, indexed by `register ^ byte` (the register is
+/// 4 bits, so every index is a byte): one lookup a byte instead of eight shifts. The step
+/// seals a frame every 0.5 ms on average; bit by bit a frame's checksum cost ~600
+/// instructions on the Cortex-M4F (`hils target-cost --rig`). 256 B in flash.
+static CRC4_BYTE: [u8; 256] = {
+    let mut table = [0u8; 256];
+    let mut i = 0;
+    while i < 256 {
+        table[i] = crc4_bits(i as u8, 8);
+        i += 1;
+    }
+    table
+};
+
+/// Feeds whole bytes into a CRC-4/G-704 register.
+#[inline]
+fn crc4_bytes(mut crc: u8, bytes: &[u8]) -> u8 {
+    for &b in bytes {
+        crc = CRC4_BYTE[(crc ^ b) as usize];
+    }
+    crc
+}
+
 /// CRC-4/G-704 over the identifier, data bytes 0-6 and the counter nibble (see module doc).
 pub fn checksum(id: u16, data: &[u8; 8]) -> u8 {
-    let mut crc = 0u8;
-    let mut feed = |byte: u8, bits: u32| {
-        crc ^= byte;
-        for _ in 0..bits {
-            crc = if crc & 1 != 0 {
-                (crc >> 1) ^ 0x0C
-            } else {
-                crc >> 1
-            };
-        }
-    };
-    feed(id as u8, 8);
-    feed((id >> 8) as u8, 8);
-    for &b in &data[..7] {
-        feed(b, 8);
-    }
-    feed(data[7] & 0x0F, 4);
-    crc & 0x0F
+    let crc = crc4_bytes(0, &id.to_le_bytes());
+    let crc = crc4_bytes(crc, &data[..7]);
+    crc4_bits(crc ^ (data[7] & 0x0F), 4) & 0x0F
 }
 
 /// Plain CRC-4/G-704 of a byte string (the catalogue check: "123456789" -> 0x7).
 pub fn crc4_g704(bytes: &[u8]) -> u8 {
-    let mut crc = 0u8;
-    for &b in bytes {
-        crc ^= b;
-        for _ in 0..8 {
-            crc = if crc & 1 != 0 {
-                (crc >> 1) ^ 0x0C
-            } else {
-                crc >> 1
-            };
-        }
-    }
-    crc & 0x0F
+    crc4_bytes(0, bytes) & 0x0F
 }
 
 /// Reads an Intel (little-endian) signal of `len` bits from `start` (bit 0 = LSB of byte 0).
@@ -1604,6 +1616,32 @@ mod tests {
     fn crc4_g704_catalogue_check_value() {
         // Reveng catalogue: CRC-4/G-704 check = 0x7 over "123456789".
         assert_eq!(crc4_g704(b"123456789"), 0x7);
+    }
+
+    /// The table-driven checksum against the CRC as a bit-serial shift register: the 76 bits
+    /// (identifier, bytes 0-6, the counter nibble) least significant bit first, the register
+    /// shifted right with x^4 + x + 1 reflected (0xC) fed back.
+    #[test]
+    fn checksum_equals_the_bit_serial_crc() {
+        let serial = |id: u16, d: &[u8; 8]| {
+            let word = (id as u128) | (u64::from_le_bytes(*d) as u128) << 16;
+            let mut crc = 0u8;
+            for k in 0..76 {
+                let bit = ((word >> k) & 1) as u8;
+                crc = if (crc ^ bit) & 1 != 0 {
+                    (crc >> 1) ^ 0x0C
+                } else {
+                    crc >> 1
+                };
+            }
+            crc
+        };
+        let mut x = 0x9E37_79B9_7F4A_7C15u64;
+        for id in (0u16..0x800).step_by(7) {
+            x = x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            let d = x.to_le_bytes();
+            assert_eq!(checksum(id, &d), serial(id, &d), "id {id:#x} data {d:02x?}");
+        }
     }
 
     #[test]

@@ -1003,7 +1003,9 @@ impl<S: SimStore> Rig<S> {
         Ok(())
     }
 
-    /// Carries out a command (also from the board's user button).
+    /// Carries out a command (also from the board's user button). Out of line: the board
+    /// runs it from flash, on the tick of a command only (firmware/board/ccm.x).
+    #[inline(never)]
     pub fn command(&mut self, command: Command) -> Result<(), CommandError> {
         match command {
             Command::Start(start) => self.start(start),
@@ -1419,7 +1421,7 @@ impl<S: SimStore> Rig<S> {
             let w = core::mem::take(&mut self.diag_window);
             let (max, n) = (w.max_cycles, w.steps);
             let mean = if n > 0 {
-                (w.sum_cycles / n as u64) as u32
+                crate::pulse::div_u64(w.sum_cycles, n as u64) as u32
             } else {
                 0
             };

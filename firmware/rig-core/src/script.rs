@@ -154,7 +154,11 @@ impl CostRun {
     }
 
     /// One tick as the board's step interrupt does it: the sequence's command, if any, and
-    /// `Rig::step`. `false` once the sequence is over (nothing done).
+    /// `Rig::step`. `false` once the sequence is over (nothing done). Inline: compiled in
+    /// the caller's crate, so `Rig::step` and `Rig::command` are too, at its optimisation
+    /// level (the emulator's, set alike to the board's: Cargo.toml), as on the board,
+    /// where the board crate instantiates them; not at rig-core's.
+    #[inline]
     pub fn tick(&mut self) -> bool {
         if self.tick >= COST_TICKS {
             return false;
@@ -170,6 +174,7 @@ impl CostRun {
     }
 
     /// Thread-mode work between ticks (building a requested run): not part of the step.
+    #[inline]
     pub fn between_ticks(&mut self) {
         if self.rig.build_pending().is_err() {
             self.rejected += 1;

@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result, anyhow, bail};
 
 /// The workspace root (the emulator crate is `firmware/qemu` below it).
 pub fn workspace_root() -> PathBuf {
@@ -60,4 +60,47 @@ pub fn build_elf() -> Result<PathBuf> {
         }
     }
     bail!("cargo built no hils-qemu executable")
+}
+
+/// The optimisation level of the board image, as cargo's `OPT_LEVEL` spells it ("2", "s"):
+/// `[profile.firmware.package.board] opt-level` of the workspace's Cargo.toml, else the
+/// firmware profile's, else the release profile's (which it inherits).
+pub fn board_opt_level() -> Result<String> {
+    let path = workspace_root().join("Cargo.toml");
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("cannot read {}", path.display()))?;
+    let doc: toml::Table =
+        toml::from_str(&text).with_context(|| format!("cannot parse {}", path.display()))?;
+    let profile = |name: &str| doc.get("profile").and_then(|p| p.get(name));
+    let firmware = profile("firmware");
+    let level = firmware
+        .and_then(|r| r.get("package"))
+        .and_then(|p| p.get("board"))
+        .and_then(|b| b.get("opt-level"))
+        .or_else(|| firmware.and_then(|r| r.get("opt-level")))
+        .or_else(|| profile("release").and_then(|r| r.get("opt-level")))
+        .ok_or_else(|| anyhow!("{}: no opt-level for the board image", path.display()))?;
+    Ok(match level {
+        toml::Value::String(s) => s.clone(),
+        other => other.to_string(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The emulator image that `hils target-cost` measures is built at the board image's
+    /// level (Cargo.toml sets both; the figures would not be the board's otherwise).
+    #[test]
+    fn the_emulator_is_built_at_the_board_images_opt_level() {
+        let text = std::fs::read_to_string(workspace_root().join("Cargo.toml")).unwrap();
+        let doc: toml::Table = toml::from_str(&text).unwrap();
+        let emulator = &doc["profile"]["firmware"]["package"]["hils-qemu"]["opt-level"];
+        let emulator = match emulator {
+            toml::Value::String(s) => s.clone(),
+            other => other.to_string(),
+        };
+        assert_eq!(emulator, board_opt_level().unwrap());
+    }
 }

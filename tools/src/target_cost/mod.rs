@@ -42,7 +42,7 @@ use clap::Args;
 use hils_plant::FrictionModel;
 use serde::Serialize;
 
-pub use build::{build_elf, emulator_features, workspace_root};
+pub use build::{board_opt_level, build_elf, emulator_features, workspace_root};
 pub use compare::{
     Comparison, Mismatch, check_against_simulate, column_names, compare, host_trace,
 };
@@ -89,6 +89,54 @@ pub struct TargetCostArgs {
     pub rig: bool,
 }
 
+/// The optimisation levels of the emulator image measured and of the board image.
+#[derive(Clone, Debug, Serialize)]
+pub struct OptLevels {
+    /// The emulator image's (its `H` line; `None` from an image too old to say).
+    pub emulator: Option<String>,
+    /// The board image's (Cargo.toml, [`board_opt_level`]).
+    pub board: String,
+}
+
+impl OptLevels {
+    /// Reads both; an image this program built at another level than the board's is an
+    /// error (the figures would not be the board's: Cargo.toml sets both alike).
+    fn check(text: &str, built_here: bool) -> Result<Self> {
+        let levels = Self {
+            emulator: parse_output(text)?.opt_level,
+            board: board_opt_level()?,
+        };
+        if built_here && levels.emulator.as_deref() != Some(levels.board.as_str()) {
+            bail!(
+                "the emulator image was built at opt-level {} but the board image is built at \
+                 {}: give [profile.firmware.package.hils-qemu] in Cargo.toml the board's opt-level",
+                levels.emulator.as_deref().unwrap_or("(not said)"),
+                levels.board
+            );
+        }
+        Ok(levels)
+    }
+
+    /// One line for the report.
+    pub fn text(&self) -> String {
+        match self.emulator.as_deref() {
+            Some(e) if e == self.board => {
+                format!("emulator image built at opt-level {e}, as the board image (Cargo.toml)")
+            }
+            Some(e) => format!(
+                "emulator image built at opt-level {e}; the board image is built at {}: \
+                 these figures are not the board's",
+                self.board
+            ),
+            None => format!(
+                "emulator image of unknown opt-level (it does not say); the board image is \
+                 built at {}",
+                self.board
+            ),
+        }
+    }
+}
+
 /// The figures of `hils target-cost --rig --json`.
 #[derive(Clone, Debug, Serialize)]
 pub struct RigCost {
@@ -101,12 +149,13 @@ pub struct RigCost {
     pub max_tick: u32,
     pub rejected_commands: u32,
     pub machine: &'static str,
+    pub opt_level: OptLevels,
     /// Input-to-output latencies ([`latency`]).
     pub latency: Vec<latency::Path>,
 }
 
 /// The rig's figures from the emulator's output.
-pub fn rig_cost(text: &str) -> Result<RigCost> {
+pub fn rig_cost(text: &str, opt_level: OptLevels) -> Result<RigCost> {
     let out = parse_output(text)?;
     let r = out
         .rig
@@ -126,6 +175,7 @@ pub fn rig_cost(text: &str) -> Result<RigCost> {
         max_tick: r.max_tick,
         rejected_commands: r.rejected_commands,
         machine: "QEMU mps2-an386 (Cortex-M4F), -icount shift=0",
+        opt_level,
         latency: latency::measure(r.max),
     })
 }
@@ -156,6 +206,8 @@ pub struct TargetCost {
     /// with `cycles_error` when the profile could not be taken (no llvm-objdump, ...).
     pub cycles: Option<CycleEstimate>,
     pub cycles_error: Option<String>,
+    /// The optimisation levels (`None` from [`evaluate`] alone: no image to check).
+    pub opt_level: Option<OptLevels>,
     /// The step with degraded adhesion on, on a non-uniform track (`None` if the emulator
     /// did not measure it).
     pub degraded: Option<DegradedCost>,
@@ -212,8 +264,9 @@ pub struct FrictionCost {
 
 /// Runs the stages: build (or take) the ELF, emulate, then [`evaluate`].
 pub fn measure(args: &TargetCostArgs) -> Result<TargetCost> {
-    let (text, wall, elf) = emulate(args)?;
+    let (text, wall, elf, opt_level) = emulate(args)?;
     let mut cost = evaluate(&text, wall)?;
+    cost.opt_level = Some(opt_level);
     match cycles::estimate(&args.qemu, &elf, cost.instructions_mean) {
         Ok(c) => cost.cycles = Some(c),
         Err(e) => cost.cycles_error = Some(format!("{e:#}")),
@@ -221,8 +274,9 @@ pub fn measure(args: &TargetCostArgs) -> Result<TargetCost> {
     Ok(cost)
 }
 
-/// Builds (or takes) the ELF and runs it: the emulator's output, its wall time (s) and the ELF.
-fn emulate(args: &TargetCostArgs) -> Result<(String, f64, PathBuf)> {
+/// Builds (or takes) the ELF and runs it: the emulator's output, its wall time (s), the ELF
+/// and the optimisation levels ([`OptLevels::check`]).
+fn emulate(args: &TargetCostArgs) -> Result<(String, f64, PathBuf, OptLevels)> {
     let elf = match &args.elf {
         Some(p) => p.clone(),
         None => build_elf()?,
@@ -233,7 +287,8 @@ fn emulate(args: &TargetCostArgs) -> Result<(String, f64, PathBuf)> {
     if let Some(path) = &args.save_output {
         crate::outputs::write_file(path, &text)?;
     }
-    Ok((text, wall, elf))
+    let opt_level = OptLevels::check(&text, args.elf.is_none())?;
+    Ok((text, wall, elf, opt_level))
 }
 
 /// The figures from the emulator's output: parse, compare each friction model's run with
@@ -287,6 +342,7 @@ pub fn evaluate(text: &str, emulator_wall_s: f64) -> Result<TargetCost> {
         emulator_wall_s,
         cycles: None,
         cycles_error: None,
+        opt_level: None,
         degraded: degraded_cost(&out),
     })
 }
@@ -318,15 +374,17 @@ pub fn main(args: TargetCostArgs) -> Result<()> {
         )?;
     }
     if args.rig {
-        let c = rig_cost(&emulate(&args)?.0)?;
+        let (text, _, _, opt_level) = emulate(&args)?;
+        let c = rig_cost(&text, opt_level)?;
         if args.json {
             println!("{}", serde_json::to_string(&c)?);
         } else {
             println!(
                 "rig step (Rig::step + command, mock board, {} ticks of the cost sequence) on {}:\n  \
-                 rig_step_instructions_max  {} (tick {}; budget {}: {})\n  rig_step_instructions_mean {:.0}",
+                 {}\n  rig_step_instructions_max  {} (tick {}; budget {}: {})\n  rig_step_instructions_mean {:.0}",
                 c.ticks,
                 c.machine,
+                c.opt_level.text(),
                 c.rig_step_instructions_max,
                 c.max_tick,
                 c.rig_step_budget_max,

@@ -72,6 +72,9 @@ pub struct RigStepCost {
 #[derive(Clone, Debug, Default)]
 pub struct EmulatorOutput {
     pub math: String,
+    /// The optimisation level the image was built at (`opt_level=` of the `H` line; `None`
+    /// from an image built before it printed one).
+    pub opt_level: Option<String>,
     pub instructions_per_tick: u32,
     pub timer_overhead: u32,
     pub calibration: Vec<CalibrationPoint>,
@@ -127,6 +130,7 @@ impl Parser {
         match line.split(' ').next().unwrap_or("") {
             "H" => {
                 self.out.math = kv(line, "math")?.to_string();
+                self.out.opt_level = kv(line, "opt_level").ok().map(str::to_string);
                 self.out.instructions_per_tick = num(line, "instructions_per_tick")?;
                 self.out.timer_overhead = num(line, "overhead")?;
                 self.header = true;
@@ -286,7 +290,7 @@ mod tests {
 
     fn sample_output(rows: &[TraceRow]) -> String {
         let mut s = String::from(
-            "H hils-qemu math=M instructions_per_tick=40 ticks_for_2000000=50001 overhead=0 spin=4\n\
+            "H hils-qemu math=M opt_level=2 instructions_per_tick=40 ticks_for_2000000=50001 overhead=0 spin=4\n\
              K n=2000 instructions=2004\nF fn=exp n=10 sum=320 max=32 lo=-20 hi=3\n\
              B friction=variable harness_baseline=32\n",
         );
@@ -307,6 +311,7 @@ mod tests {
         let out = parse_output(&sample_output(&rows)).expect("parses");
         assert_eq!(out.math, "M");
         assert_eq!(out.instructions_per_tick, 40);
+        assert_eq!(out.opt_level.as_deref(), Some("2"));
         assert_eq!(
             out.calibration,
             vec![CalibrationPoint {

@@ -30,6 +30,9 @@ pub fn report(c: &TargetCost) -> String {
          within {} instructions",
         c.math, c.instructions_per_systick_tick, c.calibration_max_error
     );
+    if let Some(o) = &c.opt_level {
+        let _ = writeln!(s, "  {}", o.text());
+    }
     costs(&mut s, c);
     cycles(&mut s, c);
     let _ = writeln!(s, "Math functions (instructions per call):");
