@@ -19,8 +19,8 @@
 //! * **Adhesion utilisation**: from the equivalent response time t_d + tau to the stop, the
 //!   speed lost over the integral of min(a_demand, g mu_avail) + resistance.
 //! * **Air consumption**: free air vented by the WSP dump valves, litres at atmospheric
-//!   pressure (isothermal): sum of V_channel (p[k-1] - p[k]) / p_atm while the dump valve
-//!   vents as it acts (else as commanded). Needs the cylinder pressures and the vent states
+//!   pressure (isothermal): sum over the vent episodes (samples at which the dump valve
+//!   vents as it acts, else as commanded) of V_channel (p before - p after) / p_atm. Needs the cylinder pressures and the vent states
 //!   (or vent flags estimated from the pressure falls, then listed in
 //!   `estimated_from_cylinder_pressure`).
 //! * **Locks**: a wheelset is locked while its speed is below `lock_speed_ratio` of the
