@@ -19,8 +19,8 @@
 //! * **Adhesion utilisation**: from the equivalent response time t_d + tau to the stop, the
 //!   speed lost over the integral of min(a_demand, g mu_avail) + resistance.
 //! * **Air consumption**: free air vented by the WSP dump valves, litres at atmospheric
-//!   pressure (isothermal): sum of V_channel (p[k-1] - p[k]) / p_atm while the dump valve
-//!   vents as it acts (else as commanded). Needs the cylinder pressures and the vent states
+//!   pressure (isothermal): sum over the vent episodes (samples at which the dump valve
+//!   vents as it acts, else as commanded) of V_channel (p before - p after) / p_atm. Needs the cylinder pressures and the vent states
 //!   (or vent flags estimated from the pressure falls, then listed in
 //!   `estimated_from_cylinder_pressure`).
 //! * **Locks**: a wheelset is locked while its speed is below `lock_speed_ratio` of the
@@ -533,9 +533,19 @@ fn timer_actions_of(trace: &Trace, j: usize, timer_s: f64) -> u32 {
     actions
 }
 
-/// Free air vented from wheelset `j`'s channel, litres at atmospheric pressure: pressure
-/// falls while the dump valve vents as it acts (else as commanded). Only for a trace whose
-/// pressures and vents are logged ([`Trace::air_measured`]).
+/// Free air vented from wheelset `j`'s channel, litres at atmospheric pressure: per vent
+/// episode (a run of samples at which the dump valve vents as it acts, else as commanded),
+/// the pressure at the sample before it less the pressure at the sample after it. Only for
+/// a trace whose pressures and vents are logged ([`Trace::air_measured`]).
+///
+/// The valve opens and closes between two samples, at any time (a rig's controller runs
+/// its control cycle on its own clock): summing the falls between samples that vent lost
+/// the fall from the closing to the first sample without vent, up to one sample period of
+/// the fastest fall per episode (-1.7 .. -2.0 % of a rig run's air, by the phase of the
+/// unit's cycle to the log's samples), and counted only falls, so the transducer's noise
+/// added air where a vent falls slowly. The sample after an episode takes that whole fall,
+/// and a difference of two noisy samples has the noise's mean, zero: the figure is
+/// unbiased at any phase and noise (`tests::air_of_a_sampled_noisy_log_is_unbiased`).
 fn air_of(trace: &Trace, j: usize, channel_volume_l: f64) -> f64 {
     let p = &trace.p_cyl_pa[j];
     let vents = if trace.acting_vent[j].len() == p.len() {
@@ -543,10 +553,24 @@ fn air_of(trace: &Trace, j: usize, channel_volume_l: f64) -> f64 {
     } else {
         &trace.venting[j]
     };
-    (1..p.len())
-        .filter(|&k| vents.get(k).copied().unwrap_or(false) && p[k] < p[k - 1])
-        .map(|k| channel_volume_l * (p[k - 1] - p[k]) / P_ATM_PA)
-        .sum()
+    let venting = |k: usize| vents.get(k).copied().unwrap_or(false);
+    let last = p.len().saturating_sub(1);
+    let mut fall_pa = 0.0;
+    let mut start = None;
+    for k in 0..p.len() {
+        match (venting(k), start) {
+            (true, None) => start = Some(k.saturating_sub(1)),
+            (false, Some(k0)) => {
+                fall_pa += p[k0] - p[k];
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    if let Some(k0) = start {
+        fall_pa += p[k0] - p[last];
+    }
+    channel_volume_l * fall_pa.max(0.0) / P_ATM_PA
 }
 
 /// Adhesion utilisation while the brake acts: from the equivalent response time to the
@@ -666,5 +690,86 @@ pub fn judge(name: &str, trace: &Trace, allowed: &AllowedStop, c: &Criteria) -> 
         criteria,
         not_measured,
         estimated_from_cylinder_pressure: estimated,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A WSP cycle of a cylinder on a fine time grid (10 us): from the EB pressure, a short
+    /// dump (fast falls) then hold, fill; every third cycle a long dump to near 0 (slow
+    /// falls, below the transducer's noise per sample). Returns the pressures, the vent
+    /// states and the air the vents let out, Pa of fall.
+    fn fine_cylinder(phase_steps: usize) -> (Vec<f64>, Vec<bool>, f64) {
+        let (dt, p_eb) = (1e-5f64, 3.5e5);
+        let (vent_tau, fill_tau) = (0.15, 0.1);
+        // In fine steps: a cycle of 0.9 s from 50 ms on (the first step of a sample period
+        // at phase 0, as a SIL trace), dumps of 60 or 600 ms, 0.1 s hold.
+        let (start, cycle, hold) = (5_001 + phase_steps, 90_000, 10_000);
+        let n = 600_000;
+        let (mut p, mut vented) = (p_eb, 0.0);
+        let (mut ps, mut vents) = (Vec::with_capacity(n), Vec::with_capacity(n));
+        for i in 0..n {
+            let running = i >= start;
+            let (number, in_cycle) = (
+                (i.max(start) - start) / cycle,
+                (i.max(start) - start) % cycle,
+            );
+            let dump = if number % 3 == 2 { 60_000 } else { 6_000 };
+            let vent = running && in_cycle < dump;
+            let fill = running && in_cycle >= dump + hold;
+            let before = p;
+            if vent {
+                p -= p * (1.0 - (-dt / vent_tau).exp());
+                vented += before - p;
+            } else if fill {
+                p += (p_eb - p) * (1.0 - (-dt / fill_tau).exp());
+            }
+            ps.push(p);
+            vents.push(vent);
+        }
+        (ps, vents, vented)
+    }
+
+    /// The fine cylinder sampled every 1 ms (each sample's vent flag: the valve acting just
+    /// before it, as a SIL trace's), with a transducer's noise of `noise_pa` (uniform).
+    fn sampled(phase_steps: usize, noise_pa: f64, seed: u32) -> (Trace, f64) {
+        let (p, vents, vented) = fine_cylinder(phase_steps);
+        let mut trace = Trace::default();
+        let mut state = seed;
+        for k in (100..p.len()).step_by(100) {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            let u = (state >> 8) as f64 / (1u32 << 24) as f64;
+            trace.t_s.push(k as f64 * 1e-5);
+            trace.p_cyl_pa[0].push(p[k] + noise_pa * (2.0 * u - 1.0));
+            trace.acting_vent[0].push(vents[k]);
+        }
+        (trace, vented)
+    }
+
+    /// Before (falls between vent samples summed): -0.58 % at a 0.9 ms phase of the valve
+    /// to the samples (each closing's last fall lost), +7.3 .. +7.9 % with noise of +-600 Pa
+    /// (the noise's falls counted in the slow vents). The air per vent episode is exact on an aligned trace (SIL's) and within
+    /// 0.3 % at any phase, with or without noise.
+    #[test]
+    fn air_of_a_sampled_noisy_log_is_unbiased() {
+        for tenth_ms in 0..10 {
+            let phase_s = tenth_ms as f64 * 1e-4;
+            for (noise_pa, seed) in [(0.0, 1), (600.0, 7), (600.0, 99)] {
+                let (trace, vented_pa) = sampled(10 * tenth_ms, noise_pa, seed);
+                let air = air_of(&trace, 0, P_ATM_PA);
+                let err = (air - vented_pa) / vented_pa;
+                let limit = if tenth_ms == 0 && noise_pa == 0.0 {
+                    1e-9
+                } else {
+                    3e-3
+                };
+                assert!(
+                    err.abs() <= limit,
+                    "phase {phase_s} s, noise {noise_pa} Pa: {air} against {vented_pa} Pa ({err})"
+                );
+            }
+        }
     }
 }
