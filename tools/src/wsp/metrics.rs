@@ -554,6 +554,19 @@ fn air_of(trace: &Trace, j: usize, channel_volume_l: f64) -> f64 {
         &trace.venting[j]
     };
     let venting = |k: usize| vents.get(k).copied().unwrap_or(false);
+    // An episode from the sample before it (k0) to the first sample after it (k1). A
+    // missing pressure at either end (a gap in the log) falls back to the finite falls
+    // within, so that one empty cell neither voids the run's air nor becomes NaN.
+    let episode = |k0: usize, k1: usize| -> f64 {
+        if p[k0].is_finite() && p[k1].is_finite() {
+            p[k0] - p[k1]
+        } else {
+            (k0 + 1..=k1)
+                .map(|k| p[k - 1] - p[k])
+                .filter(|d| d.is_finite() && *d > 0.0)
+                .sum()
+        }
+    };
     let last = p.len().saturating_sub(1);
     let mut fall_pa = 0.0;
     let mut start = None;
@@ -561,14 +574,14 @@ fn air_of(trace: &Trace, j: usize, channel_volume_l: f64) -> f64 {
         match (venting(k), start) {
             (true, None) => start = Some(k.saturating_sub(1)),
             (false, Some(k0)) => {
-                fall_pa += p[k0] - p[k];
+                fall_pa += episode(k0, k);
                 start = None;
             }
             _ => {}
         }
     }
     if let Some(k0) = start {
-        fall_pa += p[k0] - p[last];
+        fall_pa += episode(k0, last);
     }
     channel_volume_l * fall_pa.max(0.0) / P_ATM_PA
 }
@@ -771,5 +784,22 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// A gap (NaN) at the edge of a vent episode neither voids nor poisons the run's air:
+    /// that episode falls back to its finite falls, the others keep their exact figure.
+    #[test]
+    fn a_gap_in_the_pressure_log_keeps_the_air() {
+        let (mut trace, vented_pa) = sampled(0, 0.0, 1);
+        let k0 = (1..trace.p_cyl_pa[0].len())
+            .find(|&k| trace.acting_vent[0][k])
+            .unwrap();
+        trace.p_cyl_pa[0][k0 - 1] = f64::NAN;
+        let air = air_of(&trace, 0, P_ATM_PA);
+        assert!(air.is_finite() && air > 0.0, "air {air}");
+        assert!(
+            (air - vented_pa).abs() / vented_pa < 0.05,
+            "{air} against {vented_pa} Pa"
+        );
     }
 }
