@@ -22,6 +22,7 @@
 pub mod blocks;
 pub mod convert;
 pub mod data;
+mod vlsd;
 pub mod write;
 
 use blocks::{Block, Blocks, ReadAt, Text, xml_properties};
@@ -44,6 +45,9 @@ pub struct ChannelInfo {
     pub bit_count: u32,
     pub flags: u32,
     pub inval_bit_pos: u32,
+    /// `cn_data`: a VLSD channel's signal data (an SD block, a DL/DZ/HL list of them, or
+    /// a VLSD channel group's CG block); 0 for none.
+    pub data_addr: u64,
     pub conversion: Conversion,
 }
 
@@ -60,6 +64,8 @@ pub struct Group {
     /// 0-based data group and channel group within it.
     pub dg: usize,
     pub cg: usize,
+    /// The CG block's address (what a VLSD channel's `cn_data` points to).
+    pub addr: u64,
     /// The data group's first data block.
     pub data_addr: u64,
     /// Bytes of the record id before each record (0: sorted, one group).
@@ -193,6 +199,7 @@ impl<'a> Mdf4<'a> {
         Ok(Group {
             dg: dg_index,
             cg: cg_index,
+            addr: cg.addr,
             data_addr: dg.link(2),
             rec_id_size,
             record_id: cg.uint(0, 8),
@@ -226,6 +233,7 @@ impl<'a> Mdf4<'a> {
             bit_count: cn.uint(8, 4) as u32,
             flags: cn.uint(12, 4) as u32,
             inval_bit_pos: cn.uint(16, 4) as u32,
+            data_addr: cn.link(5),
             conversion,
         })
     }
