@@ -7,7 +7,8 @@
 //! (unsorted); data in DT blocks, DL lists of them (HL headers included), and DZ blocks
 //! (deflate, with or without transposition; `miniz_oxide`); a time master channel per
 //! group (a real one, or a virtual one from the record index); integer and float channels
-//! of either byte order, fixed-length strings, invalidation bits; conversions
+//! of either byte order, fixed-length strings, variable-length (VLSD) strings in signal
+//! data or a VLSD channel group (`vlsd.rs`), invalidation bits; conversions
 //! ([`convert`]); units (the channel's, else its conversion's); comments (TX or MD); the
 //! file's metadata (the `<common_properties>` of the HD comment).
 //!
@@ -16,8 +17,8 @@
 //! decoded. Every pointer and length is checked against the file ([`blocks`]).
 //!
 //! Not read (an error naming the channel when a used channel needs it): variable-length
-//! signal data (VLSD), algebraic conversions, bit fields, half floats, big-endian values
-//! not on byte boundaries.
+//! byte arrays and other VLSD uses than texts, algebraic conversions, bit fields, half
+//! floats, big-endian values not on byte boundaries.
 
 pub mod blocks;
 pub mod convert;
