@@ -350,6 +350,17 @@ impl<'a> Mdf4<'a> {
                 collect_vlsd_records(&decoders, &mut sources, rid, rec)?;
                 continue;
             }
+            if rec.len() < own {
+                return Err(group_err(
+                    group,
+                    format!(
+                        "record {} has {} bytes, the group's records {own}: two groups share \
+                         record id {rid}",
+                        index + 1,
+                        rec.len()
+                    ),
+                ));
+            }
             decode_record(&decoders, &mut sources, rec, index, &mut out)?;
             index += 1;
         }

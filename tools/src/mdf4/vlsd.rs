@@ -104,7 +104,7 @@ impl<'b, 'a> SignalData<'b, 'a> {
             ));
         }
         let len = u32::from_le_bytes(self.read(offset, 4)?.try_into().unwrap_or_default()) as u64;
-        if offset + 4 + len > total {
+        if (offset + 4).saturating_add(len) > total {
             return Err(format!(
                 "its text at offset {offset} ({len} bytes) runs past the end of the channel's \
                  {total} bytes of signal data: a damaged file"
