@@ -22,6 +22,12 @@ reference Python implementation). Called by scripts/mdf4-asammdf.sh; subcommands
   fixtures DIR       the small fixtures the Rust tests read without Python
                      (tools/tests/data/mdf4/): sorted, unsorted, compressed, with the spec
                      CSV asammdf decodes them to.
+  vlsd DUMP [N]      VLSD text channels (UTF-8, Latin-1, UTF-16 LE/BE) beside numbers, N
+                     records: MDF 4.10 and 4.20, uncompressed (also unsorted, and as an
+                     MDF 4.2 VLSD channel group), DZ, DZ transposed; every sample the
+                     project's reader gives (DUMP: `cargo build -p hils --example mdf4_dump
+                     --features mdf4-dump`, target/debug/examples/mdf4_dump) equals asammdf's.
+                     Not run by CI.
 """
 import argparse
 import json
@@ -104,9 +110,13 @@ def to_si(col, x):
     return x
 
 
-def signal(col, name, unit, t, si):
-    """A signal as a logger stores it: integers with conversions where loggers use them."""
+def signal(col, name, unit, t, si, vlsd=False):
+    """A signal as a logger stores it: integers with conversions where loggers use them
+    (`vlsd`: the command as a variable-length UTF-8 string, as asammdf stores texts)."""
     nan = np.isnan(si) if not isinstance(si, list) else None
+    if col == "cmd" and vlsd:
+        return Signal(np.array([c.encode() for c in si]), t, name=name, encoding="utf-8",
+                      comment="brake command")
     if col == "cmd":
         codes = {"REL": 0, "EB": 1, "SB": 2}
         raw = np.array([codes.get(c, 3) for c in si], dtype=np.uint8)
@@ -158,7 +168,7 @@ def canape(args):
         r = rows[group]
         si = cols[col]
         si = [si[i] for i in r] if isinstance(si, list) else si[r]
-        groups[group].append(signal(col, name, unit, t[r], si))
+        groups[group].append(signal(col, name, unit, t[r], si, getattr(args, "vlsd", False)))
         mapping[col] = name
     mdf = MDF(version="4.10")
     for g in ("fast", "slow", "thermal"):
@@ -216,10 +226,10 @@ def blocks_of(b, addr, kind):
 
 
 def data_bytes(b, addr):
-    """The bytes of a data group's DT block or DL list of DT blocks."""
+    """The bytes of a data group's DT block or DL list of DT blocks (or of SD blocks)."""
     kind = b[addr + 2:addr + 4]
     length, links = blocks_of(b, addr, kind)
-    if kind == b"DT":
+    if kind in (b"DT", b"SD"):
         return bytes(b[addr + 24:addr + length])
     assert kind == b"DL", kind
     out = b""
@@ -229,6 +239,16 @@ def data_bytes(b, addr):
         if links[0] == 0:
             return out
         length, links = blocks_of(b, links[0], b"DL")
+
+
+def append_block(b, kind, links, data):
+    """Appends a block (at an 8-byte boundary) to the file's bytes `b`; its address."""
+    while len(b) % 8:
+        b.append(0)
+    addr = len(b)
+    b += b"##" + kind + bytes(4) + struct.pack("<QQ", 24 + 8 * len(links) + len(data), len(links))
+    b += struct.pack(f"<{len(links)}Q", *links) + data
+    return addr
 
 
 def unsort_file(src, dst):
@@ -259,15 +279,8 @@ def unsort_file(src, dst):
         struct.pack_into("<Q", b, cg + 24, nxt[0] if nxt else 0)
     merged.sort(key=lambda r: (r[0], r[1]))
     payload = b"".join(bytes([rid]) + rec for _, rid, rec in merged)
-    while len(b) % 8:
-        b.append(0)
-    dt = len(b)
-    b += b"##DT\0\0\0\0" + struct.pack("<QQ", 24 + len(payload), 0) + payload
-    while len(b) % 8:
-        b.append(0)
-    new_dg = len(b)
-    b += b"##DG\0\0\0\0" + struct.pack("<QQ", 24 + 32 + 8, 4)
-    b += struct.pack("<4Q", 0, groups[0][0], dt, 0) + bytes([1]) + bytes(7)
+    dt = append_block(b, b"DT", (), payload)
+    new_dg = append_block(b, b"DG", (0, groups[0][0], dt, 0), bytes([1]) + bytes(7))
     struct.pack_into("<Q", b, 64 + 24, new_dg)
     open(dst, "wb").write(b)
 
@@ -392,13 +405,20 @@ def fixtures(args):
         lines.append(",".join(row))
     src = os.path.join(args.dir, "source.csv")
     open(src, "w").write("\n".join(lines) + "\n")
-    for stem, unsorted, comp in (("canape_sorted", False, 0), ("canape_unsorted", True, 0),
-                                 ("canape_dz", False, 2)):
+    for stem, unsorted, comp, vlsd in (("canape_sorted", False, 0, False),
+                                       ("canape_unsorted", True, 0, False),
+                                       ("canape_dz", False, 2, False),
+                                       ("canape_vlsd", False, 2, True)):
         ns = argparse.Namespace(csv=src, out_stem=os.path.join(args.dir, stem),
-                                unsorted=unsorted, compression=comp)
+                                unsorted=unsorted, compression=comp, vlsd=vlsd)
         canape(ns)
         raw = open(ns.out_stem + ".mf4", "rb").read()
         print(f"fixture {stem}.mf4: {len(raw)} bytes, DZ blocks: {raw.count(b'##DZ')}")
+    # `cmd` as a VLSD string: asammdf reads the same CSV and map as from its coded twin.
+    vlsd = os.path.join(args.dir, "canape_vlsd")
+    for ext in (".csv", ".map.toml"):
+        assert open(vlsd + ext).read() == open(os.path.join(args.dir, "canape_dz" + ext)).read()
+        os.remove(vlsd + ext)
     os.remove(src)
 
 
@@ -426,6 +446,124 @@ def fuzz_seeds(args):
         b = open(path(f), "rb").read()
         open(path(f), "wb").write(b[16:])
         print(f"seed {f}: {len(b) - 16} bytes, DZ blocks: {b.count(b'##DZ')}")
+
+
+VLSD_WORDS = ["REL", "EB", "SERVICE_3", "Bremsstufe \u00e4", "", "L\u00f6sen \u03a9"]
+VLSD_ENC = {"cmd": "utf-8", "state_l1": "latin-1", "s_le": "utf-16-le", "s_be": "utf-16-be"}
+
+
+def vlsd_file(path, n, ver, comp):
+    """A 1 kHz group (numbers, UTF-8 and Latin-1 texts) and a 200 Hz group (a number,
+    UTF-16 LE and BE texts), texts as asammdf stores them: VLSD."""
+    t = np.round(np.arange(n) * 0.001, 6)
+
+    def texts(k, tt, name):
+        enc = VLSD_ENC[name]
+        w = [VLSD_WORDS[(i // (7 + k)) % len(VLSD_WORDS)] for i in range(len(tt))]
+        w = [x.replace("\u03a9", "O") if enc == "latin-1" else x for x in w]
+        return Signal(np.array([x.encode(enc) for x in w]), tt, name=name, encoding=enc)
+    t2 = t[::5]
+    m = MDF(version=ver)
+    m.append([Signal(np.sin(t), t, name="v", unit="m/s"),
+              Signal((np.arange(n) % 300).astype(np.int16), t, name="i16"),
+              texts(0, t, "cmd"), texts(1, t, "state_l1")])
+    m.append([Signal(np.cos(t2), t2, name="p", unit="bar"),
+              texts(2, t2, "s_le"), texts(3, t2, "s_be")])
+    m.save(path, overwrite=True, compression=comp)
+
+
+def vlsd_group_file(src, dst, channel="cmd", vlsd_id=9):
+    """An unsorted file (1-byte record ids) with `channel`'s signal data (SD blocks, not
+    compressed) moved into an MDF 4.2 VLSD channel group: one VLSD record (id `vlsd_id`)
+    before each record of the channel's group, carrying that record's entry."""
+    b = bytearray(open(src, "rb").read())
+    _, hd = blocks_of(b, 64, b"HD")
+    _, dgl = blocks_of(b, hd[0], b"DG")
+    sizes, cgs, target, cg = {}, [], None, dgl[1]
+    while cg:
+        _, cgl = blocks_of(b, cg, b"CG")
+        rid, = struct.unpack_from("<Q", b, cg + 24 + 8 * len(cgl))
+        sizes[rid] = sum(struct.unpack_from("<II", b, cg + 24 + 8 * len(cgl) + 24))
+        cgs.append(cg)
+        cn = cgl[1]
+        while cn:
+            _, cnl = blocks_of(b, cn, b"CN")
+            tx = cnl[2]
+            if bytes(b[tx + 24:tx + 24 + len(channel) + 1]) == channel.encode() + b"\0":
+                target = (rid, cn, cnl[5], struct.unpack_from("<I", b, cn + 24 + 64 + 4)[0])
+            cn = cnl[0]
+        cg = cgl[0]
+    rid, cn, sd, at = target
+    sdata = data_bytes(b, sd)
+    recs = data_bytes(b, dgl[2])
+    out, pos, count, total = bytearray(), 0, 0, 0
+    while pos < len(recs):
+        size = sizes[recs[pos]]
+        if recs[pos] == rid:
+            off, = struct.unpack_from("<Q", recs, pos + 1 + at)
+            ln, = struct.unpack_from("<I", sdata, off)
+            out += bytes([vlsd_id]) + sdata[off:off + 4 + ln]
+            count, total = count + 1, total + 4 + ln
+        out += recs[pos:pos + 1 + size]
+        pos += 1 + size
+    dt = append_block(b, b"DT", (), bytes(out))
+    vcg = append_block(b, b"CG", (0,) * 6, struct.pack(
+        "<QQHH4xII", vlsd_id, count, 1, 0, total & 0xFFFFFFFF, total >> 32))
+    struct.pack_into("<Q", b, cgs[-1] + 24, vcg)  # after the last channel group
+    struct.pack_into("<Q", b, cn + 24 + 8 * 5, vcg)  # the channel's cn_data
+    struct.pack_into("<Q", b, hd[0] + 24 + 16, dt)  # the data group's records
+    b[8:16] = b"4.20    "
+    struct.pack_into("<H", b, 28, 420)
+    open(dst, "wb").write(b)
+
+
+def vlsd_compare(dump, path):
+    """Every channel the project's reader gives for `path` equals asammdf's: (channels, samples)."""
+    import subprocess
+    ref = MDF(path)
+    out = subprocess.run([dump, path], capture_output=True, text=True, check=True).stdout
+    n_ch = n_s = 0
+    for line in out.splitlines():
+        d = json.loads(line)
+        assert "error" not in d, (path, d.get("error"))
+        for name, vals in d["channels"].items():
+            s = ref.get(name, group=d["group"])
+            assert np.array_equal(np.array(d["t"]), s.timestamps), (path, name)
+            if name in VLSD_ENC:
+                enc = VLSD_ENC[name]
+                # numpy's S dtype drops trailing NULs: pad UTF-16 LE back to whole units
+                pad = lambda x: x + b"\0" if enc == "utf-16-le" and len(x) % 2 else x
+                exp = [pad(x).decode(enc).split("\0")[0] for x in s.samples.tolist()]
+                assert vals == exp, (path, name)
+            else:
+                assert np.array_equal(np.array(vals, dtype=float), s.samples.astype(float)), name
+            n_ch, n_s = n_ch + 1, n_s + len(vals)
+    return n_ch, n_s
+
+
+def vlsd(args):
+    import os
+    import tempfile
+    total = 0
+    with tempfile.TemporaryDirectory() as tmp:
+        for ver in ("4.10", "4.20"):
+            for comp in (0, 1, 2):
+                p = os.path.join(tmp, f"vlsd_{ver}_{comp}.mf4")
+                vlsd_file(p, args.n, ver, comp)
+                files = [p]
+                if comp == 0:
+                    unsort_file(p, p[:-4] + "_unsorted.mf4")
+                    vlsd_group_file(p[:-4] + "_unsorted.mf4", p[:-4] + "_vlsd_group.mf4")
+                    files += [p[:-4] + "_unsorted.mf4", p[:-4] + "_vlsd_group.mf4"]
+                for f in files:
+                    raw = open(f, "rb").read()
+                    kinds = ", ".join(f"{k.decode()} {raw.count(b'##' + k)}"
+                                      for k in (b"SD", b"DZ", b"DL", b"HL"))
+                    n_ch, n_s = vlsd_compare(args.dump, f)
+                    total += n_s
+                    print(f"{os.path.basename(f)}: {len(raw)} bytes ({kinds}): {n_ch} channels, "
+                          f"{n_s} samples EQUAL")
+    print(f"vlsd: every sample equal to asammdf's: {total} samples")
 
 
 def main():
@@ -460,6 +598,10 @@ def main():
     z = sub.add_parser("fuzz-seeds")
     z.add_argument("dir")
     z.set_defaults(f=fuzz_seeds)
+    v = sub.add_parser("vlsd")
+    v.add_argument("dump")
+    v.add_argument("n", type=int, nargs="?", default=2000)
+    v.set_defaults(f=vlsd)
     a = p.parse_args()
     a.f(a)
 

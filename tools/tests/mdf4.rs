@@ -86,6 +86,26 @@ fn asammdf_recordings_read_as_their_spec_csv() {
     }
 }
 
+/// asammdf stores a text column as a variable-length (VLSD) string: `canape_vlsd.mf4` is
+/// `canape_dz.mf4` with `BrakeCmd` as a UTF-8 VLSD channel (its signal data in a DZ
+/// block) instead of codes with a value-to-text conversion. asammdf reads both to the same
+/// CSV (`scripts/mdf4_asammdf.py fixtures` checks that); so must the project's reader.
+#[test]
+fn an_asammdf_vlsd_text_channel_reads_as_its_csv() {
+    let m = map("canape_dz");
+    let mf4 =
+        read_run_log_with(&data("canape_vlsd.mf4"), Some(&m)).unwrap_or_else(|e| panic!("{e}"));
+    let csv = read_run_log(&data("canape_dz.csv")).unwrap();
+    same_logs(&mf4, &csv);
+    let cmd = mf4.cmd.as_ref().expect("cmd");
+    assert_eq!(cmd.values, ["REL", "EB"]);
+    let raw = std::fs::read(data("canape_vlsd.mf4")).unwrap();
+    assert!(
+        raw.windows(4).any(|w| w == b"##DZ"),
+        "the fixture's data are compressed"
+    );
+}
+
 /// A file the project writes reads back through the project's reader as its CSV does.
 #[test]
 fn written_mf4_reads_back_as_the_csv() {

@@ -4,6 +4,7 @@
 
 use super::blocks::{Blocks, HEADER_BYTES};
 use super::convert::Phys;
+use super::vlsd::{SignalData, VlsdRecords, text_of};
 use super::{ChannelInfo, Group, Mdf4};
 use crate::measured::TextColumn;
 
@@ -18,7 +19,7 @@ const MAX_INFLATED_BYTES: u64 = 1 << 30;
 
 /// A piece of the data stream.
 #[derive(Clone, Debug)]
-enum Piece {
+pub(super) enum Piece {
     /// Raw bytes at an address.
     Raw { addr: u64, len: u64 },
     /// A DZ block: its compressed bytes, how they were packed, the inflated length.
@@ -31,39 +32,63 @@ enum Piece {
     },
 }
 
-/// The pieces of the data stream that starts at `addr` (DT, DV, DZ, DL, HL).
-fn pieces(blocks: &Blocks, addr: u64) -> Result<Vec<Piece>, String> {
+impl Piece {
+    /// Bytes the piece holds in the stream (a DZ block's: unpacked).
+    pub(super) fn stream_len(&self) -> u64 {
+        match *self {
+            Piece::Raw { len, .. } => len,
+            Piece::Zipped { inflated, .. } => inflated,
+        }
+    }
+}
+
+/// Record data: DT (or DV) blocks.
+pub(super) const RECORD_BLOCKS: &[&[u8; 2]] = &[b"DT", b"DV"];
+
+/// The pieces of the stream that starts at `addr`: one block of the kinds `data` (record
+/// data: [`RECORD_BLOCKS`]; signal data: SD), a DZ block holding one, or a DL list (an HL
+/// header's) of them.
+pub(super) fn pieces(blocks: &Blocks, addr: u64, data: &[&[u8; 2]]) -> Result<Vec<Piece>, String> {
     let mut out = Vec::new();
     if addr == 0 {
         return Ok(out);
     }
-    let head = blocks.header(addr, &[b"DT", b"DV", b"DZ", b"DL", b"HL"])?;
+    let mut kinds = data.to_vec();
+    kinds.extend_from_slice(&[b"DZ", b"DL", b"HL"]);
+    let head = blocks.header(addr, &kinds)?;
     match &head.id {
         b"HL" => {
             let hl = blocks.block(addr, &[b"HL"])?;
-            return pieces_of_list(blocks, hl.link(0), &mut out).map(|_| out);
+            return pieces_of_list(blocks, hl.link(0), data, &mut out).map(|_| out);
         }
-        b"DL" => pieces_of_list(blocks, addr, &mut out)?,
-        _ => out.push(piece(blocks, addr)?),
+        b"DL" => pieces_of_list(blocks, addr, data, &mut out)?,
+        _ => out.push(piece(blocks, addr, data)?),
     }
     Ok(out)
 }
 
 /// The pieces of a DL list (and the lists it links to).
-fn pieces_of_list(blocks: &Blocks, first: u64, out: &mut Vec<Piece>) -> Result<(), String> {
+fn pieces_of_list(
+    blocks: &Blocks,
+    first: u64,
+    data: &[&[u8; 2]],
+    out: &mut Vec<Piece>,
+) -> Result<(), String> {
     for dl in blocks.chain(first, &[b"DL"], 0, "data lists")? {
         for &a in dl.links.iter().skip(1) {
             if a != 0 {
-                out.push(piece(blocks, a)?);
+                out.push(piece(blocks, a, data)?);
             }
         }
     }
     Ok(())
 }
 
-/// One DT/DV/DZ block as a piece.
-fn piece(blocks: &Blocks, addr: u64) -> Result<Piece, String> {
-    let h = blocks.header(addr, &[b"DT", b"DV", b"DZ"])?;
+/// One data block (of the kinds `data`, or a DZ block holding one) as a piece.
+fn piece(blocks: &Blocks, addr: u64, data: &[&[u8; 2]]) -> Result<Piece, String> {
+    let mut kinds = data.to_vec();
+    kinds.push(b"DZ");
+    let h = blocks.header(addr, &kinds)?;
     let start = addr + HEADER_BYTES + 8 * h.links.len() as u64;
     let len = h.length - HEADER_BYTES - 8 * h.links.len() as u64;
     if &h.id != b"DZ" {
@@ -72,10 +97,14 @@ fn piece(blocks: &Blocks, addr: u64) -> Result<Piece, String> {
     let d = blocks.block(addr, &[b"DZ"])?;
     d.need(24)?;
     let (org, zip_type) = (&d.data[0..2], d.data[2]);
-    if org != b"DT" && org != b"DV" {
+    if !data.iter().any(|k| &k[..] == org) {
         return Err(format!(
-            "DZ block at {addr:#x}: holds a `{}` block, not record data",
-            String::from_utf8_lossy(org)
+            "DZ block at {addr:#x}: holds a `{}` block where the format wants {}",
+            String::from_utf8_lossy(org),
+            data.iter()
+                .map(|k| String::from_utf8_lossy(&k[..]).into_owned())
+                .collect::<Vec<_>>()
+                .join(" or ")
         ));
     }
     let inflated = d.uint(8, 8);
@@ -97,7 +126,7 @@ fn piece(blocks: &Blocks, addr: u64) -> Result<Piece, String> {
 }
 
 /// Inflates a DZ piece and undoes its transposition.
-fn inflate(blocks: &Blocks, p: &Piece) -> Result<Vec<u8>, String> {
+pub(super) fn inflate(blocks: &Blocks, p: &Piece) -> Result<Vec<u8>, String> {
     let Piece::Zipped {
         addr,
         len,
@@ -157,7 +186,7 @@ impl<'b, 'a> Stream<'b, 'a> {
     fn new(blocks: &'b Blocks<'a>, addr: u64) -> Result<Self, String> {
         Ok(Self {
             blocks,
-            pieces: pieces(blocks, addr)?,
+            pieces: pieces(blocks, addr, RECORD_BLOCKS)?,
             next_piece: 0,
             raw_at: 0,
             buf: Vec::new(),
@@ -245,7 +274,29 @@ fn group_err(g: &Group, message: impl Into<String>) -> ChannelError {
     }
 }
 
-impl Mdf4<'_> {
+/// Where a VLSD text channel's texts come from.
+enum VlsdSource<'b, 'a> {
+    /// Signal data, read by offset as the records come.
+    Sd(SignalData<'b, 'a>),
+    /// A VLSD channel group's records (in the same data stream): the records' offsets
+    /// (None: an invalid sample) are looked up when the stream has been read.
+    Cg {
+        records: VlsdRecords,
+        offsets: Vec<Option<u64>>,
+    },
+}
+
+/// A channel with more distinct texts than a command or state channel has.
+fn too_many_texts(ch: &ChannelInfo) -> ChannelError {
+    ChannelError {
+        channel: ch.name.clone(),
+        message: format!(
+            "more than {MAX_DISTINCT_TEXTS} distinct texts: not a command or state channel"
+        ),
+    }
+}
+
+impl<'a> Mdf4<'a> {
     /// The time of every record of group `g` (s, from its master channel's values) and the
     /// values of its channels `wanted` (indices into `g.channels`).
     pub fn read_group(
@@ -262,6 +313,10 @@ impl Mdf4<'_> {
         let decoders = idx
             .iter()
             .map(|&i| Decoder::new(group, &group.channels[i]))
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut sources = decoders
+            .iter()
+            .map(|d| d.vlsd.then(|| self.vlsd_source(group, d.ch)).transpose())
             .collect::<Result<Vec<_>, _>>()?;
         // Room for the group's records (its count, bounded by what the file can hold).
         let record = (group.data_bytes + group.inval_bytes).max(1) as u64;
@@ -292,22 +347,21 @@ impl Mdf4<'_> {
                 break;
             };
             if rid != group.record_id {
+                collect_vlsd_records(&decoders, &mut sources, rid, rec)?;
                 continue;
             }
-            for (d, o) in decoders.iter().zip(out.iter_mut()) {
-                d.push(rec, index, o);
-                if let Values::Text(t) = o {
-                    if t.values.len() > MAX_DISTINCT_TEXTS {
-                        return Err(ChannelError {
-                            channel: d.ch.name.clone(),
-                            message: format!(
-                                "more than {MAX_DISTINCT_TEXTS} distinct texts: not a command \
-                                 or state channel"
-                            ),
-                        });
-                    }
-                }
+            if rec.len() < own {
+                return Err(group_err(
+                    group,
+                    format!(
+                        "record {} has {} bytes, the group's records {own}: two groups share \
+                         record id {rid}",
+                        index + 1,
+                        rec.len()
+                    ),
+                ));
             }
+            decode_record(&decoders, &mut sources, rec, index, &mut out)?;
             index += 1;
         }
         if index != group.cycle_count {
@@ -319,11 +373,54 @@ impl Mdf4<'_> {
                 ),
             ));
         }
+        for ((d, s), o) in decoders.iter().zip(sources).zip(out.iter_mut()) {
+            if let Some(VlsdSource::Cg { records, offsets }) = s {
+                d.resolve(&records, &offsets, o)?;
+            }
+        }
         let time = match out.remove(0) {
             Values::Num(t) => t,
             Values::Text(_) => return Err(group_err(group, "the time master is a text")),
         };
         Ok((time, out))
+    }
+
+    /// The source of VLSD text channel `ch` of `group`: its signal data, or (MDF 4.2) the
+    /// VLSD channel group of the same data group its `cn_data` points to.
+    fn vlsd_source<'b>(
+        &'b self,
+        group: &Group,
+        ch: &ChannelInfo,
+    ) -> Result<VlsdSource<'b, 'a>, ChannelError> {
+        let err = |m: String| ChannelError {
+            channel: ch.name.clone(),
+            message: m,
+        };
+        let sd = |addr| SignalData::new(&self.blocks, addr).map(VlsdSource::Sd);
+        if ch.data_addr == 0 {
+            return sd(0).map_err(err);
+        }
+        let head = self
+            .blocks
+            .header(ch.data_addr, &[b"SD", b"DZ", b"DL", b"HL", b"CG"])
+            .map_err(|e| err(format!("its signal data: {e}")))?;
+        if &head.id != b"CG" {
+            return sd(ch.data_addr).map_err(|e| err(format!("its signal data: {e}")));
+        }
+        let vlsd_group = self.groups.iter().find(|v| v.addr == ch.data_addr);
+        match vlsd_group {
+            Some(v) if v.is_vlsd() && v.dg == group.dg && group.rec_id_size > 0 => {
+                Ok(VlsdSource::Cg {
+                    records: VlsdRecords::new(v.record_id, ch.data_type),
+                    offsets: Vec::new(),
+                })
+            }
+            _ => Err(err(format!(
+                "its signal data points to a channel group at {:#x} that is not a VLSD channel \
+                 group of its unsorted data group",
+                ch.data_addr
+            ))),
+        }
     }
 
     /// Record sizes of the groups of data group `dg` by record id (None: a VLSD group,
@@ -381,6 +478,49 @@ fn le(b: &[u8]) -> u64 {
     b.iter().rev().fold(0u64, |v, &x| (v << 8) | x as u64)
 }
 
+/// Decodes record `rec` (number `index` of its group) into the channels' values.
+fn decode_record(
+    decoders: &[Decoder],
+    sources: &mut [Option<VlsdSource>],
+    rec: &[u8],
+    index: u64,
+    out: &mut [Values],
+) -> Result<(), ChannelError> {
+    for ((d, s), o) in decoders.iter().zip(sources.iter_mut()).zip(out.iter_mut()) {
+        match s {
+            Some(s) => d.push_vlsd(rec, index, s, o)?,
+            None => d.push(rec, index, o),
+        }
+        if let Values::Text(t) = o {
+            if t.values.len() > MAX_DISTINCT_TEXTS {
+                return Err(too_many_texts(d.ch));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Takes record `rec` of another group (id `rid`) as an entry of the VLSD channel groups
+/// the decoded channels read.
+fn collect_vlsd_records(
+    decoders: &[Decoder],
+    sources: &mut [Option<VlsdSource>],
+    rid: u64,
+    rec: &[u8],
+) -> Result<(), ChannelError> {
+    for (d, s) in decoders.iter().zip(sources.iter_mut()) {
+        if let Some(VlsdSource::Cg { records, .. }) = s {
+            if records.record_id == rid {
+                records.push(rec);
+                if records.texts.values.len() > MAX_DISTINCT_TEXTS {
+                    return Err(too_many_texts(d.ch));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 /// How one channel's value is taken out of a record.
 struct Decoder<'c> {
     ch: &'c ChannelInfo,
@@ -391,6 +531,8 @@ struct Decoder<'c> {
     invalid: Option<(usize, u8)>,
     all_invalid: bool,
     text: bool,
+    /// A VLSD text: the record holds the offset of its entry in the signal data.
+    vlsd: bool,
 }
 
 impl<'c> Decoder<'c> {
@@ -405,10 +547,13 @@ impl<'c> Decoder<'c> {
             6..=9 => ch.bit_count % 8 == 0 && ch.bit_count > 0,
             _ => false,
         };
-        if ch.cn_type == 1 {
+        let vlsd = ch.cn_type == 1;
+        let offset_ok = ch.bit_offset == 0 && ch.bit_count % 8 == 0 && ch.bit_count <= 64;
+        if vlsd && !(matches!(ch.data_type, 6..=9) && offset_ok) {
             return Err(err(format!(
-                "a variable-length {} (VLSD signal data) is not read by this reader: store it \
-                 as fixed-length, or as numbers with a value-to-text conversion",
+                "a variable-length {} (VLSD signal data) is not read by this reader (it reads \
+                 variable-length texts with byte-aligned offsets): store it as fixed-length, or \
+                 as numbers with a value-to-text conversion",
                 data_type_name(ch.data_type)
             )));
         }
@@ -468,7 +613,8 @@ impl<'c> Decoder<'c> {
             bytes,
             invalid,
             all_invalid: ch.flags & 1 != 0,
-            text,
+            text: text || vlsd,
+            vlsd,
         })
     }
 
@@ -511,6 +657,70 @@ impl<'c> Decoder<'c> {
         }
     }
 
+    /// Decodes the VLSD text of record `rec` (number `index`) from its source into `out`.
+    fn push_vlsd(
+        &self,
+        rec: &[u8],
+        index: u64,
+        source: &mut VlsdSource,
+        out: &mut Values,
+    ) -> Result<(), ChannelError> {
+        let invalid = self.all_invalid || self.invalid.is_some_and(|(b, m)| rec[b] & m != 0);
+        let offset = (!invalid).then(|| le(&rec[self.start..self.start + self.bytes]));
+        let text = match (source, offset) {
+            (VlsdSource::Cg { offsets, .. }, _) => {
+                offsets.push(offset);
+                return Ok(());
+            }
+            (VlsdSource::Sd(_), None) => String::new(),
+            (VlsdSource::Sd(sd), Some(at)) => {
+                let entry = sd.entry(at).map_err(|e| self.record_err(index, e))?;
+                text_of(self.ch.data_type, &entry)
+            }
+        };
+        if let Values::Text(t) = out {
+            t.push(&text);
+        }
+        Ok(())
+    }
+
+    /// Fills `out` with the texts of the VLSD group's `records` at the records' `offsets`.
+    fn resolve(
+        &self,
+        records: &VlsdRecords,
+        offsets: &[Option<u64>],
+        out: &mut Values,
+    ) -> Result<(), ChannelError> {
+        let Values::Text(t) = out else {
+            return Ok(());
+        };
+        for (index, offset) in offsets.iter().enumerate() {
+            let text = match offset {
+                None => "",
+                Some(at) => records.text(*at).ok_or_else(|| {
+                    self.record_err(
+                        index as u64,
+                        format!(
+                            "its text's offset {at} is the start of no entry of its VLSD \
+                             channel group ({} bytes of entries): a damaged file",
+                            records.len_bytes()
+                        ),
+                    )
+                })?,
+            };
+            t.push(text);
+        }
+        Ok(())
+    }
+
+    /// An error about the channel's value in record `index` (0-based) of its group.
+    fn record_err(&self, index: u64, message: String) -> ChannelError {
+        ChannelError {
+            channel: self.ch.name.clone(),
+            message: format!("record {} of its channel group: {message}", index + 1),
+        }
+    }
+
     /// The raw value in the channel's bytes.
     fn raw(&self, b: &[u8]) -> Raw {
         let ch = self.ch;
@@ -529,11 +739,7 @@ impl<'c> Decoder<'c> {
                     f64::from_bits(bits as u64)
                 })
             }
-            6 | 7 => {
-                let end = b.iter().position(|&c| c == 0).unwrap_or(b.len());
-                Raw::Text(String::from_utf8_lossy(&b[..end]).into_owned())
-            }
-            _ => Raw::Text(utf16(b, ch.data_type == 8)),
+            _ => Raw::Text(text_of(ch.data_type, b)),
         }
     }
 
@@ -572,21 +778,6 @@ fn be_u128(b: &[u8]) -> u128 {
     b.iter().take(16).fold(0u128, |v, &x| (v << 8) | x as u128)
 }
 
-fn utf16(b: &[u8], little: bool) -> String {
-    let units: Vec<u16> = b
-        .chunks_exact(2)
-        .map(|c| {
-            if little {
-                u16::from_le_bytes([c[0], c[1]])
-            } else {
-                u16::from_be_bytes([c[0], c[1]])
-            }
-        })
-        .take_while(|&u| u != 0)
-        .collect();
-    String::from_utf16_lossy(&units)
-}
-
 #[cfg(test)]
 mod tests {
     use super::super::convert::Conversion;
@@ -605,6 +796,7 @@ mod tests {
             bit_count: 8,
             flags: 2,
             inval_bit_pos: 0,
+            data_addr: 0,
             conversion,
         }
     }
@@ -613,6 +805,7 @@ mod tests {
         Group {
             dg: 0,
             cg: 0,
+            addr: 0,
             data_addr: 0,
             rec_id_size: 0,
             record_id: 0,
@@ -680,11 +873,11 @@ mod tests {
         assert!(message(half).contains("a float of 16 bits"));
         let vlsd = ChannelInfo {
             cn_type: 1,
-            data_type: 7,
+            data_type: 10,
             bit_count: 64,
             ..channel(Conversion::Identity)
         };
-        assert!(message(vlsd).contains("variable-length UTF-8 string"));
+        assert!(message(vlsd).contains("variable-length byte array"));
         assert!(message(channel(Conversion::Unsupported(3))).contains("algebraic formula"));
     }
 

@@ -7,7 +7,8 @@
 //! (unsorted); data in DT blocks, DL lists of them (HL headers included), and DZ blocks
 //! (deflate, with or without transposition; `miniz_oxide`); a time master channel per
 //! group (a real one, or a virtual one from the record index); integer and float channels
-//! of either byte order, fixed-length strings, invalidation bits; conversions
+//! of either byte order, fixed-length strings, variable-length (VLSD) strings in signal
+//! data or a VLSD channel group (`vlsd.rs`), invalidation bits; conversions
 //! ([`convert`]); units (the channel's, else its conversion's); comments (TX or MD); the
 //! file's metadata (the `<common_properties>` of the HD comment).
 //!
@@ -16,12 +17,13 @@
 //! decoded. Every pointer and length is checked against the file ([`blocks`]).
 //!
 //! Not read (an error naming the channel when a used channel needs it): variable-length
-//! signal data (VLSD), algebraic conversions, bit fields, half floats, big-endian values
-//! not on byte boundaries.
+//! byte arrays and other VLSD uses than texts, algebraic conversions, bit fields, half
+//! floats, big-endian values not on byte boundaries.
 
 pub mod blocks;
 pub mod convert;
 pub mod data;
+mod vlsd;
 pub mod write;
 
 use blocks::{Block, Blocks, ReadAt, Text, xml_properties};
@@ -44,6 +46,9 @@ pub struct ChannelInfo {
     pub bit_count: u32,
     pub flags: u32,
     pub inval_bit_pos: u32,
+    /// `cn_data`: a VLSD channel's signal data (an SD block, a DL/DZ/HL list of them, or
+    /// a VLSD channel group's CG block); 0 for none.
+    pub data_addr: u64,
     pub conversion: Conversion,
 }
 
@@ -60,6 +65,8 @@ pub struct Group {
     /// 0-based data group and channel group within it.
     pub dg: usize,
     pub cg: usize,
+    /// The CG block's address (what a VLSD channel's `cn_data` points to).
+    pub addr: u64,
     /// The data group's first data block.
     pub data_addr: u64,
     /// Bytes of the record id before each record (0: sorted, one group).
@@ -193,6 +200,7 @@ impl<'a> Mdf4<'a> {
         Ok(Group {
             dg: dg_index,
             cg: cg_index,
+            addr: cg.addr,
             data_addr: dg.link(2),
             rec_id_size,
             record_id: cg.uint(0, 8),
@@ -226,6 +234,7 @@ impl<'a> Mdf4<'a> {
             bit_count: cn.uint(8, 4) as u32,
             flags: cn.uint(12, 4) as u32,
             inval_bit_pos: cn.uint(16, 4) as u32,
+            data_addr: cn.link(5),
             conversion,
         })
     }
