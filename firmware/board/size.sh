@@ -45,7 +45,7 @@ if [ -n "$objdump_tool" ] && [ -n "$nm_tool" ]; then
     tim3="$("$nm_tool" "$elf" | awk '$3 == "TIM3" { print $1 }')"
     cpsid="$("$objdump_tool" -d --no-show-raw-insn "$elf" | grep -ciE '^ *10[0-9a-f]{6}:.*cpsid' || true)"
     hot_exits="$("$nm_tool" "$elf" | awk '$1 ~ /^10/ && $3 ~ /LongThunk/ { print $3 }' \
-        | grep -vE 'panic|defmt|slice_index_fail|with_step|with_config|brake_unit4unit.*3new|reset_state|exp_outside|IoConfig3set|KeptSetup5apply|setup_digest|decode_calibration|Rig.LT.S.GT.7command17h' || true)"
+        | grep -vE 'panic|defmt|slice_index_fail|with_step|with_config|brake_unit4unit.*3new|reset_state|exp_outside|IoConfig3set|KeptSetup5apply|setup_digest|decode_calibration|div_u64_wide|u64_of_wide|Rig.LT.S.GT.7command17h' || true)"
     printf "  step placement: TIM3 at 0x%s, CPSID in CCM code: %s, calls from CCM to hot flash code: %s\n" \
         "$tim3" "$cpsid" "$(printf '%s' "$hot_exits" | grep -c . || true)"
     if [ "${tim3:0:2}" != "10" ] || [ "$cpsid" != "0" ] || [ -n "$hot_exits" ]; then

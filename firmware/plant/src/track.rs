@@ -420,6 +420,17 @@ struct WheelContact<F> {
     mu_factor: F,
 }
 
+impl<F: Copy> WheelContact<F> {
+    /// Takes `polach` as this wheelset's contact model. Out of line so that the copy's
+    /// source and destination are distinct references (a `memcpy`): written in `locate`,
+    /// two elements of the track's arrays the compiler cannot tell apart, it was a call
+    /// of the 1.6 KiB `memmove`, which nothing else in the board's step calls.
+    #[inline(never)]
+    fn set_polach(&mut self, polach: &Polach<F>) {
+        self.polach = *polach;
+    }
+}
+
 /// State of the recovery model.
 #[derive(Clone, Debug)]
 struct Recovery<F> {
@@ -567,7 +578,7 @@ impl<F: Real> TrackAdhesion<F> {
             (lo, hi) = (F::of(f64::INFINITY), F::of(f64::NEG_INFINITY));
         }
         self.surface[j] = surface;
-        self.wheel[j].polach = self.polach[surface as usize & 3];
+        self.wheel[j].set_polach(&self.polach[surface as usize & 3]);
         self.lo[j] = lo;
         self.hi[j] = hi;
     }

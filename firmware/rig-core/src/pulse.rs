@@ -73,8 +73,16 @@ pub fn wheel_frequency_hz(omega_radps: f32, teeth: u16) -> f32 {
 pub(crate) fn div_u64(a: u64, b: u64) -> u64 {
     match (u32::try_from(a), u32::try_from(b)) {
         (Ok(a), Ok(b)) => (a / b) as u64,
-        _ => a / b,
+        _ => div_u64_wide(a, b),
     }
+}
+
+/// The software 64-bit division of [`div_u64`], out of line and cold: the board keeps it
+/// in flash (firmware/board/ccm.x), so the step's CCM SRAM code holds no 64-bit division.
+#[cold]
+#[inline(never)]
+fn div_u64_wide(a: u64, b: u64) -> u64 {
+    a / b
 }
 
 /// `x as u64` for a finite `x >= 0`, with the FPU's conversion to 32 bits when `x` fits
@@ -84,8 +92,16 @@ fn u64_of(x: f32) -> u64 {
     if x < 4_294_967_296.0 {
         x as u32 as u64
     } else {
-        x as u64
+        u64_of_wide(x)
     }
+}
+
+/// The software conversion of [`u64_of`], out of line and cold (in flash on the board,
+/// as [`div_u64_wide`]).
+#[cold]
+#[inline(never)]
+fn u64_of_wide(x: f32) -> u64 {
+    x as u64
 }
 
 impl PulseTimer {

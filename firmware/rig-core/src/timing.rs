@@ -90,13 +90,14 @@ impl StepTiming {
         let duration = exit.wrapping_sub(entry);
         let mut missed = 0;
         if let Some(last) = self.last_entry {
-            let interval = entry.wrapping_sub(last) as u64;
-            let p = self.period_cycles as u64;
+            let interval = entry.wrapping_sub(last);
+            let p = self.period_cycles;
             // Rounded number of periods since the last entry (jitter of up to half a
-            // period is not a lost tick).
-            let periods = (interval + p / 2) / p;
+            // period is not a lost tick): (interval + p / 2) / p in 32 bits, where the
+            // sum could overflow (interval % p + p / 2 < 2 p adds at most one period).
+            let periods = interval / p + u32::from(interval % p >= p - p / 2);
             if periods >= 2 {
-                missed = (periods - 1).min(u32::MAX as u64) as u32;
+                missed = periods - 1;
             }
         }
         self.last_entry = Some(entry);
@@ -123,7 +124,7 @@ impl StepTiming {
         let s = WindowStats {
             max_cycles: self.win_max,
             mean_cycles: if self.win_steps > 0 {
-                (self.win_sum / self.win_steps as u64) as u32
+                crate::pulse::div_u64(self.win_sum, self.win_steps as u64) as u32
             } else {
                 0
             },
@@ -204,6 +205,35 @@ mod tests {
             2
         );
         assert_eq!(t.missed_ticks, 2);
+    }
+
+    /// Missed ticks after `interval` cycles as the 64-bit formula counts them: rounded
+    /// periods (interval + p / 2) / p, less the one expected.
+    fn missed_ticks_64(interval: u32, period: u32) -> u64 {
+        let periods = (interval as u64 + period as u64 / 2) / period as u64;
+        periods.saturating_sub(1)
+    }
+
+    proptest::proptest! {
+        /// The missed ticks counted in 32 bits equal the 64-bit formula's, at any interval
+        /// (up to 2^32 cycles, where the 32-bit sum would overflow) and on either side of
+        /// each rounding boundary (half a period past a whole number of periods).
+        #[test]
+        fn missed_ticks_equal_the_64_bit_rounding(
+            period in proptest::prop_oneof![1u32..40_000, 1u32..=u32::MAX],
+            any_interval in proptest::prop_oneof![0u32..200_000, (u32::MAX - 200_000)..=u32::MAX, 0u32..=u32::MAX],
+            whole_periods in 0u64..5_000,
+            offset in -1i64..=1,
+        ) {
+            let boundary = whole_periods * period as u64 + (period - period / 2) as u64;
+            let near_boundary = u32::try_from(boundary as i64 + offset).unwrap_or(u32::MAX);
+            for interval in [any_interval, near_boundary] {
+                let mut t = StepTiming::new_with_period(period);
+                t.record(0, 0, false);
+                let missed = t.record(interval, interval, false).missed_ticks;
+                proptest::prop_assert_eq!(missed as u64, missed_ticks_64(interval, period));
+            }
+        }
     }
 
     #[test]
