@@ -164,9 +164,9 @@ impl<'a> Blocks<'a> {
         let kind = [h[2], h[3]];
         if &h[0..2] != b"##" || !kinds.iter().any(|k| **k == kind) {
             return Err(format!(
-                "at {addr:#x}: expected a {} block, found `{}`",
+                "at {addr:#x}: expected a {} block, found {}",
                 names.join(" or "),
-                String::from_utf8_lossy(&h[0..4])
+                block_id_text(&h[0..4])
             ));
         }
         let length = u64::from_le_bytes(h[8..16].try_into().unwrap_or_default());
@@ -315,9 +315,30 @@ pub fn xml_properties(xml: &str) -> Result<Vec<(String, String)>, String> {
         .collect())
 }
 
+/// A block id as read, for a message: `##DG`, or its bytes in hex when they are not
+/// printable ASCII (a link into the middle of a block).
+fn block_id_text(id: &[u8]) -> String {
+    if id.iter().all(|b| b.is_ascii_graphic()) {
+        format!("`{}`", String::from_utf8_lossy(id))
+    } else {
+        let hex: Vec<String> = id.iter().map(|b| format!("{b:02x}")).collect();
+        format!("no block (bytes {})", hex.join(" "))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A link into the middle of a block shows the bytes found, not raw bytes as text.
+    #[test]
+    fn a_block_id_that_is_no_block_is_shown_in_hex() {
+        assert_eq!(block_id_text(b"##DG"), "`##DG`");
+        assert_eq!(
+            block_id_text(&[3, 0, 0xff, 0]),
+            "no block (bytes 03 00 ff 00)"
+        );
+    }
 
     /// Properties in nested trees (a tool's device or vehicle sections) are keyed by their
     /// tree path: two trees' `name` are two keys, not one key given twice.

@@ -4,7 +4,7 @@
 
 use super::blocks::{Blocks, HEADER_BYTES};
 use super::convert::Phys;
-use super::vlsd::{SignalData, VlsdRecords, text_of};
+use super::vlsd::{SignalData, VlsdRecords, entry_text, text_of};
 use super::{ChannelInfo, Group, Mdf4};
 use crate::measured::TextColumn;
 
@@ -126,6 +126,18 @@ fn piece(blocks: &Blocks, addr: u64, data: &[&[u8; 2]]) -> Result<Piece, String>
 }
 
 /// Inflates a DZ piece and undoes its transposition.
+/// Why deflate data did not unpack, in words (never the decoder's debug form, which
+/// carries the whole partial output).
+fn inflate_failure(status: miniz_oxide::inflate::TINFLStatus) -> &'static str {
+    use miniz_oxide::inflate::TINFLStatus as S;
+    match status {
+        S::Adler32Mismatch => "checksum mismatch",
+        S::HasMoreOutput => "it unpacks to more than the block says",
+        S::NeedsMoreInput | S::FailedCannotMakeProgress => "it ends early",
+        _ => "not valid deflate data",
+    }
+}
+
 pub(super) fn inflate(blocks: &Blocks, p: &Piece) -> Result<Vec<u8>, String> {
     let Piece::Zipped {
         addr,
@@ -138,9 +150,13 @@ pub(super) fn inflate(blocks: &Blocks, p: &Piece) -> Result<Vec<u8>, String> {
         return Ok(Vec::new());
     };
     let packed = blocks.bytes(addr, len, "DZ data")?;
-    let out =
-        miniz_oxide::inflate::decompress_to_vec_zlib_with_limit(&packed, inflated as usize)
-            .map_err(|e| format!("DZ block at {addr:#x}: deflate data does not unpack ({e:?})"))?;
+    let out = miniz_oxide::inflate::decompress_to_vec_zlib_with_limit(&packed, inflated as usize)
+        .map_err(|e| {
+        format!(
+            "DZ block at {addr:#x}: its compressed data is damaged ({})",
+            inflate_failure(e.status)
+        )
+    })?;
     if out.len() as u64 != inflated {
         return Err(format!(
             "DZ block at {addr:#x}: unpacks to {} bytes, the block says {inflated}",
@@ -343,7 +359,18 @@ impl<'a> Mdf4<'a> {
                 self.size_of(&sizes, rid, &mut stream)
                     .map_err(|e| group_err(group, e))?
             };
-            let Some(rec) = stream.take(size).map_err(|e| group_err(group, e))? else {
+            let vlsd_record = sizes.iter().any(|&(id, n)| id == rid && n.is_none());
+            let Some(rec) = stream
+                .take(size)
+                .map_err(|e| match vlsd_record {
+                    true => format!(
+                        "a VLSD record (id {rid}) says its value has {size} bytes, more than \
+                         the data holds: a damaged or truncated file"
+                    ),
+                    false => e,
+                })
+                .map_err(|e| group_err(group, e))?
+            else {
                 break;
             };
             if rid != group.record_id {
@@ -411,7 +438,7 @@ impl<'a> Mdf4<'a> {
         match vlsd_group {
             Some(v) if v.is_vlsd() && v.dg == group.dg && group.rec_id_size > 0 => {
                 Ok(VlsdSource::Cg {
-                    records: VlsdRecords::new(v.record_id, ch.data_type),
+                    records: VlsdRecords::new(v.record_id, ch.data_type, v.cycle_count),
                     offsets: Vec::new(),
                 })
             }
@@ -675,7 +702,8 @@ impl<'c> Decoder<'c> {
             (VlsdSource::Sd(_), None) => String::new(),
             (VlsdSource::Sd(sd), Some(at)) => {
                 let entry = sd.entry(at).map_err(|e| self.record_err(index, e))?;
-                text_of(self.ch.data_type, &entry)
+                entry_text(self.ch.data_type, &entry)
+                    .map_err(|why| self.record_err(index, format!("{why}: a damaged file")))?
             }
         };
         if let Values::Text(t) = out {
@@ -691,22 +719,38 @@ impl<'c> Decoder<'c> {
         offsets: &[Option<u64>],
         out: &mut Values,
     ) -> Result<(), ChannelError> {
+        if records.count() != records.expected {
+            return Err(ChannelError {
+                channel: self.ch.name.clone(),
+                message: format!(
+                    "its VLSD channel group holds {} entries, the group says {}: a truncated \
+                     or damaged file",
+                    records.count(),
+                    records.expected
+                ),
+            });
+        }
         let Values::Text(t) = out else {
             return Ok(());
         };
         for (index, offset) in offsets.iter().enumerate() {
             let text = match offset {
                 None => "",
-                Some(at) => records.text(*at).ok_or_else(|| {
-                    self.record_err(
-                        index as u64,
-                        format!(
-                            "its text's offset {at} is the start of no entry of its VLSD \
+                Some(at) => records
+                    .text(*at)
+                    .ok_or_else(|| {
+                        self.record_err(
+                            index as u64,
+                            format!(
+                                "its text's offset {at} is the start of no entry of its VLSD \
                              channel group ({} bytes of entries): a damaged file",
-                            records.len_bytes()
-                        ),
-                    )
-                })?,
+                                records.len_bytes()
+                            ),
+                        )
+                    })?
+                    .map_err(|why| {
+                        self.record_err(index as u64, format!("{why}: a damaged file"))
+                    })?,
             };
             t.push(text);
         }
@@ -781,6 +825,21 @@ fn be_u128(b: &[u8]) -> u128 {
 #[cfg(test)]
 mod tests {
     use super::super::convert::Conversion;
+
+    /// Damaged deflate data is said in words: the decoder's error carries its whole partial
+    /// output in its debug form (5 MB of numbers for a large block).
+    #[test]
+    fn damaged_deflate_data_is_said_in_words() {
+        let data: Vec<u8> = (0..20_000u32)
+            .flat_map(|i| (i % 251).to_le_bytes())
+            .collect();
+        let mut packed = miniz_oxide::deflate::compress_to_vec_zlib(&data, 6);
+        let n = packed.len();
+        packed[n - 2] ^= 0x55;
+        let e = miniz_oxide::inflate::decompress_to_vec_zlib_with_limit(&packed, data.len())
+            .unwrap_err();
+        assert_eq!(inflate_failure(e.status), "checksum mismatch");
+    }
     use super::*;
 
     fn channel(conversion: Conversion) -> ChannelInfo {

@@ -131,10 +131,14 @@ pub(super) struct VlsdRecords {
     offsets: Vec<u64>,
     codes: Vec<u32>,
     pub(super) texts: TextColumn,
+    /// Offsets of the entries that do not decode, with why (increasing).
+    damaged: Vec<(u64, &'static str)>,
+    /// Entries the VLSD group says it has (its cycle count).
+    pub(super) expected: u64,
 }
 
 impl VlsdRecords {
-    pub(super) fn new(record_id: u64, data_type: u8) -> Self {
+    pub(super) fn new(record_id: u64, data_type: u8, expected: u64) -> Self {
         Self {
             record_id,
             data_type,
@@ -142,26 +146,69 @@ impl VlsdRecords {
             offsets: Vec::new(),
             codes: Vec::new(),
             texts: TextColumn::default(),
+            damaged: Vec::new(),
+            expected,
         }
     }
 
-    /// Adds the entry of one VLSD record (its bytes after the length).
+    /// Adds the entry of one VLSD record (its bytes after the length). An entry that does
+    /// not decode is kept as damaged: a record that refers to it is an error.
     pub(super) fn push(&mut self, value: &[u8]) {
-        self.texts.push(&text_of(self.data_type, value));
+        let text = entry_text(self.data_type, value).unwrap_or_else(|why| {
+            self.damaged.push((self.next, why));
+            String::new()
+        });
+        self.texts.push(&text);
         self.offsets.push(self.next);
         self.codes.push(self.texts.codes.pop().unwrap_or_default());
         self.next += 4 + value.len() as u64;
     }
 
-    /// The text of the entry at `offset` (None: no entry starts there).
-    pub(super) fn text(&self, offset: u64) -> Option<&str> {
+    /// The text of the entry at `offset` (None: no entry starts there; Some(Err): the
+    /// entry does not decode, and why).
+    pub(super) fn text(&self, offset: u64) -> Option<Result<&str, &'static str>> {
         let i = self.offsets.binary_search(&offset).ok()?;
-        Some(&self.texts.values[self.codes[i] as usize])
+        if let Ok(d) = self.damaged.binary_search_by_key(&offset, |&(at, _)| at) {
+            return Some(Err(self.damaged[d].1));
+        }
+        Some(Ok(&self.texts.values[self.codes[i] as usize]))
+    }
+
+    /// Entries collected.
+    pub(super) fn count(&self) -> u64 {
+        self.offsets.len() as u64
     }
 
     /// Bytes of entries collected.
     pub(super) fn len_bytes(&self) -> u64 {
         self.next
+    }
+}
+
+/// The text of a variable-length string entry of data type 6-9, decoded strictly: an
+/// entry that is not valid UTF-8, or UTF-16 of an odd length or with an unpaired
+/// surrogate, is a damaged value (Err: why), never a text with replacement characters.
+pub(super) fn entry_text(data_type: u8, b: &[u8]) -> Result<String, &'static str> {
+    match data_type {
+        7 => {
+            let end = b.iter().position(|&c| c == 0).unwrap_or(b.len());
+            std::str::from_utf8(&b[..end])
+                .map(str::to_owned)
+                .map_err(|_| "its text is not valid UTF-8")
+        }
+        8 | 9 => {
+            let units: Vec<u16> = b
+                .chunks(2)
+                .map(|c| match (c, data_type) {
+                    ([a, b], 8) => Ok(u16::from_le_bytes([*a, *b])),
+                    ([a, b], _) => Ok(u16::from_be_bytes([*a, *b])),
+                    _ => Err("its UTF-16 text has an odd number of bytes"),
+                })
+                .collect::<Result<_, _>>()?;
+            let end = units.iter().position(|&u| u == 0).unwrap_or(units.len());
+            String::from_utf16(&units[..end]).map_err(|_| "its UTF-16 text is not valid UTF-16")
+        }
+        _ => Ok(text_of(data_type, b)),
     }
 }
 
@@ -377,8 +424,13 @@ mod tests {
     /// MDF 4.2: `cn_data` points to a VLSD channel group whose records, in the same
     /// unsorted data group, carry the entries; the offset counts their bytes.
     fn vlsd_group_file(offsets: &[u64]) -> File {
+        vlsd_group_file_saying(offsets, 3)
+    }
+
+    /// The same, the VLSD group saying it has `said_entries` entries (it holds 3).
+    fn vlsd_group_file_saying(offsets: &[u64], said_entries: u64) -> File {
         let mut f = File::new();
-        let vlsd_cg = f.group(2, 3, 1, 0, 0);
+        let vlsd_cg = f.group(2, said_entries, 1, 0, 0);
         let cmd = f.channel("cmd", 1, 7, 8, vlsd_cg);
         let t = f.channel("t", 2, 4, 0, 0);
         f.set_link(t, 0, cmd);
@@ -408,6 +460,48 @@ mod tests {
         );
         assert!(
             e.message.contains("offset 12 is the start of no entry"),
+            "{}",
+            e.message
+        );
+    }
+
+    /// A text that does not decode is a damaged value named by channel and record, never
+    /// a text with replacement characters (`R\u{fffd}L`) that a command might judge.
+    #[test]
+    fn a_text_that_does_not_decode_is_an_error_naming_its_record() {
+        let utf8 = |f: &mut File| f.add(b"SD", &[], &entries(&[b"REL", b"R\xffL"]));
+        let e = sorted_file(utf8, 7, &[0, 7]).cmd().unwrap_err();
+        assert_eq!(e.channel, "cmd");
+        assert!(
+            e.message.contains("record 2 of its channel group"),
+            "{}",
+            e.message
+        );
+        assert!(e.message.contains("not valid UTF-8"), "{}", e.message);
+        let odd = |f: &mut File| f.add(b"SD", &[], &entries(&[b"R\0E\0L\0", b"EB\0"]));
+        let e = sorted_file(odd, 8, &[0, 10]).cmd().unwrap_err();
+        assert!(
+            e.message.contains("record 2 of its channel group"),
+            "{}",
+            e.message
+        );
+        assert!(e.message.contains("odd number of bytes"), "{}", e.message);
+        assert_eq!(
+            sorted_file(|f| f.add(b"SD", &[], &entries(&[b"R\0E\0L\0"])), 8, &[0])
+                .cmd()
+                .unwrap(),
+            ["REL"]
+        );
+    }
+
+    /// A VLSD channel group holding fewer entries than it says is a damaged file, as a
+    /// data group with fewer records than its group says is.
+    #[test]
+    fn a_vlsd_group_short_of_its_entries_is_an_error() {
+        let e = vlsd_group_file_saying(&[0, 7, 13], 8).cmd().unwrap_err();
+        assert_eq!(e.channel, "cmd");
+        assert!(
+            e.message.contains("holds 3 entries, the group says 8"),
             "{}",
             e.message
         );
