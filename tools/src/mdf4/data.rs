@@ -359,16 +359,17 @@ impl<'a> Mdf4<'a> {
                 self.size_of(&sizes, rid, &mut stream)
                     .map_err(|e| group_err(group, e))?
             };
-            let vlsd_record = sizes.iter().any(|&(id, n)| id == rid && n.is_none());
             let Some(rec) = stream
                 .take(size)
-                .map_err(|e| match vlsd_record {
-                    true => format!(
-                        "a VLSD record (id {rid}) says its value has {size} bytes, more than \
+                .map_err(
+                    |e| match sizes.iter().any(|&(id, n)| id == rid && n.is_none()) {
+                        true => format!(
+                            "a VLSD record (id {rid}) says its value has {size} bytes, more than \
                          the data holds: a damaged or truncated file"
-                    ),
-                    false => e,
-                })
+                        ),
+                        false => e,
+                    },
+                )
                 .map_err(|e| group_err(group, e))?
             else {
                 break;

@@ -190,24 +190,12 @@ impl VlsdRecords {
 /// surrogate, is a damaged value (Err: why), never a text with replacement characters.
 pub(super) fn entry_text(data_type: u8, b: &[u8]) -> Result<String, &'static str> {
     match data_type {
-        7 => {
-            let end = b.iter().position(|&c| c == 0).unwrap_or(b.len());
-            std::str::from_utf8(&b[..end])
-                .map(str::to_owned)
-                .map_err(|_| "its text is not valid UTF-8")
-        }
-        8 | 9 => {
-            let units: Vec<u16> = b
-                .chunks(2)
-                .map(|c| match (c, data_type) {
-                    ([a, b], 8) => Ok(u16::from_le_bytes([*a, *b])),
-                    ([a, b], _) => Ok(u16::from_be_bytes([*a, *b])),
-                    _ => Err("its UTF-16 text has an odd number of bytes"),
-                })
-                .collect::<Result<_, _>>()?;
-            let end = units.iter().position(|&u| u == 0).unwrap_or(units.len());
-            String::from_utf16(&units[..end]).map_err(|_| "its UTF-16 text is not valid UTF-16")
-        }
+        7 => std::str::from_utf8(up_to_nul(b))
+            .map(str::to_owned)
+            .map_err(|_| "its text is not valid UTF-8"),
+        8 | 9 if b.len() % 2 != 0 => Err("its UTF-16 text has an odd number of bytes"),
+        8 | 9 => String::from_utf16(&utf16_units(data_type, b))
+            .map_err(|_| "its UTF-16 text is not valid UTF-16"),
         _ => Ok(text_of(data_type, b)),
     }
 }
@@ -216,30 +204,27 @@ pub(super) fn entry_text(data_type: u8, b: &[u8]) -> Result<String, &'static str
 /// its first NUL (the padding of a fixed-length string).
 pub(super) fn text_of(data_type: u8, b: &[u8]) -> String {
     match data_type {
-        6 => b
-            .iter()
-            .take_while(|&&c| c != 0)
-            .map(|&c| c as char)
-            .collect(),
-        7 => {
-            let end = b.iter().position(|&c| c == 0).unwrap_or(b.len());
-            String::from_utf8_lossy(&b[..end]).into_owned()
-        }
-        _ => {
-            let units: Vec<u16> = b
-                .chunks_exact(2)
-                .map(|c| {
-                    if data_type == 8 {
-                        u16::from_le_bytes([c[0], c[1]])
-                    } else {
-                        u16::from_be_bytes([c[0], c[1]])
-                    }
-                })
-                .take_while(|&u| u != 0)
-                .collect();
-            String::from_utf16_lossy(&units)
-        }
+        6 => up_to_nul(b).iter().map(|&c| c as char).collect(),
+        7 => String::from_utf8_lossy(up_to_nul(b)).into_owned(),
+        _ => String::from_utf16_lossy(&utf16_units(data_type, b)),
     }
+}
+
+/// The bytes before the first NUL.
+fn up_to_nul(b: &[u8]) -> &[u8] {
+    &b[..b.iter().position(|&c| c == 0).unwrap_or(b.len())]
+}
+
+/// The UTF-16 code units (data type 8: little-endian, 9: big-endian) before the first NUL
+/// unit; an odd last byte is not read.
+fn utf16_units(data_type: u8, b: &[u8]) -> Vec<u16> {
+    b.chunks_exact(2)
+        .map(|c| match data_type {
+            8 => u16::from_le_bytes([c[0], c[1]]),
+            _ => u16::from_be_bytes([c[0], c[1]]),
+        })
+        .take_while(|&u| u != 0)
+        .collect()
 }
 
 #[cfg(test)]
@@ -324,6 +309,14 @@ mod tests {
         }
     }
 
+    /// `e` is about channel `cmd`, record `record` (1-based), and says `phrase`.
+    fn assert_names_record(e: &ChannelError, record: u32, phrase: &str) {
+        assert_eq!(e.channel, "cmd");
+        let at = format!("record {record} of its channel group");
+        assert!(e.message.contains(&at), "{}", e.message);
+        assert!(e.message.contains(phrase), "{}", e.message);
+    }
+
     /// Length-prefixed entries.
     fn entries(texts: &[&[u8]]) -> Vec<u8> {
         let mut out = Vec::new();
@@ -393,17 +386,7 @@ mod tests {
         let sd = |f: &mut File| f.add(b"SD", &[], &entries(&[b"REL"]));
         for bad in [8, 5, 1 << 40, u64::MAX] {
             let e = sorted_file(sd, 7, &[0, bad]).cmd().unwrap_err();
-            assert_eq!(e.channel, "cmd");
-            assert!(
-                e.message.contains("record 2 of its channel group"),
-                "{}",
-                e.message
-            );
-            assert!(
-                e.message.contains(&format!("offset {bad}")),
-                "{}",
-                e.message
-            );
+            assert_names_record(&e, 2, &format!("offset {bad}"));
         }
         // A length running past the end; no signal data at all.
         let long = |f: &mut File| f.add(b"SD", &[], &[200, 0, 0, 0, b'R']);
@@ -452,17 +435,7 @@ mod tests {
         let f = vlsd_group_file(&[0, 7, 13]);
         assert_eq!(f.cmd().unwrap(), ["REL", "EB", "REL"]);
         let e = vlsd_group_file(&[0, 7, 12]).cmd().unwrap_err();
-        assert_eq!(e.channel, "cmd");
-        assert!(
-            e.message.contains("record 3 of its channel group"),
-            "{}",
-            e.message
-        );
-        assert!(
-            e.message.contains("offset 12 is the start of no entry"),
-            "{}",
-            e.message
-        );
+        assert_names_record(&e, 3, "offset 12 is the start of no entry");
     }
 
     /// A text that does not decode is a damaged value named by channel and record, never
@@ -471,21 +444,10 @@ mod tests {
     fn a_text_that_does_not_decode_is_an_error_naming_its_record() {
         let utf8 = |f: &mut File| f.add(b"SD", &[], &entries(&[b"REL", b"R\xffL"]));
         let e = sorted_file(utf8, 7, &[0, 7]).cmd().unwrap_err();
-        assert_eq!(e.channel, "cmd");
-        assert!(
-            e.message.contains("record 2 of its channel group"),
-            "{}",
-            e.message
-        );
-        assert!(e.message.contains("not valid UTF-8"), "{}", e.message);
+        assert_names_record(&e, 2, "not valid UTF-8");
         let odd = |f: &mut File| f.add(b"SD", &[], &entries(&[b"R\0E\0L\0", b"EB\0"]));
         let e = sorted_file(odd, 8, &[0, 10]).cmd().unwrap_err();
-        assert!(
-            e.message.contains("record 2 of its channel group"),
-            "{}",
-            e.message
-        );
-        assert!(e.message.contains("odd number of bytes"), "{}", e.message);
+        assert_names_record(&e, 2, "odd number of bytes");
         assert_eq!(
             sorted_file(|f| f.add(b"SD", &[], &entries(&[b"R\0E\0L\0"])), 8, &[0])
                 .cmd()
