@@ -227,6 +227,26 @@ fn eb_run_over_the_bus_matches_sil_and_its_log_is_diagnosed() {
     run_session(&mut s, &lines, false).expect("session");
     assert_eq!(s.link.rig().state(), RigState::Finished);
 
+    // The board's pulse channels over the whole stop, on the timer model: every period
+    // against the setting it was loaded from. Dithered, the differences cancel (their
+    // sum stays within a few counts); undithered, each period would be short by the
+    // setting's fraction, -0.5 count on average.
+    for (j, d) in s.link.pulse_dither_check().iter().enumerate() {
+        assert!(
+            d.periods > 5_000,
+            "wheelset {}: {} periods",
+            j + 1,
+            d.periods
+        );
+        assert!(
+            d.sum_error_counts.abs() < 0.001 * d.periods as f64,
+            "wheelset {}: {:.1} counts over {} periods",
+            j + 1,
+            d.sum_error_counts,
+            d.periods
+        );
+    }
+
     let sil_stop_s = sil_stop_s(Rail::Wet, BrakeDemand::Emergency, 100.0);
 
     let log = hils::measured::read_run_log(&csv).expect("reader accepts the rig log");

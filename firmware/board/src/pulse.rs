@@ -1,7 +1,7 @@
 //! The four axle-speed pulse trains: channel 1 of TIM1 (PA8), TIM15 (PB14), TIM8 (PC6) and
 //! TIM20 (PB2), PWM mode 1 with ARR and CCR preload; PSC/ARR/CCR come from
-//! `hils_rig_core::pulse` and are written by the step through `pulse::apply` (UDIS around
-//! the writes, silence at once). The output enable (PC8) of the interface stage is on only
+//! `hils_rig_core::pulse` and are written by the step through `pulse::PulseChannel` (UDIS
+//! around the writes, silence at once, the period dithered at each update event, SR.UIF). The output enable (PC8) of the interface stage is on only
 //! while the rig says the controller-facing outputs are live.
 //!
 //! All four are break-capable timers (RM0440: TIM1/8/20 advanced, TIM15 with one
@@ -17,7 +17,7 @@ use embassy_stm32::pac::timer::vals::{Bkp, Ocm, Ossi, Ossr};
 use embassy_stm32::timer::low_level::Timer;
 use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::timer::{Ch1, GeneralInstance4Channel};
-use hils_rig_core::pulse::{PulseRegisters, PulseTimerRegs, apply, update};
+use hils_rig_core::pulse::{PulseChannel, PulseRegisters, PulseTimerRegs};
 
 /// A pin: GPIO port (0 = A, 1 = B, 2 = C) and number.
 pub type PinId = (usize, usize);
@@ -119,8 +119,8 @@ pub fn set_output_enable(on: bool) {
 /// whose registers used here sit where TIM1's do) driven as a [`PulseRegisters`] output.
 pub struct Channel1Out {
     regs: TimAdv,
-    /// The registers last written (`pulse::update` decides from them).
-    last: PulseRegisters,
+    /// The registers last written and the period dither (`pulse::PulseChannel`).
+    channel: PulseChannel,
 }
 
 impl Channel1Out {
@@ -155,7 +155,7 @@ impl Channel1Out {
         });
         Self {
             regs,
-            last: *silent,
+            channel: PulseChannel::new(*silent),
         }
     }
 
@@ -165,18 +165,19 @@ impl Channel1Out {
         self.write_period(silent.arr);
         self.write_compare(silent.ccr);
         self.generate_update();
-        self.last = *silent;
+        self.channel = PulseChannel::new(*silent);
         self.regs.bdtr().modify(|w| w.set_moe(true));
         self.regs.cr1().modify(|w| w.set_cen(true));
     }
 
     /// The step's new registers: nothing when unchanged, preloaded under UDIS, or silent at
-    /// once (`hils_rig_core::pulse::update`).
+    /// once, with the period dithered at each update event (`hils_rig_core::pulse::
+    /// PulseChannel::write`; the channel state is copied out so that `self` is its timer).
     #[inline(always)]
     pub fn write(&mut self, r: &PulseRegisters) {
-        let u = update(&self.last, r);
-        self.last = *r;
-        apply(u, self);
+        let mut channel = self.channel;
+        channel.write(r, self);
+        self.channel = channel;
     }
 
     /// The timer's registers (bring-up: break check).
@@ -261,5 +262,17 @@ impl PulseTimerRegs for Channel1Out {
     #[inline(always)]
     fn generate_update(&mut self) {
         self.regs.egr().write(|w| w.set_ug(true));
+    }
+    /// SR.UIF read, and cleared by writing 0 to it alone (rc_w0: the other flags are
+    /// written 1, which leaves them; RM0440 TIMx_SR). An update event between the read and
+    /// the write is lost: the dither then skips one advance, which moves one period by a
+    /// count at most.
+    #[inline(always)]
+    fn take_update_flag(&mut self) -> bool {
+        let set = self.regs.sr().read().uif();
+        if set {
+            self.regs.sr().write_value(pac::timer::regs::SrAdv(!1));
+        }
+        set
     }
 }

@@ -202,14 +202,19 @@ pub const PULSE_TEST_SPEED_KMH: f32 = 150.0;
 pub const PULSE_CAPTURE_HZ: u32 = SYSCLK_HZ / 4;
 
 /// The pulse registers the check writes: [`PULSE_TEST_SPEED_KMH`] on a wheel of
-/// `wheel_radius_m`, through the rig's own pulse code (`teeth` teeth).
+/// `wheel_radius_m`, through the rig's own pulse code (`teeth` teeth). The check writes
+/// them once, without the step's per-period dither, so they carry no fraction: every
+/// period is ARR + 1 counts and `PulseTimer::frequency_of` is the frequency on the pin.
 pub fn pulse_test_registers(
     timer: &crate::pulse::PulseTimer,
     teeth: u16,
     wheel_radius_m: f32,
 ) -> crate::pulse::PulseRegisters {
     let omega = PULSE_TEST_SPEED_KMH / crate::KMH_PER_MPS / wheel_radius_m;
-    timer.registers(crate::pulse::wheel_frequency_hz(omega, teeth))
+    crate::pulse::PulseRegisters {
+        arr_frac: 0,
+        ..timer.registers(crate::pulse::wheel_frequency_hz(omega, teeth))
+    }
 }
 
 /// A pulse train measured by input capture: the counts between successive rising edges.

@@ -14,7 +14,8 @@
 //!   diagnostics out; commands in), described by `hils.dbc` beside this crate.
 //! * [`sensor`]: ADC oversampling, offset/gain calibration, scaling to clamp force or
 //!   cylinder pressure, and plausibility (open, short, out of range, stuck).
-//! * [`pulse`]: pulse-train timer settings, f = teeth omega / 2 pi.
+//! * [`pulse`]: pulse-train timer settings, f = teeth omega / 2 pi, dithered periods.
+//! * [`timer_model`]: a counting model of a pulse timer (host tests, the simulated rig).
 //! * [`timing`]: step accounting from the DWT cycle counter (max, mean, overruns, missed ticks).
 //! * [`bus`]: CAN bus state supervision (error passive, bus-off, recovery).
 //! * [`can_timing`]: nominal CAN bit timing from the kernel clock and its oscillator tolerance.
@@ -67,6 +68,7 @@ pub mod sensor;
 pub mod setup;
 pub mod stack;
 pub mod telemetry;
+pub mod timer_model;
 pub mod timing;
 pub mod valves;
 

@@ -2,11 +2,15 @@
 //!
 //! Each wheelset drives one timer channel in PWM mode 1 at 50 % duty: the output frequency
 //! is f = f_timer / ((PSC + 1)(ARR + 1)). [`PulseTimer::registers`] picks the smallest
-//! prescaler that lets ARR + 1 fit the counter, then rounds ARR + 1 to the nearest count:
-//! the relative frequency error is at most 0.5 / (ARR + 1), and ARR + 1 >= 32768 whenever
-//! the prescaler is above 1, so the error is below 0.0016 % from 0.04 Hz up to 2.6 kHz and
-//! below 0.1 % up to f_timer / 500 (340 kHz at 170 MHz). Above that the frequency is held
-//! at f_timer / 500 (a wheel of 1000 teeth at 300 rad/s gives 48 kHz).
+//! prescaler that lets ARR + 1 fit the counter and splits the period into whole counts
+//! (ARR + 1) and a fraction of a count in 1/256 (`arr_frac`). One period is within a count
+//! of the exact one: a relative error below 1 / (ARR + 1), and ARR + 1 >= 32768 whenever
+//! the prescaler is above 1, so below 0.0031 % from 0.04 Hz up to 2.6 kHz and below 0.2 %
+//! up to f_timer / 500 (340 kHz at 170 MHz). [`PulseChannel`] dithers ARR between periods
+//! so that the mean period carries the fraction too: the mean frequency is exact to 1/256
+//! count (below 1.2e-7 of the speed up to 2.6 kHz), and a held speed shows no staircase.
+//! Above f_timer / 500 the frequency is held there (a wheel of 1000 teeth at 300 rad/s
+//! gives 48 kHz).
 //!
 //! **Standstill.** Below [`MIN_FREQUENCY_HZ`] (0.5 Hz: one edge per second or less is no
 //! speed signal) and for NaN the output is silent: CCR = 0 holds the pin low, with a short
@@ -40,6 +44,10 @@ pub struct PulseRegisters {
     pub arr: u32,
     /// TIMx_CCRy: high time, counts (0 = silent).
     pub ccr: u32,
+    /// The period's fraction of a count above ARR + 1, in 1/256: the channel dithers ARR
+    /// between ARR and ARR + 1 from one timer period to the next ([`PulseChannel`]), so that
+    /// the mean period is ARR + 1 + `arr_frac` / 256 counts (0: every period ARR + 1).
+    pub arr_frac: u8,
 }
 
 impl PulseRegisters {
@@ -131,6 +139,7 @@ impl PulseTimer {
             psc: 0,
             arr: period - 1,
             ccr: 0,
+            arr_frac: 0,
         }
     }
 
@@ -145,20 +154,33 @@ impl PulseTimer {
         let counts = u64_of(self.clock_hz as f32 / f + 0.5);
         let max_period = self.usable_max_period() as u64;
         let prescale = div_u64(counts + max_period - 1, max_period).clamp(1, 1 << 16);
-        let period = div_u64(counts + prescale / 2, prescale).clamp(2, max_period);
+        // The period in prescaled counts with its fraction (f32 holds 8 bits of fraction up
+        // to 65536 counts): ARR + 1 is its whole part, `arr_frac` the rest, dithered.
+        let exact = self.clock_hz as f32 / (f * prescale as f32);
+        let whole = u64_of(exact);
+        let (period, frac) = if whole < 2 {
+            (2, 0)
+        } else if whole >= max_period {
+            (max_period, 0)
+        } else {
+            (whole, ((exact - whole as f32) * 256.0) as u32)
+        };
         PulseRegisters {
             psc: (prescale - 1) as u16,
             arr: (period - 1) as u32,
             ccr: (period / 2) as u32,
+            arr_frac: frac.min(255) as u8,
         }
     }
 
-    /// The frequency a register setting produces, Hz (0 when silent).
+    /// The mean frequency a register setting produces, Hz (0 when silent): over the
+    /// dithered periods of a [`PulseChannel`], ARR + 1 + `arr_frac` / 256 counts each.
     pub fn frequency_of(&self, r: &PulseRegisters) -> f64 {
         if r.is_silent() {
             return 0.0;
         }
-        self.clock_hz as f64 / ((r.psc as f64 + 1.0) * (r.arr as f64 + 1.0))
+        let period = r.arr as f64 + 1.0 + r.arr_frac as f64 / 256.0;
+        self.clock_hz as f64 / ((r.psc as f64 + 1.0) * period)
     }
 }
 
@@ -178,9 +200,10 @@ pub enum PulseUpdate {
     Resume(PulseRegisters),
 }
 
-/// The update from the registers last written to `next` (module doc).
+/// The update from the registers last written to `next` (module doc). `arr_frac` is not a
+/// register: only PSC, ARR and CCR count.
 pub fn update(last: &PulseRegisters, next: &PulseRegisters) -> PulseUpdate {
-    if last == next {
+    if (last.psc, last.arr, last.ccr) == (next.psc, next.arr, next.ccr) {
         PulseUpdate::Keep
     } else if next.is_silent() {
         PulseUpdate::SilenceNow(*next)
@@ -208,6 +231,9 @@ pub trait PulseTimerRegs {
     fn set_pwm(&mut self, pwm: bool);
     /// TIMx_EGR.UG: counter to 0 and the preloaded registers into the shadows at once.
     fn generate_update(&mut self);
+    /// TIMx_SR.UIF, read and cleared: whether an update event (a new period, or UG) happened
+    /// since the last call.
+    fn take_update_flag(&mut self) -> bool;
 }
 
 /// PSC, ARR and CCR under UDIS (no update event between them).
@@ -237,6 +263,63 @@ pub fn apply(u: PulseUpdate, t: &mut impl PulseTimerRegs) {
             t.generate_update();
             t.set_pwm(true);
         }
+    }
+}
+
+/// One pulse channel as the step drives it: [`update`] and [`apply`] from the registers
+/// last written, with the period dithered so that its mean is exact.
+///
+/// **Dither** (a first-order sigma-delta over the timer's periods). A 16-bit period's
+/// resolution is one count in ARR + 1 (1.5e-5 to 3e-5 of the speed between 0.04 Hz and
+/// 2.6 kHz): held for many periods, that staircase is a speed error a WSP unit's
+/// deceleration filter sees. The channel keeps a residue, the sum of the fractions of the
+/// periods so far modulo 256. Each step writes ARR + 1 when the residue plus the setting's
+/// `arr_frac` carries over 256, ARR otherwise (preloaded: it is the next period's). At each
+/// update event (a new period started, TIMx_SR.UIF, read once per step) the residue takes
+/// the fraction of the setting that period was loaded from. So the periods' lengths sum to
+/// the settings' exact periods within one count, whatever the settings do between update
+/// events. Should more than one period end within a step (above 10 kHz), the residue takes
+/// one fraction for them: the mean stays within one count over the step.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PulseChannel {
+    /// The registers as last written (ARR with the dither's count; `arr_frac` the
+    /// setting's).
+    written: PulseRegisters,
+    /// Sum of the fractions of the periods so far, modulo 256.
+    residue: u8,
+}
+
+impl PulseChannel {
+    /// A channel whose timer holds `silent` ([`PulseTimer::silent`]).
+    pub const fn new(silent: PulseRegisters) -> Self {
+        Self {
+            written: silent,
+            residue: 0,
+        }
+    }
+
+    /// The registers as last written (with the dither's count in ARR).
+    pub fn written(&self) -> PulseRegisters {
+        self.written
+    }
+
+    /// The step's new setting `r`: the residue advanced if a period started since the last
+    /// step, then the update from the registers last written to `r` with the dither's
+    /// count (type doc).
+    #[inline]
+    pub fn write(&mut self, r: &PulseRegisters, t: &mut impl PulseTimerRegs) {
+        if t.take_update_flag() {
+            self.residue = self.residue.wrapping_add(self.written.arr_frac);
+        }
+        let mut next = *r;
+        // A fraction above 0 leaves ARR + 2 within the counter (`PulseTimer::registers`).
+        if !r.is_silent() && r.arr_frac > 0 {
+            next.arr += self.residue.checked_add(r.arr_frac).is_none() as u32;
+        } else {
+            next.arr_frac = 0;
+        }
+        apply(update(&self.written, &next), t);
+        self.written = next;
     }
 }
 
@@ -387,12 +470,23 @@ mod tests {
             }
             self.wrote();
         }
+        fn take_update_flag(&mut self) -> bool {
+            false
+        }
+    }
+
+    /// The registers of `f` as a timer holds them (no fraction: that is not a register).
+    fn regs(f: f32) -> PulseRegisters {
+        PulseRegisters {
+            arr_frac: 0,
+            ..TIMER.registers(f)
+        }
     }
 
     #[test]
     fn an_update_event_between_the_writes_never_loads_a_mixed_setting() {
         // 1297 Hz: the prescaler changes between these two (PSC 1 -> 2).
-        let (a, b) = (TIMER.registers(1300.0), TIMER.registers(1290.0));
+        let (a, b) = (regs(1300.0), regs(1290.0));
         assert_ne!(a.psc, b.psc);
         for at in 0..8 {
             let mut t = Timer::running(a);
@@ -420,7 +514,7 @@ mod tests {
 
     #[test]
     fn going_silent_is_at_once_and_coming_back_too() {
-        let slow = TIMER.registers(0.6); // a 1.7 s period
+        let slow = regs(0.6); // a 1.7 s period
         let silent = TIMER.silent();
         let mut t = Timer::running(slow);
         let u = update(&slow, &silent);
@@ -429,7 +523,7 @@ mod tests {
         // Low now, without waiting for the running period; the silent setting loaded.
         assert!(!t.output_can_be_high());
         assert_eq!((t.shadow, t.udis), (silent, false));
-        let fast = TIMER.registers(1388.0);
+        let fast = regs(1388.0);
         let u = update(&silent, &fast);
         assert_eq!(u, PulseUpdate::Resume(fast));
         apply(u, &mut t);
@@ -441,7 +535,7 @@ mod tests {
 
     #[test]
     fn a_new_duty_at_the_same_frequency_is_one_write_loaded_at_the_period_end() {
-        let a = TIMER.registers(500.0);
+        let a = regs(500.0);
         let b = PulseRegisters {
             ccr: a.ccr / 5,
             ..a
@@ -454,10 +548,7 @@ mod tests {
         t.update_event();
         assert_eq!(t.shadow, b);
         // A new period is never a duty-only update.
-        assert!(matches!(
-            update(&a, &TIMER.registers(400.0)),
-            PulseUpdate::Preload(_)
-        ));
+        assert!(matches!(update(&a, &regs(400.0)), PulseUpdate::Preload(_)));
     }
 
     proptest! {
@@ -472,6 +563,8 @@ mod tests {
             let timer = PulseTimer { clock_hz, max_period };
             let r = timer.registers(f);
             prop_assert!(r.arr >= 1 && r.arr < max_period.max(2));
+            // The dither's long period fits too.
+            prop_assert!(r.arr_frac == 0 || r.arr + 1 < max_period.max(2));
             prop_assert!(r.ccr <= r.arr);
             if clock_hz == 0 || !(f >= MIN_FREQUENCY_HZ) {
                 prop_assert!(r.is_silent());

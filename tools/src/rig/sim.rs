@@ -19,10 +19,11 @@
 //!   wired to the board as a real controller would be, every signal through the rig-core
 //!   code the board runs:
 //!   - wheel speeds from the four axle-speed pulse trains, as a WSP unit's speed sensor
-//!     inputs read them ([`SpeedSensors`]): the frequency of the timer registers the board
-//!     wrote (`hils_rig_core::pulse::PulseTimer::frequency_of`) times the wheel
-//!     circumference over the teeth (its configuration: the `Configure Teeth` and `Vehicle`
-//!     frames it sees); a silent train is a wheel at rest;
+//!     inputs read them ([`SpeedSensors`]): each train's mean frequency over the board's
+//!     period dither (`hils_rig_core::pulse::PulseTimer::frequency_of` of the setting the
+//!     board wrote; the board's channel code drives a counting timer model each tick) times
+//!     the wheel circumference over the teeth (its configuration: the `Configure Teeth` and
+//!     `Vehicle` frames it sees); a silent train is a wheel at rest;
 //!   - its brake demand from the train lines the board drives: the emergency brake loop
 //!     and the service demand PWM's registers, read through
 //!     `hils_rig_core::demand::{DemandConfig::decode_pwm, ControllerDemand}` (open loop or
@@ -64,9 +65,10 @@ use hils_rig_core::can::{
 use hils_rig_core::controller_io::{DrivenOutputs, IoConfig};
 use hils_rig_core::demand::ControllerDemand;
 use hils_rig_core::hw::{RigIo, TelemetryEvent};
-use hils_rig_core::pulse::{PulseRegisters, PulseTimer};
+use hils_rig_core::pulse::{PulseChannel, PulseRegisters, PulseTimer};
 use hils_rig_core::rig::{Rig, RigConfig};
 use hils_rig_core::sensor::{ADC_MAX_COUNTS, ADC_SEQUENCE_LEN, OVERSAMPLING, SensorKind};
+use hils_rig_core::timer_model::CountingTimer;
 use hils_rig_core::valves::{ValveLevels, ValveWiring};
 use hils_rig_core::{CHANNELS, STEP_RATE_HZ};
 
@@ -86,30 +88,102 @@ pub struct SimFaults {
     pub status_alive_frozen_at_s: Option<f64>,
 }
 
-/// The four pulse trains as the controller's axle speed sensor inputs read them: the
-/// frequency the board set each train to in its last step (`PulseTimer::frequency_of` of
-/// the registers it wrote; a silent train is a wheel at rest). An ideal frequency input, as
-/// SIL's unit reads the plant's wheel speeds: a real unit measures the pulses' period, a
-/// period late (at most 2 ms above 30 km/h with 90 teeth), which the simulated unit does
-/// not model in SIL either.
+/// The four pulse trains and the controller's axle speed sensor inputs that read them.
+///
+/// Each train is the board's channel logic (`hils_rig_core::pulse::PulseChannel`: update
+/// order, dithered periods) driving a counting model of its timer
+/// (`hils_rig_core::timer_model::CountingTimer`), which runs for one tick of board time
+/// before each step. The model checks the dither over whole runs
+/// ([`SimBoard::pulse_dither_check`]).
+///
+/// The controller's inputs read each train's frequency as its mean over the dither: the
+/// frequency of the setting the board wrote in its last step
+/// (`PulseTimer::frequency_of`, fraction included; a silent train is a wheel at rest). The
+/// pin's edges move by one timer count (5.9 ns at 170 MHz) from one period to the next,
+/// far below what a controller's speed input resolves (a capture clock of 1-10 MHz), and
+/// SIL's unit reads the plant's speeds as an ideal input too, without the period's delay
+/// of a period-measuring input.
 struct SpeedSensors {
     timer: PulseTimer,
-    /// Registers as written by the step.
-    written: [PulseRegisters; WHEELSETS],
+    channels: [PulseChannel; WHEELSETS],
+    timers: [CountingTimer; WHEELSETS],
+    /// The settings the step wrote last.
+    settings: [PulseRegisters; WHEELSETS],
+    /// Exact mean period of the setting each timer's running period was loaded from, and
+    /// of the one its next period loads, undivided counts (None: silent).
+    running: [Option<f64>; WHEELSETS],
+    dither: [DitherCheck; WHEELSETS],
+}
+
+/// Whole pulse periods of a train against the settings they were loaded from.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DitherCheck {
+    /// Periods that ended at the prescaler of the one before (a prescaler change starts
+    /// the dither's residue afresh in the new counts).
+    pub periods: u64,
+    /// Sum of (period - its setting's exact mean period), in prescaled counts.
+    pub sum_error_counts: f64,
 }
 
 impl SpeedSensors {
     fn new(timer: PulseTimer) -> Self {
         Self {
             timer,
-            written: [timer.silent(); WHEELSETS],
+            channels: [PulseChannel::new(timer.silent()); WHEELSETS],
+            timers: [CountingTimer::new(timer.silent()); WHEELSETS],
+            settings: [timer.silent(); WHEELSETS],
+            running: [None; WHEELSETS],
+            dither: [DitherCheck::default(); WHEELSETS],
+        }
+    }
+
+    /// Exact mean period of a setting, undivided counts (None: silent).
+    fn mean_period(&self, r: &PulseRegisters) -> Option<f64> {
+        let f = self.timer.frequency_of(r);
+        (f > 0.0).then(|| self.timer.clock_hz as f64 / f)
+    }
+
+    /// One tick of board time: the timers count; a period that ended is checked against
+    /// the setting it was loaded from.
+    fn run_tick(&mut self) {
+        let counts = self.timer.clock_hz as u64 / STEP_RATE_HZ as u64;
+        for j in 0..WHEELSETS {
+            let t = &mut self.timers[j];
+            let psc_before = t.shadow().psc;
+            let ended = t.run(counts);
+            if ended == 0 {
+                continue;
+            }
+            let (Some(p), Some(want)) = (t.last_period_counts(), self.running[j]) else {
+                self.running[j] = self.mean_period(&self.settings[j]);
+                continue;
+            };
+            let psc = t.shadow().psc;
+            if ended == 1 && psc == psc_before {
+                let d = &mut self.dither[j];
+                d.periods += 1;
+                d.sum_error_counts += (p as f64 - want) / (psc as f64 + 1.0);
+            }
+            self.running[j] = self.mean_period(&self.settings[j]);
+        }
+    }
+
+    /// The step's setting for a wheelset's train.
+    fn write(&mut self, wheelset: usize, r: &PulseRegisters) {
+        if let (Some(c), Some(t), Some(s)) = (
+            self.channels.get_mut(wheelset),
+            self.timers.get_mut(wheelset),
+            self.settings.get_mut(wheelset),
+        ) {
+            c.write(r, t);
+            *s = *r;
         }
     }
 
     /// Wheel circumferential speeds, m/s, for `teeth` teeth on wheels of radius `r_m`.
     fn speeds_mps(&self, teeth: u16, r_m: f64) -> [f32; WHEELSETS] {
-        self.written.map(|regs| {
-            (self.timer.frequency_of(&regs) * core::f64::consts::TAU * r_m / teeth.max(1) as f64)
+        self.settings.map(|r| {
+            (self.timer.frequency_of(&r) * core::f64::consts::TAU * r_m / teeth.max(1) as f64)
                 as f32
         })
     }
@@ -163,9 +237,7 @@ impl RigIo for SimIo {
     }
 
     fn set_pulse(&mut self, wheelset: usize, registers: &PulseRegisters) {
-        if let Some(w) = self.pulses.written.get_mut(wheelset) {
-            *w = *registers;
-        }
+        self.pulses.write(wheelset, registers);
     }
 
     fn queue_frame(&mut self, frame: ClassicFrame) -> bool {
@@ -378,6 +450,12 @@ impl SimBoard {
         &self.rig
     }
 
+    /// Each pulse train's whole periods against the settings they were loaded from, over
+    /// the session so far: the board's dither keeps their sum within a count or so.
+    pub fn pulse_dither_check(&self) -> [DitherCheck; WHEELSETS] {
+        self.io.pulses.dither
+    }
+
     /// The carbody mass the controller's load weighing found at its last start, kg.
     pub fn controller_weighed_carbody_kg(&self) -> Option<f64> {
         self.controller.weighed_carbody_kg
@@ -398,6 +476,7 @@ impl SimBoard {
         // The board's builder task (thread mode): a requested run is built and handed over
         // between two steps; a build error is in the status frame as on the board.
         let _ = self.rig.build_pending();
+        self.io.pulses.run_tick();
         let out = self.controller.step(&self.io.driven, &self.io.pulses);
         self.io.pressure_pa = out.pressure_pa;
         let wiring = self.rig.config().io.valves;
