@@ -441,17 +441,28 @@ fn programme_args(
 /// `hils wsp-test`'s metrics (its JSON keys), the service brake reaches its demanded
 /// deceleration, a run the frames cannot carry is listed with the reason; the report puts
 /// each rig run beside its SIL run.
-/// Without `--arm` a programme is refused before anything is sent or written: running it
-/// would drive the controller under test.
+/// Without `--arm` a programme on a CAN interface is refused before anything is opened, sent
+/// or written: running it would drive the controller under test. `--interface sim` drives
+/// only its simulated controller: it runs without `--arm`, arming each run as with it.
 #[test]
-fn programme_without_arm_is_refused_and_writes_nothing() {
+fn programme_without_arm_is_refused_on_a_can_interface_and_runs_on_sim() {
     let dir = out_dir("programme-unarmed");
     let (mut rig, mut run) = programme_args(&dir, &[]);
     run.arm = false;
+    rig.interface = "can0".into();
     rig.command = hils::rig::RigCommand::Run(run.clone());
     let e = hils::rig::programme::main(&rig, &run).unwrap_err();
     assert!(format!("{e:#}").contains("--arm"), "{e:#}");
     assert!(!dir.join("out.json").exists() && !dir.join("report").exists());
+
+    rig.interface = "sim".into();
+    run.only = Some("dry-service-40".into());
+    rig.command = hils::rig::RigCommand::Run(run.clone());
+    hils::rig::programme::main(&rig, &run).expect("sim runs unarmed by the flag");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out.json")).unwrap()).unwrap();
+    assert_eq!(json[0]["on_rig"], true, "{json}");
+    assert_eq!(json[0]["end"], "finished", "{json}");
 }
 
 #[test]

@@ -97,9 +97,10 @@ pub struct RunArgs {
     /// Only the runs whose name contains this.
     #[arg(long)]
     pub only: Option<String>,
-    /// Arm the board before each run's start (required): the runs drive the controller
-    /// under test (pulse trains, wheel speeds); the board disarms at every stop, fault and
-    /// reset, so each run is armed again.
+    /// Arm the board before each run's start (required on a CAN interface): the runs drive
+    /// the controller under test (pulse trains, wheel speeds); the board disarms at every
+    /// stop, fault and reset, so each run is armed again. `--interface sim` arms without it:
+    /// its controller is the simulated one in this process, no real controller is driven.
     #[arg(long)]
     pub arm: bool,
     /// The rig's controller I/O configuration, sent before the first run (`hils rig
@@ -426,7 +427,8 @@ fn configure_board<T: Transport>(s: &mut Session<T>, io: Option<&IoConfig>) -> R
 /// `hils rig run`: `--report DIR` is required (each run's log is written there, with the
 /// report: nothing is written into the current folder unasked).
 pub fn main(rig: &RigArgs, args: &RunArgs) -> Result<()> {
-    if !args.arm {
+    // The arming rule protects a real controller: `--interface sim` has none on its bus.
+    if !args.arm && rig.interface != "sim" {
         return Err(anyhow!(
             "hils rig run --programme drives the controller under test from each run's start: add --arm to arm the board before each run (docs/rig.md, Arming)"
         ));
