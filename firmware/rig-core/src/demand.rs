@@ -108,9 +108,14 @@ impl DemandConfig {
     }
 
     /// The PWM's prescaler and period at the configured frequency: they depend on the
-    /// configuration only, so the step computes them once per configuration.
+    /// configuration only, so the step computes them once per configuration. Without a
+    /// fraction: the demand is the duty, and an undithered period keeps PSC and ARR written
+    /// once (`pulse::PulseChannel` dithers only a setting with a fraction).
     pub fn pwm_period(&self, timer: &PulseTimer) -> PulseRegisters {
-        timer.registers(self.pwm_frequency_hz as f32)
+        PulseRegisters {
+            arr_frac: 0,
+            ..timer.registers(self.pwm_frequency_hz as f32)
+        }
     }
 
     /// [`Self::pwm`] in a period from [`Self::pwm_period`]: the duty's compare value only.

@@ -99,8 +99,9 @@ pub struct SimFaults {
 /// The controller's inputs read each train's frequency as its mean over the dither: the
 /// frequency of the setting the board wrote in its last step
 /// (`PulseTimer::frequency_of`, fraction included; a silent train is a wheel at rest). The
-/// pin's edges move by one timer count (5.9 ns at 170 MHz) from one period to the next,
-/// far below what a controller's speed input resolves (a capture clock of 1-10 MHz), and
+/// pin's edges move by one timer count from one period to the next (at most 3e-5 of the
+/// period below 2.6 kHz: 12 ns at 1388 Hz), below what a controller's speed input resolves
+/// (a capture clock of 1-10 MHz), and
 /// SIL's unit reads the plant's speeds as an ideal input too, without the period's delay
 /// of a period-measuring input.
 struct SpeedSensors {
