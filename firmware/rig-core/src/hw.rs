@@ -59,6 +59,8 @@ pub trait RigIo {
     fn adc_sequence(&mut self) -> Option<[u16; ADC_SEQUENCE_LEN]>;
 
     /// Sets the pulse output of a wheelset (0-3); takes effect at the next timer period.
+    /// Called every step; the board writes it through [`crate::pulse::PulseChannel`], which
+    /// dithers the period by the setting's `arr_frac`.
     fn set_pulse(&mut self, wheelset: usize, registers: &PulseRegisters);
 
     /// Queues a frame for transmission; `false` if the queue is full (the frame is lost).
