@@ -36,7 +36,7 @@ pub const BACKOFF_MAX_MS: u32 = 1000;
 pub enum AdcAction {
     /// Nothing.
     None,
-    /// Restart the ring ([`restart`], with the step masked).
+    /// Restart the ring ([`stop`] then [`realign`], with the step masked).
     Restart,
 }
 

@@ -151,8 +151,8 @@ impl NominalBitTiming {
         }
     }
 
-    /// The FDCAN_NBTP register value (each field holds its value minus one): NSJW [31:25],
-    /// NBRP [24:16], NTSEG1 [15:8], NTSEG2 [6:0].
+    /// The FDCAN_NBTP register value (each field holds its value minus one): NSJW \[31:25\],
+    /// NBRP \[24:16\], NTSEG1 \[15:8\], NTSEG2 \[6:0\].
     pub fn nbtp(&self) -> u32 {
         ((self.sjw as u32 - 1) << 25)
             | ((self.prescaler as u32 - 1) << 16)

@@ -740,7 +740,7 @@ impl<S: SimStore> Rig<S> {
     }
 
     /// The plant outputs of the run (None without a run), built on demand
-    /// ([`hils_plant::Plant::outputs`]; the tick uses [`Self::plant`]'s cheap accessors).
+    /// ([`hils_plant::Plant::outputs`]; the tick uses the plant's cheap accessors).
     pub fn outputs(&self) -> Option<Outputs<f32>> {
         self.plant().map(|p| p.outputs())
     }
