@@ -465,7 +465,7 @@ fn a_friction_test_in_two_channel_groups_is_read_whole_and_says_so() {
     let path = data("friction_two_rates.mf4");
     let m = map("friction_two_rates");
     let whole = read_friction_test_with(&path, Some(&m)).unwrap_or_else(|e| panic!("{e}"));
-    let (mut mu, mut chunks) = (Vec::new(), 0);
+    let (mut mu, mut chunks) = (Vec::<f64>::new(), 0);
     let open = || std::fs::File::open(&path).map(std::io::BufReader::new);
     let streamed = stream_friction_test_with(&path, Some(&m), open, |c| {
         mu.extend(&c.mu);
