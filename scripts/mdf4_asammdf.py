@@ -28,6 +28,13 @@ reference Python implementation). Called by scripts/mdf4-asammdf.sh; subcommands
                      project's reader gives (DUMP: `cargo build -p hils --example mdf4_dump
                      --features mdf4-dump`, target/debug/examples/mdf4_dump) equals asammdf's.
                      Not run by CI.
+  friction CSV OUT_STEM [--slow-temp] [--compression N]
+                     a spec friction-test CSV (`hils bench --reader X.csv
+                     --write-friction-points N`) as a dynamometer logger writes it:
+                     Speed in km/h, DiscTemp in degC, Mu, at 10 kHz (the CSV's `t_s`, else
+                     the row index times 0.1 ms); --slow-temp: DiscTemp in a second group at
+                     every 10th row. Writes OUT_STEM.mf4 and OUT_STEM.map.toml (for
+                     fit-friction's memory figures, docs/mdf4.md). Not run by CI.
 """
 import argparse
 import json
@@ -566,6 +573,31 @@ def vlsd(args):
     print(f"vlsd: every sample equal to asammdf's: {total} samples")
 
 
+def friction(args):
+    import pandas as pd
+    df = pd.read_csv(args.csv, comment="#")
+    n = len(df)
+    t = df["t_s"].to_numpy() if "t_s" in df else np.arange(n) * 1e-4
+    speed = Signal(df["v_friction_mps"].to_numpy() / KMH, t, name="Speed", unit="km/h")
+    temp = Signal(df["t_disc_c"].to_numpy(), t, name="DiscTemp", unit="degC")
+    mu = Signal(df["mu"].to_numpy(), t, name="Mu", unit="-")
+    del df
+    mdf = MDF(version="4.10")
+    if args.slow_temp:
+        mdf.append([speed, mu], comment="fast")
+        mdf.append([Signal(temp.samples[::10], t[::10], name="DiscTemp", unit="degC")],
+                   comment="slow")
+    else:
+        mdf.append([speed, temp, mu], comment="dynamometer")
+    mdf.header.comment = header_xml([("source", f"scripts/mdf4_asammdf.py friction {args.csv}")])
+    mdf.save(args.out_stem + ".mf4", overwrite=True, compression=args.compression)
+    with open(args.out_stem + ".map.toml", "w") as f:
+        f.write("# scripts/mdf4_asammdf.py friction\n")
+        for col, name in (("v_friction_mps", "Speed"), ("t_disc_c", "DiscTemp"), ("mu", "Mu")):
+            f.write(f'[channels.{col}]\nfrom = "{name}"\n')
+    print(f"friction: {n} rows -> {args.out_stem}.mf4")
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -602,6 +634,12 @@ def main():
     v.add_argument("dump")
     v.add_argument("n", type=int, nargs="?", default=2000)
     v.set_defaults(f=vlsd)
+    f = sub.add_parser("friction")
+    f.add_argument("csv")
+    f.add_argument("out_stem")
+    f.add_argument("--slow-temp", action="store_true")
+    f.add_argument("--compression", type=int, default=0)
+    f.set_defaults(f=friction)
     a = p.parse_args()
     a.f(a)
 

@@ -468,8 +468,8 @@ fn progress(show: bool, template: &str) -> ProgressBar {
     bar
 }
 
-/// Reads friction test `f` (CSV in chunks, MDF4 whole) through the channel `map`, adding
-/// its points to `gathered`; `bar` counts the bytes read.
+/// Reads friction test `f` (in row chunks: a CSV, an MDF4 file's one channel group)
+/// through the channel `map`, adding its points to `gathered`; `bar` counts the bytes read.
 fn read_into(
     f: &Path,
     map: Option<&ChannelMap>,

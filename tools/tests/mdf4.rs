@@ -9,6 +9,8 @@
 //! a slow channel has no sample) and the channel map. The project's reader must give the
 //! same run log from the MDF4 file and the map as from that CSV.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 
 use hils::measured::{ChannelMap, RunLog, read_run_log, read_run_log_with};
@@ -388,4 +390,102 @@ proptest::proptest! {
             }
         }
     }
+}
+
+/// The fit-friction figures of a JSON without what names the files and the time taken.
+fn fit_figures(dir: &Path, json: &str) -> serde_json::Value {
+    let text = std::fs::read_to_string(dir.join(json)).unwrap();
+    let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let o = v.as_object_mut().unwrap();
+    o.remove("files");
+    o.remove("wall_s");
+    v
+}
+
+/// `fit-friction` reads an MDF4 friction test in row chunks (its one channel group, chunk
+/// by chunk of records) and fits it to exactly the figures of the CSV of the same numbers:
+/// 250,000 points, four chunks, fitted as cells (beyond 200,000 points).
+#[test]
+fn fit_friction_of_an_mdf4_test_equals_its_csv() {
+    use hils::mdf4::write::{Column, ColumnValues, write};
+    let dir = common::temp_dir("mdf4-fit");
+    let n = 250_000;
+    let text = common::friction_test_text(n);
+    std::fs::write(dir.join("ft.csv"), &text).unwrap();
+    let mut cols = [Vec::new(), Vec::new(), Vec::new()];
+    for line in text.lines().skip(2) {
+        for (c, cell) in cols.iter_mut().zip(line.split(',')) {
+            c.push(cell.parse::<f64>().unwrap());
+        }
+    }
+    let columns: Vec<Column> = [("Speed", "m/s"), ("DiscTemp", "degC"), ("Mu", "")]
+        .iter()
+        .zip(cols)
+        .map(|(&(name, unit), v)| Column {
+            name,
+            unit,
+            comment: "",
+            values: ColumnValues::Num(v),
+        })
+        .collect();
+    let t: Vec<f64> = (0..n).map(|k| k as f64 * 1e-3).collect();
+    let meta = [("source", "test (synthetic, Eq 2)".to_string())];
+    let file = std::fs::File::create(dir.join("ft.mf4")).unwrap();
+    write(file, "friction test", &meta, &t, &columns).unwrap();
+    std::fs::write(
+        dir.join("m.toml"),
+        "[channels.v_friction_mps]\nfrom = \"Speed\"\n[channels.t_disc_c]\nfrom = \"DiscTemp\"\n\
+         [channels.mu]\nfrom = \"Mu\"\nunit = \"-\"\n",
+    )
+    .unwrap();
+    common::hils_ok(&dir, args!["fit-friction", "--json", "csv.json", "ft.csv"]);
+    let mf4_args = args![
+        "fit-friction",
+        "--map",
+        "m.toml",
+        "--json",
+        "mf4.json",
+        "ft.mf4"
+    ];
+    common::hils_ok(&dir, mf4_args);
+    let (csv, mf4) = (fit_figures(&dir, "csv.json"), fit_figures(&dir, "mf4.json"));
+    assert_eq!(mf4["points"], n, "{mf4}");
+    assert!(mf4["cells"].is_object(), "fitted as cells: {mf4}");
+    assert_eq!(csv, mf4);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A friction test whose channels are in two channel groups (DiscTemp at a tenth of the
+/// rate; asammdf wrote it: `scripts/mdf4_asammdf.py friction ... --slow-temp`) is read
+/// whole to put them on one time grid: the same points as the whole-file reader, and a
+/// note that says it was not read in row chunks.
+#[test]
+fn a_friction_test_in_two_channel_groups_is_read_whole_and_says_so() {
+    use hils::measured::{read_friction_test_with, stream_friction_test_with};
+    let path = data("friction_two_rates.mf4");
+    let m = map("friction_two_rates");
+    let whole = read_friction_test_with(&path, Some(&m)).unwrap_or_else(|e| panic!("{e}"));
+    let (mut mu, mut chunks) = (Vec::<f64>::new(), 0);
+    let open = || std::fs::File::open(&path).map(std::io::BufReader::new);
+    let streamed = stream_friction_test_with(&path, Some(&m), open, |c| {
+        mu.extend(&c.mu);
+        chunks += 1;
+        Ok(())
+    })
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(
+        (chunks, mu.len()),
+        (1, 50),
+        "DiscTemp at every 10th of 500 rows"
+    );
+    assert_eq!(mu, whole.mu);
+    assert_eq!(streamed.skipped, whole.skipped);
+    assert!(
+        streamed
+            .notes
+            .iter()
+            .any(|n| n.contains("2 channel groups") && n.contains("read whole")),
+        "{:?}",
+        streamed.notes
+    );
 }

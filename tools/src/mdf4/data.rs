@@ -312,14 +312,47 @@ fn too_many_texts(ch: &ChannelInfo) -> ChannelError {
     }
 }
 
+/// An error of [`Mdf4::read_group_chunks`]: the file's (about a channel or the group), or
+/// the one its caller's `each` returned.
+#[derive(Debug)]
+pub enum ChunkError<E> {
+    File(ChannelError),
+    Each(E),
+}
+
+impl<E> From<ChannelError> for ChunkError<E> {
+    fn from(e: ChannelError) -> Self {
+        ChunkError::File(e)
+    }
+}
+
+/// A chunk of a group's records: the time of each (the master channel's values) and the
+/// values of the channels asked for.
+pub type Chunk = (Vec<f64>, Vec<Values>);
+
 impl<'a> Mdf4<'a> {
     /// The time of every record of group `g` (s, from its master channel's values) and the
     /// values of its channels `wanted` (indices into `g.channels`).
-    pub fn read_group(
+    pub fn read_group(&self, g: usize, wanted: &[usize]) -> Result<Chunk, ChannelError> {
+        let never = |_: Chunk| -> Result<(), ChannelError> { Ok(()) };
+        self.read_group_chunks(g, wanted, usize::MAX, never)
+            .map_err(|e| match e {
+                ChunkError::File(e) | ChunkError::Each(e) => e,
+            })
+    }
+
+    /// [`Mdf4::read_group`] in chunks of `chunk_rows` records, for groups too large to
+    /// hold: each full chunk is handed to `each`, then dropped; the last (partial, maybe
+    /// empty) chunk is returned. Memory is the chunk and the read window (1 MiB of record
+    /// data or one DZ block), whatever the group's length. A text channel whose texts sit
+    /// in a VLSD channel group (known only at the data's end) makes one chunk of the group.
+    pub fn read_group_chunks<E>(
         &self,
         g: usize,
         wanted: &[usize],
-    ) -> Result<(Vec<f64>, Vec<Values>), ChannelError> {
+        chunk_rows: usize,
+        mut each: impl FnMut(Chunk) -> Result<(), E>,
+    ) -> Result<Chunk, ChunkError<E>> {
         let group = &self.groups[g];
         let master = group
             .time_master()
@@ -334,9 +367,17 @@ impl<'a> Mdf4<'a> {
             .iter()
             .map(|d| d.vlsd.then(|| self.vlsd_source(group, d.ch)).transpose())
             .collect::<Result<Vec<_>, _>>()?;
+        let chunk_rows = match sources
+            .iter()
+            .any(|s| matches!(s, Some(VlsdSource::Cg { .. })))
+        {
+            true => usize::MAX,
+            false => chunk_rows.max(1),
+        };
         // Room for the group's records (its count, bounded by what the file can hold).
         let record = (group.data_bytes + group.inval_bytes).max(1) as u64;
         let room = group.cycle_count.min(self.blocks.src.size() / record) as usize;
+        let room = room.min(chunk_rows);
         let mut out: Vec<Values> = decoders.iter().map(|d| d.empty(room)).collect();
         let sizes = self.record_sizes(group.dg);
         let mut stream =
@@ -379,7 +420,7 @@ impl<'a> Mdf4<'a> {
                 continue;
             }
             if rec.len() < own {
-                return Err(group_err(
+                return Err(ChunkError::File(group_err(
                     group,
                     format!(
                         "record {} has {} bytes, the group's records {own}: two groups share \
@@ -387,30 +428,31 @@ impl<'a> Mdf4<'a> {
                         index + 1,
                         rec.len()
                     ),
-                ));
+                )));
             }
             decode_record(&decoders, &mut sources, rec, index, &mut out)?;
             index += 1;
+            if out[0].len() >= chunk_rows {
+                let full = decoders.iter().map(|d| d.empty(room)).collect();
+                each(time_and_values(group, std::mem::replace(&mut out, full))?)
+                    .map_err(ChunkError::Each)?;
+            }
         }
         if index != group.cycle_count {
-            return Err(group_err(
+            return Err(ChunkError::File(group_err(
                 group,
                 format!(
                     "{index} records in the data, the group says {}: a truncated or damaged file",
                     group.cycle_count
                 ),
-            ));
+            )));
         }
         for ((d, s), o) in decoders.iter().zip(sources).zip(out.iter_mut()) {
             if let Some(VlsdSource::Cg { records, offsets }) = s {
                 d.resolve(&records, &offsets, o)?;
             }
         }
-        let time = match out.remove(0) {
-            Values::Num(t) => t,
-            Values::Text(_) => return Err(group_err(group, "the time master is a text")),
-        };
-        Ok((time, out))
+        Ok(time_and_values(group, out)?)
     }
 
     /// The source of VLSD text channel `ch` of `group`: its signal data, or (MDF 4.2) the
@@ -481,6 +523,14 @@ impl<'a> Mdf4<'a> {
                 "record id {rid} belongs to no channel group of the data group"
             )),
         }
+    }
+}
+
+/// The master channel's values (the first of `out`) as times, and the other channels'.
+fn time_and_values(group: &Group, mut out: Vec<Values>) -> Result<Chunk, ChannelError> {
+    match out.remove(0) {
+        Values::Num(t) => Ok((t, out)),
+        Values::Text(_) => Err(group_err(group, "the time master is a text")),
     }
 }
 

@@ -163,10 +163,29 @@ pub fn stream_friction_test<R: std::io::BufRead>(
     path: &std::path::Path,
     map: Option<&super::ChannelMap>,
     mut open: impl FnMut() -> std::io::Result<R>,
+    each: impl FnMut(&FrictionTest) -> Result<(), MeasuredError>,
+) -> Result<FrictionTest, MeasuredError> {
+    use super::table::{file_error, read_table_chunks};
+    let read = |chunk: &mut ChunkFn| {
+        let input = open().map_err(|e| file_error(path, format!("cannot read: {e}")))?;
+        read_table_chunks(path, input, map, CHUNK_ROWS, chunk)
+    };
+    stream_chunks(path, map, read, each)
+}
+
+/// What a table reader hands each chunk of rows to.
+pub(crate) type ChunkFn<'c> = dyn FnMut(&mut Table) -> Result<(), MeasuredError> + 'c;
+
+/// [`stream_friction_test`] of a table reader of either format: `read` reads the file
+/// once, handing each full chunk of [`CHUNK_ROWS`] rows to its argument and returning the
+/// last (partial) chunk; it is called once, or twice for mu from the forces.
+pub(crate) fn stream_chunks(
+    path: &std::path::Path,
+    map: Option<&super::ChannelMap>,
+    mut read: impl FnMut(&mut ChunkFn) -> Result<Table, MeasuredError>,
     mut each: impl FnMut(&FrictionTest) -> Result<(), MeasuredError>,
 ) -> Result<FrictionTest, MeasuredError> {
-    use super::table::{Kind, file_error, read_table_chunks};
-    let mut input = || open().map_err(|e| file_error(path, format!("cannot read: {e}")));
+    use super::table::{Kind, file_error};
     let (mut total, mut skipped) = (FrictionTest::default(), Skipped::default());
     let mut take = |t: &mut Table, clamp_max: f64| -> Result<(), MeasuredError> {
         let (chunk, s) = points_of(t, clamp_max)?;
@@ -192,14 +211,14 @@ pub fn stream_friction_test<R: std::io::BufRead>(
             Ok(())
         }
     };
-    let mut last = read_table_chunks(path, input()?, map, CHUNK_ROWS, &mut first_pass)?;
+    let mut last = read(&mut first_pass)?;
     first_pass(&mut last)?;
     if last.rows_before + last.rows() == 0 {
         return Err(last.err(last.header_line, 0, "", "no data rows"));
     }
     if !direct(&last) {
         let max = clamp_max.get();
-        last = read_table_chunks(path, input()?, map, CHUNK_ROWS, |t| take(t, max))?;
+        last = read(&mut |t| take(t, max))?;
         take(&mut last, max)?;
     }
     super::check_metadata(&mut last, map)?;

@@ -23,7 +23,7 @@ use super::map::{ChannelMap, Resolved, resolve};
 use super::table::{Cells, MeasuredError, Metadata, Table, TextColumn, file_error};
 use super::units::{Quantity, to_si};
 use crate::mdf4::blocks::ReadAt;
-use crate::mdf4::data::{ChannelError, Values};
+use crate::mdf4::data::{ChannelError, Chunk, ChunkError, Values};
 use crate::mdf4::{Group, Mdf4};
 
 /// A used channel: where it is in the file and which table column it fills.
@@ -33,12 +33,21 @@ struct Used {
     channel: usize,
 }
 
-/// Reads an MDF4 file into a table (columns named and converted by `map`).
-pub(crate) fn read_table(
+/// An MDF4 file opened: its structure, its table (no rows yet), the used channels and
+/// what reading it did that a user should know.
+struct Opened<'a> {
+    mdf: Mdf4<'a>,
+    table: Table,
+    used: Vec<Used>,
+    notes: Vec<String>,
+}
+
+/// Opens an MDF4 file: its channels named and converted by `map` into a table's columns.
+fn open<'a>(
     path: &Path,
-    src: &dyn ReadAt,
+    src: &'a dyn ReadAt,
     map: Option<&ChannelMap>,
-) -> Result<Table, MeasuredError> {
+) -> Result<Opened<'a>, MeasuredError> {
     let mdf = Mdf4::open(src).map_err(|e| file_error(path, e))?;
     let mut notes = Vec::new();
     let map = without_time(map, &mut notes);
@@ -51,7 +60,7 @@ pub(crate) fn read_table(
     }];
     resolved.extend(resolve(map.as_ref(), path, &names, &units)?);
     let metadata = Metadata(mdf.metadata.clone());
-    let mut table = Table::new(path, metadata, resolved, 0)?;
+    let table = Table::new(path, metadata, resolved, 0)?;
     let used: Vec<Used> = (1..table.header.len())
         .filter(|&i| !matches!(table.columns[i], Cells::Ignored))
         .map(|i| Used {
@@ -61,9 +70,103 @@ pub(crate) fn read_table(
         })
         .collect();
     check_unique(&mdf, &table, &used, &names)?;
-    fill(&mdf, &mut table, &used, &mut notes)?;
+    Ok(Opened {
+        mdf,
+        table,
+        used,
+        notes,
+    })
+}
+
+/// Reads an MDF4 file into a table (columns named and converted by `map`).
+pub(crate) fn read_table(
+    path: &Path,
+    src: &dyn ReadAt,
+    map: Option<&ChannelMap>,
+) -> Result<Table, MeasuredError> {
+    let mut f = open(path, src, map)?;
+    fill(&f.mdf, &mut f.table, &f.used, &mut f.notes)?;
+    f.table.notes.extend(f.notes);
+    Ok(f.table)
+}
+
+/// [`read_table`] in chunks of `chunk_rows` rows, as the CSV reader's
+/// [`super::table::read_table_chunks`]: each full chunk is handed to `each` (the table
+/// holding those rows only; rows in errors count from the group's first record), then
+/// dropped; the table returned holds the last, partial chunk. When every used channel is
+/// in one channel group (with its time master), that group's records are read chunk by
+/// chunk: memory is bounded by the chunk, whatever the file's length. Used channels in
+/// several groups (different rates) are put on one time grid, which needs every time of
+/// the master: the file is read whole (one table returned, `each` not called), noted.
+pub(crate) fn read_table_chunks(
+    path: &Path,
+    src: &dyn ReadAt,
+    map: Option<&ChannelMap>,
+    chunk_rows: usize,
+    mut each: impl FnMut(&mut Table) -> Result<(), MeasuredError>,
+) -> Result<Table, MeasuredError> {
+    let Opened {
+        mdf,
+        mut table,
+        used,
+        mut notes,
+    } = open(path, src, map)?;
+    let groups = used_groups(&used);
+    let &[g] = groups.as_slice() else {
+        fill(&mdf, &mut table, &used, &mut notes)?;
+        notes.push(format!(
+            "the channels used are in {} channel groups (at their own rates): the file was \
+             read whole to put them on one time grid, not in row chunks, so its memory grows \
+             with its length (docs/mdf4.md)",
+            groups.len()
+        ));
+        table.notes.extend(notes);
+        return Ok(table);
+    };
     table.notes.extend(notes);
+    let mine: Vec<&Used> = used.iter().collect();
+    let wanted: Vec<usize> = mine.iter().map(|u| u.channel).collect();
+    table.labels[0] = format!("t_s (the time of {})", mdf.groups[g].label());
+    let mut first = None;
+    let last = mdf
+        .read_group_chunks(g, &wanted, chunk_rows, |chunk| {
+            take_chunk(&mdf, &mut table, &mine, g, chunk, &mut first)?;
+            each(&mut table)?;
+            table.next_chunk(Some(0));
+            Ok(())
+        })
+        .map_err(|e| match e {
+            ChunkError::File(e) => channel_err(&mdf, &table, &mine, g, e),
+            ChunkError::Each(e) => e,
+        })?;
+    take_chunk(&mdf, &mut table, &mine, g, last, &mut first)?;
     Ok(table)
+}
+
+/// Puts a chunk of group `g`'s records (the `mine` channels) into the table, checking
+/// every time and value (`first`: the group's first time, for the span check).
+fn take_chunk(
+    mdf: &Mdf4,
+    table: &mut Table,
+    mine: &[&Used],
+    g: usize,
+    (mut time_s, values): Chunk,
+    first: &mut Option<f64>,
+) -> Result<(), MeasuredError> {
+    time_in_s(mdf, table, g, &mut time_s)?;
+    put_time(table, &time_s, first)?;
+    for (u, v) in mine.iter().zip(values) {
+        store(table, u.column, v)?;
+    }
+    Ok(())
+}
+
+/// The channel groups of the used channels, in order, each once.
+fn used_groups(used: &[Used]) -> Vec<usize> {
+    let mut groups: Vec<usize> = used.iter().map(|u| u.group).collect();
+    groups.sort_unstable();
+    groups.dedup();
+    groups
 }
 
 /// The map without a `t_s` entry (the time is the groups' master channels), noted.
@@ -148,9 +251,7 @@ fn fill(
     used: &[Used],
     notes: &mut Vec<String>,
 ) -> Result<(), MeasuredError> {
-    let mut groups: Vec<usize> = used.iter().map(|u| u.group).collect();
-    groups.sort_unstable();
-    groups.dedup();
+    let groups = used_groups(used);
     let mut data = Vec::with_capacity(groups.len());
     for &g in &groups {
         data.push(read_group(mdf, table, used, g)?);
@@ -165,16 +266,7 @@ fn fill(
     let grid = std::mem::take(&mut data[master].time_s);
     let grid_label = mdf.groups[data[master].group].label();
     table.labels[0] = format!("t_s (the time of {grid_label})");
-    table.lines = vec![0; grid.len()];
-    let mut first = None;
-    for (k, &t) in grid.iter().enumerate() {
-        if let Cells::Numeric(v, limit) = &mut table.columns[0] {
-            v.push(t);
-            let limit = *limit;
-            table.check_value(k, 0, t, limit)?;
-        }
-        table.check_time(k, 0, &mut first)?;
-    }
+    put_time(table, &grid, &mut None)?;
     for (i, d) in data.into_iter().enumerate() {
         let own_grid = i == master;
         for (col, values) in d.columns {
@@ -187,6 +279,21 @@ fn fill(
             };
             store(table, col, values)?;
         }
+    }
+    Ok(())
+}
+
+/// Puts the times of the table's rows (`grid`, s) in its time column, checking each
+/// (`first`: the log's first time, for the span check).
+fn put_time(table: &mut Table, grid: &[f64], first: &mut Option<f64>) -> Result<(), MeasuredError> {
+    table.lines = vec![0; grid.len()];
+    for (k, &t) in grid.iter().enumerate() {
+        if let Cells::Numeric(v, limit) = &mut table.columns[0] {
+            v.push(t);
+            let limit = *limit;
+            table.check_value(k, 0, t, limit)?;
+        }
+        table.check_time(k, 0, first)?;
     }
     Ok(())
 }
@@ -208,15 +315,39 @@ fn read_group(
 ) -> Result<GroupData, MeasuredError> {
     let mine: Vec<&Used> = used.iter().filter(|u| u.group == g).collect();
     let wanted: Vec<usize> = mine.iter().map(|u| u.channel).collect();
-    let label_of = |e: &ChannelError| {
-        mine.iter()
-            .find(|u| mdf.groups[g].channels[u.channel].name == e.channel)
-            .map_or(e.channel.clone(), |u| table.labels[u.column].clone())
-    };
-    let (mut time_s, values) = mdf.read_group(g, &wanted).map_err(|e| MeasuredError {
-        column: label_of(&e),
+    let (mut time_s, values) = mdf
+        .read_group(g, &wanted)
+        .map_err(|e| channel_err(mdf, table, &mine, g, e))?;
+    time_in_s(mdf, table, g, &mut time_s)?;
+    Ok(GroupData {
+        group: g,
+        time_s,
+        columns: mine.iter().map(|u| u.column).zip(values).collect(),
+    })
+}
+
+/// An error of the MDF4 reader about a channel of group `g` (one of `mine`), named as
+/// the file and the map name it.
+fn channel_err(
+    mdf: &Mdf4,
+    table: &Table,
+    mine: &[&Used],
+    g: usize,
+    e: ChannelError,
+) -> MeasuredError {
+    let column = mine
+        .iter()
+        .find(|u| mdf.groups[g].channels[u.channel].name == e.channel)
+        .map_or(e.channel.clone(), |u| table.labels[u.column].clone());
+    MeasuredError {
+        column,
         ..file_error(&table.path, e.message)
-    })?;
+    }
+}
+
+/// Converts group `g`'s times (its records after the table's `rows_before`) to s and
+/// checks that they increase (from the table's `time_before`, the chunk before).
+fn time_in_s(mdf: &Mdf4, table: &Table, g: usize, time_s: &mut [f64]) -> Result<(), MeasuredError> {
     let group = &mdf.groups[g];
     if let Some(m) = group.time_master() {
         let unit = &group.channels[m].unit;
@@ -231,25 +362,25 @@ fn read_group(
             time_s.iter_mut().for_each(|t| *t = c.apply(*t));
         }
     }
-    if let Some(k) = (1..time_s.len()).find(|&k| !(time_s[k] > time_s[k - 1])) {
-        return Err(MeasuredError {
-            column: "t_s".into(),
-            ..file_error(
-                &table.path,
-                format!(
-                    "{}: its time does not increase at record {} ({} after {})",
-                    group.label(),
-                    k + 1,
-                    time_s[k],
-                    time_s[k - 1]
-                ),
-            )
-        });
-    }
-    Ok(GroupData {
-        group: g,
-        time_s,
-        columns: mine.iter().map(|u| u.column).zip(values).collect(),
+    let before = |k: usize| match k {
+        0 => table.time_before,
+        _ => Some(time_s[k - 1]),
+    };
+    let Some(k) = (0..time_s.len()).find(|&k| before(k).is_some_and(|b| !(time_s[k] > b))) else {
+        return Ok(());
+    };
+    Err(MeasuredError {
+        column: "t_s".into(),
+        ..file_error(
+            &table.path,
+            format!(
+                "{}: its time does not increase at record {} ({} after {})",
+                group.label(),
+                table.rows_before + k + 1,
+                time_s[k],
+                before(k).unwrap_or(f64::NAN)
+            ),
+        )
     })
 }
 

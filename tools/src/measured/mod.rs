@@ -67,9 +67,7 @@ pub fn read_with(path: &Path, map: Option<&ChannelMap>) -> Result<Measured, Meas
         .map_err(|e| file_error(path, format!("cannot read: {e}")))?;
     not_mdf_under_an_mdf_name(path, head)?;
     if crate::mdf4::is_mdf(head) {
-        let file = input.into_inner();
-        let src = crate::mdf4::blocks::FileSource::new(file)
-            .map_err(|e| file_error(path, format!("cannot read: {e}")))?;
+        let src = mdf_source(path, input.into_inner())?;
         return from_table(mdf::read_table(path, &src, map)?, map);
     }
     from_table(read_table(path, input, map)?, map)
@@ -207,15 +205,17 @@ pub fn load_map(path: Option<&Path>) -> Result<Option<ChannelMap>, MeasuredError
     path.map(ChannelMap::load).transpose()
 }
 
-/// Reads a friction test, CSV or MDF4, through a channel map, handing its points to `each`:
-/// a CSV in chunks ([`stream_friction_test`], memory bounded whatever its length; `open`
-/// opens its bytes, once or twice), an MDF4 file whole (its records are read per channel,
-/// not in row chunks: docs/mdf4.md). Returns the test without points (`points` counted).
+/// Reads a friction test, CSV or MDF4, through a channel map, handing its points to `each`
+/// in chunks of [`friction_test::CHUNK_ROWS`] rows (memory bounded whatever its length):
+/// a CSV through [`stream_friction_test`] (`open` opens its bytes, once or twice), an MDF4
+/// file chunk by chunk of its records when every channel used is in one channel group,
+/// else whole (channel groups at different rates are put on one time grid: a note says
+/// so; docs/mdf4.md). Returns the test without points (`points` counted).
 pub fn stream_friction_test_with<R: BufRead>(
     path: &Path,
     map: Option<&ChannelMap>,
     open: impl FnMut() -> std::io::Result<R>,
-    mut each: impl FnMut(&FrictionTest) -> Result<(), MeasuredError>,
+    each: impl FnMut(&FrictionTest) -> Result<(), MeasuredError>,
 ) -> Result<FrictionTest, MeasuredError> {
     let mut head = Vec::with_capacity(8);
     std::fs::File::open(path)
@@ -225,14 +225,22 @@ pub fn stream_friction_test_with<R: BufRead>(
     if !crate::mdf4::is_mdf(&head) {
         return stream_friction_test(path, map, open, each);
     }
-    let mut test = read_friction_test_with(path, map)?;
-    each(&test)?;
-    test.v_friction_mps = Vec::new();
-    test.t_disc_c = Vec::new();
-    test.mu = Vec::new();
-    test.rows = Vec::new();
-    test.t_s = None;
-    Ok(test)
+    let read = |chunk: &mut friction_test::ChunkFn| {
+        let file =
+            std::fs::File::open(path).map_err(|e| file_error(path, format!("cannot read: {e}")))?;
+        let src = mdf_source(path, file)?;
+        mdf::read_table_chunks(path, &src, map, friction_test::CHUNK_ROWS, chunk)
+    };
+    friction_test::stream_chunks(path, map, read, each)
+}
+
+/// The MDF4 file `file` (at `path`) as a source read piecewise.
+fn mdf_source(
+    path: &Path,
+    file: std::fs::File,
+) -> Result<crate::mdf4::blocks::FileSource, MeasuredError> {
+    crate::mdf4::blocks::FileSource::new(file)
+        .map_err(|e| file_error(path, format!("cannot read: {e}")))
 }
 
 /// Parses a friction test's text.
@@ -411,6 +419,153 @@ t_s,v_ref_mps,omega1_radps,omega2_radps,omega3_radps,omega4_radps,p_cyl1_pa,p_cy
         let e = stream_friction_test_with(&path, Some(&map), open, |_| Ok(())).unwrap_err();
         assert_eq!(e.row, bad_row, "{e}");
         assert_eq!(e.column, "DiscTemp (t_disc_c)", "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A friction test of `rows` rows as an MDF4 file (one channel group, the time as its
+    /// master: the project's writer) and as the CSV of the same numbers, in `dir`; mu
+    /// given (`Mu`) and from the forces (`Clamp`, `Friction`: some rows released).
+    fn friction_files(dir: &Path, rows: usize) -> (std::path::PathBuf, std::path::PathBuf) {
+        use crate::mdf4::write::{Column, ColumnValues};
+        let t: Vec<f64> = (0..rows).map(|r| r as f64 * 1e-3).collect();
+        let speed_kmh: Vec<f64> = (0..rows).map(|r| 36.0 + (r % 100) as f64).collect();
+        let temp: Vec<f64> = (0..rows).map(|r| (r % 300) as f64 * 0.5).collect();
+        let clamp: Vec<f64> = (0..rows)
+            .map(|r| {
+                if r % 7 == 0 {
+                    10.0
+                } else {
+                    20_000.0 + (r % 13) as f64
+                }
+            })
+            .collect();
+        let friction: Vec<f64> = (0..rows).map(|r| 7_000.0 + (r % 11) as f64).collect();
+        let mu: Vec<f64> = (0..rows).map(|r| 0.3 + (r % 17) as f64 * 1e-3).collect();
+        let named = [
+            ("Speed", "km/h", &speed_kmh),
+            ("DiscTemp", "degC", &temp),
+            ("Clamp", "N", &clamp),
+            ("Friction", "N", &friction),
+            ("Mu", "-", &mu),
+        ];
+        let mut csv = String::from("# source: test\nt_s,Speed,DiscTemp,Clamp,Friction,Mu\n");
+        for r in 0..rows {
+            csv += &format!("{}", t[r]);
+            for (_, _, v) in &named {
+                csv += &format!(",{}", v[r]);
+            }
+            csv += "\n";
+        }
+        let columns: Vec<Column> = named
+            .iter()
+            .map(|(name, unit, v)| Column {
+                name,
+                unit,
+                comment: "",
+                values: ColumnValues::Num(v.to_vec()),
+            })
+            .collect();
+        let (csv_path, mf4_path) = (dir.join("f.csv"), dir.join("f.mf4"));
+        std::fs::write(&csv_path, csv).unwrap();
+        let meta = [("source", "test".to_string())];
+        let file = std::fs::File::create(&mf4_path).unwrap();
+        crate::mdf4::write::write(file, "friction test", &meta, &t, &columns).unwrap();
+        (csv_path, mf4_path)
+    }
+
+    /// The points `stream_friction_test_with` hands on, chunk after chunk, with the test.
+    fn streamed(path: &Path, map: &ChannelMap) -> Result<(FrictionTest, usize), MeasuredError> {
+        let open = || std::fs::File::open(path).map(BufReader::new);
+        let (mut all, mut chunks) = (FrictionTest::default(), 0);
+        let test = stream_friction_test_with(path, Some(map), open, |c| {
+            all.v_friction_mps.extend(&c.v_friction_mps);
+            all.t_disc_c.extend(&c.t_disc_c);
+            all.mu.extend(&c.mu);
+            all.rows.extend(&c.rows);
+            chunks += 1;
+            Ok(())
+        })?;
+        all.notes = test.notes;
+        all.skipped = test.skipped;
+        all.points = test.points;
+        Ok((all, chunks))
+    }
+
+    /// An MDF4 friction test is read in row chunks, as a CSV: the same points (rows, units
+    /// converted through the map, released rows skipped with the same notes) as the whole
+    /// file read and as the CSV of the same numbers, mu given and from the forces (read
+    /// twice); an error in a later chunk names the file's record (not the chunk's row) and
+    /// the channel as the file and the map name it.
+    #[test]
+    fn an_mdf4_friction_test_streams_in_chunks_like_its_csv() {
+        let dir = std::env::temp_dir().join(format!("hils-mdf-chunks-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let rows = 2 * friction_test::CHUNK_ROWS + 10;
+        let (csv, mf4) = friction_files(&dir, rows);
+        let maps = [
+            "[channels.v_friction_mps]\nfrom = \"Speed\"\nunit = \"km/h\"\n\
+             [channels.t_disc_c]\nfrom = \"DiscTemp\"\nunit = \"degC\"\n\
+             [channels.mu]\nfrom = \"Mu\"\nunit = \"-\"\n",
+            "[channels.v_friction_mps]\nfrom = \"Speed\"\nunit = \"km/h\"\n\
+             [channels.t_disc_c]\nfrom = \"DiscTemp\"\nunit = \"degC\"\n\
+             [channels.f_clamp_n]\nfrom = \"Clamp\"\nunit = \"N\"\n\
+             [channels.f_friction_n]\nfrom = \"Friction\"\nunit = \"N\"\n",
+        ];
+        for (k, text) in maps.iter().enumerate() {
+            let map = ChannelMap::parse(&dir.join("m.toml"), text).unwrap();
+            let (from_mdf, chunks) = streamed(&mf4, &map).unwrap();
+            let (from_csv, _) = streamed(&csv, &map).unwrap();
+            let whole = read_friction_test_with(&mf4, Some(&map)).unwrap();
+            assert_eq!(
+                chunks,
+                3,
+                "map {k}: chunks of {} rows",
+                friction_test::CHUNK_ROWS
+            );
+            for other in [&from_csv, &whole] {
+                assert_eq!(from_mdf.v_friction_mps, other.v_friction_mps, "map {k}");
+                assert_eq!(from_mdf.t_disc_c, other.t_disc_c, "map {k}");
+                assert_eq!(from_mdf.mu, other.mu, "map {k}");
+                assert_eq!(from_mdf.rows, other.rows, "map {k}");
+                assert_eq!(from_mdf.skipped, other.skipped, "map {k}");
+            }
+            assert_eq!(from_mdf.notes, from_csv.notes, "map {k}");
+            assert_eq!(from_mdf.points, whole.mu.len(), "map {k}");
+            let kmh = 36.0 + ((from_mdf.rows[0] - 1) % 100) as f64;
+            assert!(
+                (from_mdf.v_friction_mps[0] - kmh / 3.6).abs() < 1e-12,
+                "km/h in m/s"
+            );
+            let released = (0..rows).filter(|r| r % 7 == 0).count();
+            assert_eq!(
+                from_mdf.skipped,
+                if k == 0 { 0 } else { released },
+                "map {k}"
+            );
+        }
+        // A bad value in the third chunk: its record named, not its row in the chunk.
+        let map = ChannelMap::parse(&dir.join("m.toml"), maps[0]).unwrap();
+        let bad_row = 2 * friction_test::CHUNK_ROWS + 5;
+        let mut bytes = std::fs::read(&mf4).unwrap();
+        let record = 8 * 6;
+        let at = bytes.len() - rows * record + (bad_row - 1) * record + 16;
+        bytes[at..at + 8].copy_from_slice(&5000.0f64.to_le_bytes());
+        std::fs::write(&mf4, &bytes).unwrap();
+        let e = streamed(&mf4, &map).unwrap_err();
+        assert_eq!(
+            (e.row, e.column.as_str()),
+            (bad_row, "DiscTemp (t_disc_c)"),
+            "{e}"
+        );
+        assert!(e.to_string().contains("f.mf4"), "{e}");
+        // A time that stops increasing in the second chunk: its record named.
+        let bad_row = friction_test::CHUNK_ROWS + 3;
+        let at = bytes.len() - rows * record + (bad_row - 1) * record;
+        bytes[at..at + 8].copy_from_slice(&0.0f64.to_le_bytes());
+        std::fs::write(&mf4, &bytes).unwrap();
+        let e = streamed(&mf4, &map).unwrap_err();
+        assert_eq!(e.column, "t_s", "{e}");
+        assert!(e.message.contains(&format!("at record {bad_row} ")), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

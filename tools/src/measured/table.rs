@@ -599,7 +599,7 @@ impl Table {
 
     /// Drops the rows held (a chunk handed on), keeping what the checks of the next rows
     /// need: the row count and the last time (`time`: the time column).
-    fn next_chunk(&mut self, time: Option<usize>) {
+    pub(crate) fn next_chunk(&mut self, time: Option<usize>) {
         if let Some(Cells::Numeric(t, _)) = time.map(|i| &self.columns[i]) {
             self.time_before = t.last().copied().or(self.time_before);
         }
