@@ -131,9 +131,7 @@ pub(crate) fn read_table_chunks(
     let last = mdf
         .read_group_chunks(g, &wanted, chunk_rows, |chunk| {
             take_chunk(&mdf, &mut table, &mine, g, chunk, &mut first)?;
-            each(&mut table)?;
-            table.next_chunk(Some(0));
-            Ok(())
+            table.hand_on(Some(0), &mut each)
         })
         .map_err(|e| match e {
             ChunkError::File(e) => channel_err(&mdf, &table, &mine, g, e),

@@ -569,6 +569,44 @@ t_s,v_ref_mps,omega1_radps,omega2_radps,omega3_radps,omega4_radps,p_cyl1_pa,p_cy
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
+    /// A time that does not increase at the first row of a later chunk (just after a chunk
+    /// boundary) is an error naming that row, CSV and MDF4 alike: the last time of the
+    /// chunk before is kept, though its points (with their time column) were handed on.
+    #[test]
+    fn a_time_repeated_just_after_a_chunk_boundary_is_an_error() {
+        let dir = std::env::temp_dir().join(format!("hils-mdf-boundary-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let rows = friction_test::CHUNK_ROWS + 10;
+        let (csv, mf4) = friction_files(&dir, rows);
+        let map = ChannelMap::parse(
+            &dir.join("m.toml"),
+            "[channels.v_friction_mps]\nfrom = \"Speed\"\nunit = \"km/h\"\n\
+             [channels.t_disc_c]\nfrom = \"DiscTemp\"\nunit = \"degC\"\n\
+             [channels.mu]\nfrom = \"Mu\"\nunit = \"-\"\n",
+        )
+        .unwrap();
+        // The second chunk's first row (1-based) gets the time of the row before.
+        let row = friction_test::CHUNK_ROWS + 1;
+        let before = (row - 2) as f64 * 1e-3;
+        let mut bytes = std::fs::read(&mf4).unwrap();
+        let record = 8 * 6;
+        let at = bytes.len() - rows * record + (row - 1) * record;
+        bytes[at..at + 8].copy_from_slice(&before.to_le_bytes());
+        std::fs::write(&mf4, &bytes).unwrap();
+        let text = std::fs::read_to_string(&csv).unwrap();
+        let mut lines: Vec<String> = text.lines().map(String::from).collect();
+        let line = &mut lines[row + 1]; // a comment line and the header first
+        let rest = line.split_once(',').unwrap().1.to_string();
+        *line = format!("{before},{rest}");
+        std::fs::write(&csv, lines.join("\n") + "\n").unwrap();
+        let e = streamed(&mf4, &map).unwrap_err();
+        assert_eq!(e.column, "t_s", "{e}");
+        assert!(e.message.contains(&format!("at record {row} ")), "{e}");
+        let e = streamed(&csv, &map).unwrap_err();
+        assert_eq!((e.row, e.column.as_str()), (row, "t_s"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     /// The doc's limits table is the reader's table.
     #[test]
     fn limits_doc_is_the_readers_table() {

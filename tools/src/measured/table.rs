@@ -517,8 +517,7 @@ pub(crate) fn read_table_chunks<R: BufRead>(
     let mut t_first = None;
     loop {
         if table.lines.len() >= chunk_rows {
-            each(&mut table)?;
-            table.next_chunk(time);
+            table.hand_on(time, &mut each)?;
         }
         let r = table.lines.len();
         let more = reader.read_byte_record(&mut record).map_err(|e| {
@@ -597,16 +596,25 @@ impl Table {
         Ok(())
     }
 
-    /// Drops the rows held (a chunk handed on), keeping what the checks of the next rows
-    /// need: the row count and the last time (`time`: the time column).
-    pub(crate) fn next_chunk(&mut self, time: Option<usize>) {
-        if let Some(Cells::Numeric(t, _)) = time.map(|i| &self.columns[i]) {
-            self.time_before = t.last().copied().or(self.time_before);
-        }
+    /// Hands the rows held (a chunk) to `each`, then drops them, keeping what the checks
+    /// of the next rows need: the row count and the last time (`time`: the time column),
+    /// read before `each`, which may take the columns.
+    pub(crate) fn hand_on(
+        &mut self,
+        time: Option<usize>,
+        each: &mut impl FnMut(&mut Table) -> Result<(), MeasuredError>,
+    ) -> Result<(), MeasuredError> {
+        let last = match time.map(|i| &self.columns[i]) {
+            Some(Cells::Numeric(t, _)) => t.last().copied(),
+            _ => None,
+        };
+        each(self)?;
+        self.time_before = last.or(self.time_before);
         self.rows_before += self.lines.len();
         self.lines.clear();
         // Fresh columns: the chunk's were taken (moved out) by the caller.
         self.columns = cells_of(self.kind, &self.header);
+        Ok(())
     }
 
     /// Reads one cell of data row `r` (0-based) into its column, checking it.
