@@ -86,8 +86,12 @@ pub fn judge_log(path: &Path, run: &Run, criteria: &Criteria) -> Result<Outcome>
 /// Judges a run log read as `run` ([`judge_log`]).
 pub fn judge_run_log(log: &RunLog, run: &Run, criteria: &Criteria) -> Result<Outcome> {
     let path = &log.path;
+    crate::diagnose::plausible::check_speed_units(&run.file.plant, log)
+        .map_err(|e| anyhow!("{}: not judged: {e}", path.display()))?;
     let t_brake = brake_command_s(log)?;
     let mut trace = trace_of_log(log, &run.file, t_brake)?;
+    check_pressure_units(&trace, &run.file)
+        .map_err(|e| anyhow!("{}: not judged: {e}", path.display()))?;
     check_log_is_run(log, run, trace.v_mps[0])
         .map_err(|e| anyhow!("{}: not run `{}`: {e}", path.display(), run.name))?;
     trace.speed_resolution_mps = match log.metadata.number("speed_resolution_kmh", path) {
@@ -98,6 +102,28 @@ pub fn judge_run_log(log: &RunLog, run: &Run, criteria: &Criteria) -> Result<Out
         estimate_vents(&mut trace);
     }
     Ok(judge_trace(run.clone(), trace, criteria))
+}
+
+/// Every run of a programme brakes: a logged cylinder pressure that never reaches Eq (1)'s
+/// release threshold K_r / A_c (below it the pads apply no force) from the brake command
+/// on measures no brake at all. It is in another unit (kPa or bar under `p_cyl*_pa`) or
+/// from a dead transducer, and its falls would give the air consumption a thousandth of
+/// what it was: refused, naming the column.
+fn check_pressure_units(trace: &Trace, file: &ParamFile) -> Result<()> {
+    let b = &file.plant.brake;
+    let release_pa = b.retaining_spring_force / b.piston_area;
+    for (j, p) in trace.p_cyl_pa.iter().enumerate() {
+        let peak = p.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if !p.is_empty() && peak < release_pa {
+            bail!(
+                "`p_cyl{}_pa` peaks at {} Pa in a braked run, below Eq (1)'s release threshold of {} Pa                  (no pad force at all): a unit error (kPa or bar logged as Pa?) or a dead transducer",
+                j + 1,
+                crate::figures::round_sig(peak, 3),
+                crate::figures::round_sig(release_pa, 3)
+            );
+        }
+    }
+    Ok(())
 }
 
 /// The time of the brake command, s (module doc).
