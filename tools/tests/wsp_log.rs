@@ -299,9 +299,9 @@ fn a_log_is_not_judged_as_another_run_of_its_programme_nor_overwritten() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// `text` (a run log) with the cells of the columns whose name starts with `stem` times
-/// `factor`.
-fn scaled(text: &str, stem: &str, factor: f64) -> String {
+/// `text` (a run log) with the cells of the columns whose name starts with `stem` mapped
+/// by `f`.
+fn edited(text: &str, stem: &str, f: impl Fn(f64) -> f64) -> String {
     let mut cols = Vec::new();
     let mut out = String::new();
     for line in text.lines() {
@@ -315,7 +315,7 @@ fn scaled(text: &str, stem: &str, factor: f64) -> String {
                 .split(',')
                 .zip(&cols)
                 .map(|(c, &on)| match c.parse::<f64>() {
-                    Ok(x) if on => format!("{}", x * factor),
+                    Ok(x) if on => format!("{}", f(x)),
                     _ => c.to_string(),
                 })
                 .collect();
@@ -326,9 +326,9 @@ fn scaled(text: &str, stem: &str, factor: f64) -> String {
     out
 }
 
-/// Pressures in kPa under `p_cyl*_pa` passed with 0.0 l of air (a rig log: 6.3 l), and a
-/// wheel speed in rev/min under `omega1_radps` passed unnoticed: both are refused now,
-/// naming the column.
+/// Pressures in kPa under `p_cyl*_pa` passed with 0.0 l of air (a rig log: 6.3 l), a
+/// wheel speed in rev/min under `omega1_radps` passed unnoticed, and a dump valve input
+/// stuck at 1 was judged as the unit's venting: all are refused now, naming the column.
 #[test]
 fn a_log_in_wrong_units_is_not_judged() {
     let dir = temp_dir("wsp-log-units");
@@ -363,7 +363,7 @@ fn a_log_in_wrong_units_is_not_judged() {
             "dry-eb-40"
         ],
     );
-    std::fs::write(dir.join("kpa.csv"), scaled(&text, "p_cyl", 1e-3)).unwrap();
+    std::fs::write(dir.join("kpa.csv"), edited(&text, "p_cyl", |x| x * 1e-3)).unwrap();
     let err = hils_err(
         &dir,
         args![
@@ -381,7 +381,7 @@ fn a_log_in_wrong_units_is_not_judged() {
         "{err}"
     );
     let rpm = 60.0 / std::f64::consts::TAU;
-    std::fs::write(dir.join("rpm.csv"), scaled(&text, "omega1", rpm)).unwrap();
+    std::fs::write(dir.join("rpm.csv"), edited(&text, "omega1", |x| x * rpm)).unwrap();
     let err = hils_err(
         &dir,
         args![
@@ -398,5 +398,20 @@ fn a_log_in_wrong_units_is_not_judged() {
         err.contains("omega1_radps") && err.contains("rev/min"),
         "{err}"
     );
+    // A dump valve input stuck at 1 (venting while the cylinder fills): no vent.
+    std::fs::write(dir.join("stuck.csv"), edited(&text, "wsp1", |_| 1.0)).unwrap();
+    let err = hils_err(
+        &dir,
+        args![
+            "wsp-test",
+            "--programme",
+            "p.toml",
+            "--log",
+            "stuck.csv",
+            "--run",
+            "dry-eb-40"
+        ],
+    );
+    assert!(err.contains("`wsp1`") && err.contains("stuck"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }

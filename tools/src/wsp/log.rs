@@ -98,6 +98,8 @@ pub fn judge_run_log(log: &RunLog, run: &Run, criteria: &Criteria) -> Result<Out
         Ok(r) => r.unwrap_or(0.0).max(0.0) / KMH_PER_MPS,
         Err(e) => bail!("{e}"),
     };
+    check_vents_lower_pressure(&trace)
+        .map_err(|e| anyhow!("{}: not judged: {e}", path.display()))?;
     if !(0..WHEELSETS).all(|j| trace.venting[j].len() == trace.t_s.len()) {
         estimate_vents(&mut trace);
     }
@@ -116,11 +118,46 @@ fn check_pressure_units(trace: &Trace, file: &ParamFile) -> Result<()> {
         let peak = p.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         if !p.is_empty() && peak < release_pa {
             bail!(
-                "`p_cyl{}_pa` peaks at {} Pa in a braked run, below Eq (1)'s release threshold of {} Pa                  (no pad force at all): a unit error (kPa or bar logged as Pa?) or a dead transducer",
+                "`p_cyl{}_pa` peaks at {} Pa in a braked run, below Eq (1)'s release threshold of {} Pa (no pad force at all): a unit error (kPa or bar logged as Pa?) or a dead transducer",
                 j + 1,
                 crate::figures::round_sig(peak, 3),
                 crate::figures::round_sig(release_pa, 3)
             );
+        }
+    }
+    Ok(())
+}
+
+/// Largest rise of a cylinder pressure while its logged dump valve acts, Pa (0.5 bar: far
+/// above the transducer noise of a few hundred Pa; a valve open to the atmosphere only
+/// lowers the pressure).
+pub const VENT_RISE_MAX_PA: f64 = 5.0e4;
+
+/// A dump valve venting (its coil logged energised, acting one dead time later) while the
+/// cylinder pressure rises by more than [`VENT_RISE_MAX_PA`] is no vent: the valve input is
+/// stuck or miswired (a `wsp` column stuck at 1 gave 0.0 l of air and a timer action per
+/// wheelset, judged as the unit's). Refused, naming the column and the time.
+fn check_vents_lower_pressure(trace: &Trace) -> Result<()> {
+    for j in 0..WHEELSETS {
+        let (vent, p) = (&trace.acting_vent[j], &trace.p_cyl_pa[j]);
+        if vent.len() != trace.t_s.len() || p.len() != vent.len() {
+            continue;
+        }
+        let mut start: Option<usize> = None;
+        for k in 0..vent.len() {
+            match (vent[k], start) {
+                (true, None) => start = Some(k),
+                (false, Some(_)) => start = None,
+                (true, Some(k0)) if p[k] - p[k0] > VENT_RISE_MAX_PA => bail!(
+                    "`wsp{}` has the dump valve venting from {:.3} s (from the brake command) while `p_cyl{}_pa` rises by {} kPa by {:.3} s: a venting valve only lowers it; a stuck or miswired valve input",
+                    j + 1,
+                    trace.t_s[k0],
+                    j + 1,
+                    crate::figures::round_sig((p[k] - p[k0]) / 1e3, 3),
+                    trace.t_s[k]
+                ),
+                _ => {}
+            }
         }
     }
     Ok(())
