@@ -719,6 +719,12 @@ pub fn main(args: RigArgs) -> Result<()> {
             let text = std::fs::read_to_string(file)
                 .map_err(|e| anyhow!("cannot read {}: {e}", file.display()))?;
             let lines = parse_script(file, &text)?;
+            if lines.is_empty() {
+                bail!(
+                    "{}: no command line (only blanks and `#` comments): nothing to run",
+                    file.display()
+                );
+            }
             let mut s = Session::new(open(&args)?, args.lost_after_s);
             run_session(&mut s, &lines, false)
         }
