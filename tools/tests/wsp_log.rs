@@ -351,67 +351,43 @@ fn a_log_in_wrong_units_is_not_judged() {
         ],
     );
     let text = std::fs::read_to_string(dir.join("sim/run.csv")).unwrap();
-    hils_ok(
-        &dir,
-        args![
-            "wsp-test",
-            "--programme",
-            "p.toml",
-            "--log",
-            "sim/run.csv",
-            "--run",
-            "dry-eb-40"
-        ],
-    );
-    std::fs::write(dir.join("kpa.csv"), edited(&text, "p_cyl", |x| x * 1e-3)).unwrap();
-    let err = hils_err(
-        &dir,
-        args![
-            "wsp-test",
-            "--programme",
-            "p.toml",
-            "--log",
-            "kpa.csv",
-            "--run",
-            "dry-eb-40"
-        ],
-    );
-    assert!(
-        err.contains("p_cyl1_pa") && err.contains("not judged"),
-        "{err}"
-    );
     let rpm = 60.0 / std::f64::consts::TAU;
-    std::fs::write(dir.join("rpm.csv"), edited(&text, "omega1", |x| x * rpm)).unwrap();
-    let err = hils_err(
-        &dir,
-        args![
-            "wsp-test",
-            "--programme",
-            "p.toml",
-            "--log",
+    let cases: [(&str, &str, fn(f64, f64) -> f64, &[&str]); 4] = [
+        ("sim/run.csv", "", |x, _| x, &[]),
+        (
+            "kpa.csv",
+            "p_cyl",
+            |x, _| x * 1e-3,
+            &["p_cyl1_pa", "not judged"],
+        ),
+        (
             "rpm.csv",
-            "--run",
-            "dry-eb-40"
-        ],
-    );
-    assert!(
-        err.contains("omega1_radps") && err.contains("rev/min"),
-        "{err}"
-    );
-    // A dump valve input stuck at 1 (venting while the cylinder fills): no vent.
-    std::fs::write(dir.join("stuck.csv"), edited(&text, "wsp1", |_| 1.0)).unwrap();
-    let err = hils_err(
-        &dir,
-        args![
+            "omega1",
+            |x, rpm| x * rpm,
+            &["omega1_radps", "rev/min"],
+        ),
+        // A dump valve input stuck at 1 (venting while the cylinder fills): no vent.
+        ("stuck.csv", "wsp1", |_, _| 1.0, &["`wsp1`", "stuck"]),
+    ];
+    for (log, stem, f, want) in cases {
+        if !stem.is_empty() {
+            std::fs::write(dir.join(log), edited(&text, stem, |x| f(x, rpm))).unwrap();
+        }
+        let a = args![
             "wsp-test",
             "--programme",
             "p.toml",
             "--log",
-            "stuck.csv",
+            log,
             "--run",
             "dry-eb-40"
-        ],
-    );
-    assert!(err.contains("`wsp1`") && err.contains("stuck"), "{err}");
+        ];
+        if want.is_empty() {
+            hils_ok(&dir, a);
+        } else {
+            let err = hils_err(&dir, a);
+            assert!(want.iter().all(|w| err.contains(w)), "{log}: {err}");
+        }
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }
