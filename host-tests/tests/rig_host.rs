@@ -367,7 +367,17 @@ fn a_rejected_script_line_ends_the_session_with_a_non_zero_result() {
         st.deceleration_mps2
     );
     assert!(parse_script(&PathBuf::from("x"), "brake sideways\n").is_err());
-    assert!(parse_script(&PathBuf::from("x"), "inject 9 open\n").is_ok());
+    // A bad value is refused with its line before the session sends anything.
+    let e = parse_script(&PathBuf::from("x"), "status\ninject 9 open\n").unwrap_err();
+    assert!(
+        format!("{e:#}").contains("x:2") && format!("{e:#}").contains("channel 9"),
+        "{e:#}"
+    );
+    let e = parse_script(&PathBuf::from("x"), "configure io no-such-io.toml\n").unwrap_err();
+    assert!(
+        format!("{e:#}").contains("x:1") && format!("{e:#}").contains("no-such-io.toml"),
+        "{e:#}"
+    );
 }
 
 const PROGRAMME: &str = r#"
@@ -463,6 +473,44 @@ fn programme_without_arm_is_refused_on_a_can_interface_and_runs_on_sim() {
         serde_json::from_str(&std::fs::read_to_string(dir.join("out.json")).unwrap()).unwrap();
     assert_eq!(json[0]["on_rig"], true, "{json}");
     assert_eq!(json[0]["end"], "finished", "{json}");
+}
+
+/// Outputs that would replace an input or a file of the run, and an `--only` that matches
+/// no run, are refused before anything is run or written (the `--json` over the programme
+/// replaced it; `--json DIR/NAME.csv` replaced the run's log; `--only` matching nothing
+/// "passed" 0/0 runs with exit code 0).
+#[test]
+fn outputs_over_inputs_or_logs_and_an_empty_only_are_refused_before_running() {
+    let dir = out_dir("programme-outputs");
+    let (_, base) = programme_args(&dir, &[]);
+    std::fs::create_dir_all(dir.join("report")).unwrap();
+    let refused = |json: PathBuf, only: Option<&str>, want: &str| {
+        let mut run = base.clone();
+        run.out.json = Some(json);
+        run.only = only.map(str::to_string);
+        let (mut rig, _) = programme_args(&dir, &[]);
+        rig.command = hils::rig::RigCommand::Run(run.clone());
+        let e = format!("{:#}", hils::rig::programme::main(&rig, &run).unwrap_err());
+        assert!(e.contains(want), "{want}: {e}");
+    };
+    refused(dir.join("programme.toml"), None, "--programme input");
+    refused(
+        dir.join("report/wet-eb-50.csv"),
+        None,
+        "wet-eb-50.csv of --report",
+    );
+    refused(dir.join("report/report.md"), None, "report.md of --report");
+    refused(
+        dir.join("out.json"),
+        Some("no-such-run"),
+        "--only no-such-run",
+    );
+    assert_eq!(
+        std::fs::read_to_string(dir.join("programme.toml")).unwrap(),
+        PROGRAMME
+    );
+    assert_eq!(std::fs::read_dir(dir.join("report")).unwrap().count(), 0);
+    assert!(!dir.join("out.json").exists());
 }
 
 #[test]
@@ -850,12 +898,19 @@ fn start_with_a_track_file_and_track_rejections() {
         "base = \"low\"\n[[zone]]\nstart_m = 1.23\nend_m = 5.0\nsurface = \"dry\"\n",
     )
     .unwrap();
-    let lines = script(&format!(
-        "start --speed-kmh 60 --track {} --arm\n",
-        file.display()
-    ));
-    let e = run_session(&mut s, &lines, false).unwrap_err();
-    assert!(format!("{e:#}").contains("0.1 m grid"), "{e:#}");
+    // (Now when the script is read, naming its line: before any line is sent.)
+    let e = parse_script(
+        &PathBuf::from("t.rig"),
+        &format!(
+            "status\nstart --speed-kmh 60 --track {} --arm\n",
+            file.display()
+        ),
+    )
+    .unwrap_err();
+    assert!(
+        format!("{e:#}").contains("t.rig:2") && format!("{e:#}").contains("0.1 m grid"),
+        "{e:#}"
+    );
 }
 
 /// A `Track` commit or `Vehicle` frame lost on the bus: the board keeps its earlier setup,

@@ -459,7 +459,9 @@ pub fn read_log(input: &Path, elf: Option<&Path>) -> Result<LogText> {
 }
 
 pub fn main(args: DecodeArgs) -> Result<()> {
-    let out = OutFile::check(&args.out, "-o")?;
+    let mut inputs = vec![("log", args.input.as_path())];
+    inputs.extend(args.elf.as_deref().map(|e| ("--elf", e)));
+    let out = OutFile::check(&args.out, "-o")?.not_over("-o", &inputs)?;
     let log = read_log(&args.input, args.elf.as_deref())?;
     if log.malformed_frames > 0 {
         eprintln!(

@@ -180,6 +180,24 @@ impl OutFile {
         Ok(OutFile::File(path.to_path_buf()))
     }
 
+    /// Refuses an output file that is one of the command's inputs (`inputs`: the flag or
+    /// argument that names it, its path): the output, written once the work is done, would
+    /// replace the input (`--json` naming the programme or the log).
+    pub fn not_over(self, what: &str, inputs: &[(&str, &Path)]) -> Result<OutFile> {
+        if let OutFile::File(out) = &self {
+            for (flag, input) in inputs {
+                if same_file(out, input) {
+                    bail!(
+                        "{what} {}: is the {flag} input {}: writing it would replace the input; name another file",
+                        out.display(),
+                        input.display()
+                    );
+                }
+            }
+        }
+        Ok(self)
+    }
+
     /// Checks a file output that cannot be standard output (`what -` is refused with why).
     pub fn check_file(path: &Path, what: &str, why_not_stdout: &str) -> Result<OutFile> {
         if path.as_os_str() == STDOUT {
@@ -228,6 +246,14 @@ impl OutFile {
     }
 }
 
+/// Whether two paths name one existing file (links and `..` resolved).
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    }
+}
+
 /// An output folder, checked: its files are named by [`OutDir::file`] (plain names only),
 /// written atomically, and the folder is made when the first file is written.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -261,6 +287,15 @@ impl OutDir {
         Ok(OutDir {
             dir: path.to_path_buf(),
         })
+    }
+
+    /// Whether `path` is the folder's file `name` (an output the folder will hold: `--json`
+    /// naming a run's log in `--report DIR` would replace it).
+    pub fn holds(&self, path: &Path, name: &str) -> bool {
+        let dir = std::fs::canonicalize(&self.dir);
+        let parent = std::fs::canonicalize(folder_of(path));
+        matches!((dir, parent), (Ok(d), Ok(p)) if d == p)
+            && path.file_name().is_some_and(|n| n == name)
     }
 
     /// The folder.
@@ -348,6 +383,15 @@ impl Outputs {
 }
 
 impl Checked {
+    /// Refuses a `--json` file that is one of the command's inputs ([`OutFile::not_over`]).
+    pub fn not_over(mut self, inputs: &[(&str, &Path)]) -> Result<Checked> {
+        self.json = self
+            .json
+            .map(|j| j.not_over("--json", inputs))
+            .transpose()?;
+        Ok(self)
+    }
+
     /// Writes `value` to the `--json` output, if one was given, and names it.
     pub fn write_json(&self, value: &impl Serialize) -> Result<()> {
         if let Some(out) = &self.json {
@@ -390,6 +434,29 @@ mod tests {
             .collect();
         v.sort();
         v
+    }
+
+    #[test]
+    fn an_output_that_is_an_input_is_refused() {
+        let dir = temp("over");
+        let input = dir.join("programme.toml");
+        std::fs::write(&input, "[[run]]").unwrap();
+        let same = dir.join(".").join("programme.toml");
+        let e = OutFile::check(&same, "--json")
+            .unwrap()
+            .not_over("--json", &[("--programme", &input)])
+            .unwrap_err();
+        assert!(format!("{e:#}").contains("--programme input"), "{e:#}");
+        let report = OutDir::check(&dir, "--report").unwrap();
+        assert!(report.holds(
+            &dir.join("..").join(dir.file_name().unwrap()).join("a.csv"),
+            "a.csv"
+        ));
+        assert!(!report.holds(&dir.join("b.csv"), "a.csv"));
+        let other = OutFile::check(&dir.join("out.json"), "--json").unwrap();
+        assert!(other.not_over("--json", &[("--programme", &input)]).is_ok());
+        assert_eq!(std::fs::read_to_string(&input).unwrap(), "[[run]]");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -405,3 +405,25 @@ fn tree(dir: &Path) -> Vec<String> {
     out.sort();
     out
 }
+
+/// A session script with no command line (an empty file, or only comments: the wrong file
+/// given) exited 0 having done nothing; now an error naming the file.
+#[test]
+fn a_session_script_without_a_command_line_is_an_error() {
+    let dir = std::env::temp_dir().join(format!("hils-empty-script-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let script = dir.join("empty.rig");
+    std::fs::write(&script, "\n# only a comment\n   \n").unwrap();
+    let err = hils_fails(&[
+        "rig".as_ref(),
+        "--interface".as_ref(),
+        "sim".as_ref(),
+        "session".as_ref(),
+        script.as_os_str(),
+    ]);
+    assert!(
+        err.contains("empty.rig") && err.contains("no command line"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

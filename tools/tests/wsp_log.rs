@@ -236,3 +236,158 @@ fn a_metric_the_log_does_not_measure_is_not_judged() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A laden run's log judged with `--run` as its tare variant passed with confidence (speed,
+/// track and demand match; the vehicle is not in the log), and `--json` naming the log
+/// replaced the recording with the verdict. Both are refused now, the log left intact.
+#[test]
+fn a_log_is_not_judged_as_another_run_of_its_programme_nor_overwritten() {
+    let dir = temp_dir("wsp-log-named");
+    let runs = run_table("dry-eb-40", 40.0, "emergency", "dry")
+        + &run_table("dry-eb-40-tare", 40.0, "emergency", "dry")
+        + "vehicle = \"tare\"\n";
+    let programme = short_programme(&runs) + "[vehicles.tare]\ncarbody_mass = 26000.0\n";
+    std::fs::write(dir.join("p.toml"), programme).unwrap();
+    hils_ok(
+        &dir,
+        args![
+            "simulate",
+            "--no-plots",
+            "--speed-kmh",
+            "40",
+            "--rail",
+            "dry",
+            "--out",
+            "sim"
+        ],
+    );
+    let text = std::fs::read_to_string(dir.join("sim/run.csv")).unwrap();
+    std::fs::write(dir.join("run.csv"), format!("# run: dry-eb-40\n{text}")).unwrap();
+    let judge = |run: &str, json: &str, ok: bool| {
+        let a = [
+            "wsp-test",
+            "--programme",
+            "p.toml",
+            "--log",
+            "run.csv",
+            "--run",
+            run,
+            "--json",
+            json,
+        ];
+        let a: Vec<&std::ffi::OsStr> = a.iter().map(std::ffi::OsStr::new).collect();
+        if ok {
+            hils_ok(&dir, &a)
+        } else {
+            hils_err(&dir, &a)
+        }
+    };
+    judge("dry-eb-40", "v.json", true);
+    let err = judge("dry-eb-40-tare", "w.json", false);
+    assert!(
+        err.contains("# run: dry-eb-40") && err.contains("dry-eb-40-tare"),
+        "{err}"
+    );
+    assert!(!dir.join("w.json").exists());
+    let err = judge("dry-eb-40", "./run.csv", false);
+    assert!(err.contains("--log input"), "{err}");
+    assert!(
+        std::fs::read_to_string(dir.join("run.csv"))
+            .unwrap()
+            .starts_with("# run: dry-eb-40\n")
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// `text` (a run log) with the cells of the columns whose name starts with `stem` mapped
+/// by `f`.
+fn edited(text: &str, stem: &str, f: impl Fn(f64) -> f64) -> String {
+    let mut cols = Vec::new();
+    let mut out = String::new();
+    for line in text.lines() {
+        if line.starts_with('#') {
+            out += line;
+        } else if cols.is_empty() {
+            cols = line.split(',').map(|c| c.starts_with(stem)).collect();
+            out += line;
+        } else {
+            let cells: Vec<String> = line
+                .split(',')
+                .zip(&cols)
+                .map(|(c, &on)| match c.parse::<f64>() {
+                    Ok(x) if on => format!("{}", f(x)),
+                    _ => c.to_string(),
+                })
+                .collect();
+            out += &cells.join(",");
+        }
+        out.push('\n');
+    }
+    out
+}
+
+/// Pressures in kPa under `p_cyl*_pa` passed with 0.0 l of air (a rig log: 6.3 l), a
+/// wheel speed in rev/min under `omega1_radps` passed unnoticed, and a dump valve input
+/// stuck at 1 was judged as the unit's venting: all are refused now, naming the column.
+#[test]
+fn a_log_in_wrong_units_is_not_judged() {
+    let dir = temp_dir("wsp-log-units");
+    std::fs::write(
+        dir.join("p.toml"),
+        short_programme(&run_table("dry-eb-40", 40.0, "emergency", "dry")),
+    )
+    .unwrap();
+    hils_ok(
+        &dir,
+        args![
+            "simulate",
+            "--no-plots",
+            "--speed-kmh",
+            "40",
+            "--rail",
+            "dry",
+            "--out",
+            "sim"
+        ],
+    );
+    let text = std::fs::read_to_string(dir.join("sim/run.csv")).unwrap();
+    let rpm = 60.0 / std::f64::consts::TAU;
+    let cases: [(&str, &str, fn(f64, f64) -> f64, &[&str]); 4] = [
+        ("sim/run.csv", "", |x, _| x, &[]),
+        (
+            "kpa.csv",
+            "p_cyl",
+            |x, _| x * 1e-3,
+            &["p_cyl1_pa", "not judged"],
+        ),
+        (
+            "rpm.csv",
+            "omega1",
+            |x, rpm| x * rpm,
+            &["omega1_radps", "rev/min"],
+        ),
+        // A dump valve input stuck at 1 (venting while the cylinder fills): no vent.
+        ("stuck.csv", "wsp1", |_, _| 1.0, &["`wsp1`", "stuck"]),
+    ];
+    for (log, stem, f, want) in cases {
+        if !stem.is_empty() {
+            std::fs::write(dir.join(log), edited(&text, stem, |x| f(x, rpm))).unwrap();
+        }
+        let a = args![
+            "wsp-test",
+            "--programme",
+            "p.toml",
+            "--log",
+            log,
+            "--run",
+            "dry-eb-40"
+        ];
+        if want.is_empty() {
+            hils_ok(&dir, a);
+        } else {
+            let err = hils_err(&dir, a);
+            assert!(want.iter().all(|w| err.contains(w)), "{log}: {err}");
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

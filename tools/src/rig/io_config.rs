@@ -103,13 +103,17 @@ fn inconsistency(c: &IoConfig) -> String {
 }
 
 /// The wheelset bits of a list of wheelsets 1-4.
+/// A wheelset listed twice is refused (a typo such as `[1, 1, 3, 4]` for `[1, 2, 3, 4]`
+/// would leave one input silently unwired).
 pub fn wheelset_bits(key: &str, list: &[u8]) -> Result<u8> {
     list.iter().try_fold(0u8, |bits, &w| {
-        if (1..=4).contains(&w) {
-            Ok(bits | 1 << (w - 1))
-        } else {
+        if !(1..=4).contains(&w) {
             bail!("`{key}`: wheelset {w}; the board has wheelsets 1-4")
         }
+        if bits & 1 << (w - 1) != 0 {
+            bail!("`{key}`: wheelset {w} is listed twice")
+        }
+        Ok(bits | 1 << (w - 1))
     })
 }
 
@@ -204,6 +208,15 @@ pub fn parse(text: &str) -> Result<IoConfig> {
                 hi as f64 / scale
             );
         }
+        // The board would run the rounded value: a value off its grid is refused, not
+        // rounded (0.5 Hz is not 1 Hz; 7.5 service steps are not 8).
+        if (value * scale - raw).abs() > 1e-6 * raw.abs().max(1.0) {
+            bail!(
+                "`{key}` = {value}: the board takes steps of {} (the nearest is {})",
+                1.0 / scale,
+                raw / scale
+            );
+        }
         c.assign(item, raw as u16);
     }
     c.demand.frame = d.frame.unwrap_or(false);
@@ -269,5 +282,27 @@ mod tests {
         );
         assert!(err("[load]\nfull_v = 9.0\n").contains("load"));
         assert!(err("[load]\nvolts = 1\n").contains("volts"));
+        // Off the item's grid: refused, not rounded; a wheelset twice: refused.
+        for (text, key) in [
+            (
+                "[demand]\npwm_frequency_hz = 0.5\n",
+                "demand.pwm_frequency_hz",
+            ),
+            ("[demand]\nservice_steps = 7.5\n", "demand.service_steps"),
+            (
+                "[demand]\nduty_release_percent = 10.05\n",
+                "demand.duty_release_percent",
+            ),
+            ("[valves]\ndump = [1, 1, 3, 4]\n", "valves.dump"),
+        ] {
+            assert!(err(text).contains(key), "{text}: {}", err(text));
+        }
+        assert_eq!(
+            parse("[demand]\nduty_release_percent = 10.1\nfull_scale_mps2 = 1.234\n")
+                .unwrap()
+                .demand
+                .duty_release_permille,
+            101
+        );
     }
 }

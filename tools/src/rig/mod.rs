@@ -587,16 +587,20 @@ pub fn finish<T: Transport>(
     Ok(())
 }
 
-/// Parses the sim fault options.
+/// Parses the sim fault options; a kind given twice is refused (one time per kind: the
+/// second would silently replace the first).
 pub fn sim_faults(specs: &[String]) -> Result<SimFaults> {
     let mut f = SimFaults::default();
     for spec in specs {
         let (kind, t) =
             crate::flags::rig_sim_fault(spec).map_err(|e| anyhow!("--sim-fault {e}"))?;
-        match kind {
-            "board-lost" => f.board_lost_at_s = Some(t),
-            "bus-off" => f.bus_off_at_s = Some(t),
-            _ => f.status_alive_frozen_at_s = Some(t),
+        let slot = match kind {
+            "board-lost" => &mut f.board_lost_at_s,
+            "bus-off" => &mut f.bus_off_at_s,
+            _ => &mut f.status_alive_frozen_at_s,
+        };
+        if let Some(first) = slot.replace(t) {
+            bail!("--sim-fault {spec}: {kind} is already given (at {first} s); one time per kind");
         }
     }
     Ok(f)
@@ -632,7 +636,8 @@ pub fn open(args: &RigArgs) -> Result<Box<dyn Transport>> {
     socketcan::open(&args.interface)
 }
 
-/// The lines of a session script.
+/// The lines of a session script, each checked as [`commands_of`] makes its frames (its
+/// values and the files it names read and checked); an error names the script's line.
 pub fn parse_script(path: &Path, text: &str) -> Result<Vec<Line>> {
     #[derive(Parser)]
     #[command(name = "line", no_binary_name = true)]
@@ -654,6 +659,11 @@ pub fn parse_script(path: &Path, text: &str) -> Result<Vec<Line>> {
                 e.render().to_string().lines().next().unwrap_or("bad line")
             )
         })?;
+        // Every value and file of the line (channel, service deceleration, `--track`,
+        // `configure io`) checked now, before the session sends anything: a bad line 9
+        // does not end a session after lines 1-8 have started a run.
+        commands_of(&one.line)
+            .map_err(|e| anyhow!("{}:{}: `{body}`: {e:#}", path.display(), i + 1))?;
         lines.push(one.line);
     }
     Ok(lines)
@@ -709,6 +719,12 @@ pub fn main(args: RigArgs) -> Result<()> {
             let text = std::fs::read_to_string(file)
                 .map_err(|e| anyhow!("cannot read {}: {e}", file.display()))?;
             let lines = parse_script(file, &text)?;
+            if lines.is_empty() {
+                bail!(
+                    "{}: no command line (only blanks and `#` comments): nothing to run",
+                    file.display()
+                );
+            }
             let mut s = Session::new(open(&args)?, args.lost_after_s);
             run_session(&mut s, &lines, false)
         }
@@ -716,5 +732,22 @@ pub fn main(args: RigArgs) -> Result<()> {
             let mut s = Session::new(open(&args)?, args.lost_after_s);
             run_session(&mut s, std::slice::from_ref(line), true)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_sim_fault_kind_given_twice_is_refused_not_replaced() {
+        let specs = |s: &[&str]| s.iter().map(|x| x.to_string()).collect::<Vec<_>>();
+        let f = sim_faults(&specs(&["bus-off=5", "board-lost=2"])).unwrap();
+        assert_eq!((f.bus_off_at_s, f.board_lost_at_s), (Some(5.0), Some(2.0)));
+        let e = format!(
+            "{:#}",
+            sim_faults(&specs(&["bus-off=5", "bus-off=1"])).unwrap_err()
+        );
+        assert!(e.contains("bus-off=1") && e.contains("already"), "{e}");
     }
 }

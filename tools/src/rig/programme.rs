@@ -59,6 +59,7 @@ use hils_brake_unit::BrakeDemand;
 use hils_plant::Rail;
 use hils_rig_core::can::{
     BrakeCommand, Command, ConfigItem, RigMode, RigState, StartCommand, WHEEL_SPEED_MAX_KMH,
+    command,
 };
 use hils_rig_core::controller_io::IoConfig;
 
@@ -143,6 +144,13 @@ fn board_plan(vehicle: Option<&str>, run: &Run) -> Result<Plan, String> {
             "{speed_kmh:.1} km/h: the start frame carries up to {WHEEL_SPEED_MAX_KMH:.2} km/h"
         ));
     }
+    on_frame_grid(
+        "speed",
+        speed_kmh,
+        command::START_SPEED.scale as f64,
+        "km/h",
+        "start",
+    )?;
     let demand = match run.demand {
         BrakeDemand::Emergency => BrakeCommand::Emergency,
         BrakeDemand::Service { deceleration_mps2 } if deceleration_mps2 <= 10.0 => {
@@ -156,7 +164,32 @@ fn board_plan(vehicle: Option<&str>, run: &Run) -> Result<Plan, String> {
             ));
         }
     };
+    if let BrakeCommand::Service { deceleration_mps2 } = demand {
+        on_frame_grid(
+            "service deceleration",
+            deceleration_mps2 as f64,
+            command::SERVICE_DECELERATION.scale as f64,
+            "m/s^2",
+            "brake",
+        )?;
+    }
     Ok(Plan { setup, demand })
+}
+
+/// Whether `value` is a whole number of the frame signal's `step` (to 1 % of a step: the
+/// f32 rounding of a value written on the grid), else why not: the board would run another
+/// value than the programme's (a service deceleration of 0.0004 m/s^2 is 0 in the frame).
+fn on_frame_grid(what: &str, value: f64, step: f64, unit: &str, frame: &str) -> Result<(), String> {
+    let steps = value / step;
+    if (steps - steps.round()).abs() > 0.01 {
+        return Err(format!(
+            "{what} {} {unit} is not on the {frame} frame's {} {unit} grid (the board would run {} {unit})",
+            crate::figures::round_sig(value, 6),
+            crate::figures::round_sig(step, 3),
+            crate::figures::round_sig(steps.round() * step, 6)
+        ));
+    }
+    Ok(())
 }
 
 /// Reads a programme with `hils wsp-test`'s parser: its criteria and runs (on the default
@@ -308,7 +341,7 @@ pub fn run_programme<T: Transport>(
     let mut out = Vec::new();
     let mut stopped: Option<Stop> = None;
     if runs.iter().any(|r| r.plan.is_ok()) {
-        println!(
+        crate::say!(
             "arming the board before each run: its pulse trains and wheel speeds drive the controller on {} during the runs (docs/rig.md, Arming)",
             s.link.describe()
         );
@@ -433,7 +466,9 @@ pub fn main(rig: &RigArgs, args: &RunArgs) -> Result<()> {
             "hils rig run --programme drives the controller under test from each run's start: add --arm to arm the board before each run (docs/rig.md, Arming)"
         ));
     }
-    let out = args.out.check()?;
+    let mut inputs = vec![("--programme", args.programme.as_path())];
+    inputs.extend(args.io.as_deref().map(|p| ("--io", p)));
+    let out = args.out.check()?.not_over(&inputs)?;
     let Some(dir) = out.report.clone() else {
         bail!(
             "hils rig run records each run's log (NAME.csv) and writes its report into \
@@ -443,6 +478,25 @@ pub fn main(rig: &RigArgs, args: &RunArgs) -> Result<()> {
     let (criteria, mut runs) = load(&args.programme, args.friction)?;
     if let Some(only) = &args.only {
         runs.retain(|r| r.run.name.contains(only.as_str()));
+        if runs.is_empty() {
+            bail!(
+                "--only {only}: no run of {} has a name containing it (nothing was run)",
+                args.programme.display()
+            );
+        }
+    }
+    if let Some(json) = out.json.as_ref().and_then(|j| j.path()) {
+        let written = runs.iter().map(|r| format!("{}.csv", r.run.name));
+        if let Some(name) = written
+            .chain(["report.md".to_string()])
+            .find(|name| dir.holds(json, name))
+        {
+            bail!(
+                "--json {}: is {name} of --report {}, which this command writes there; name another file",
+                json.display(),
+                dir.path().display()
+            );
+        }
     }
     let io = args.io.as_deref().map(super::io_config::load).transpose()?;
     dir.create()?;
@@ -499,5 +553,45 @@ pub fn main(rig: &RigArgs, args: &RunArgs) -> Result<()> {
     match stopped {
         Some(e) => Err(anyhow!("programme ended early: {e}")),
         None => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The board's plan of each run of a programme of `runs` (`[[run]]` bodies on a wet
+    /// track), or why not.
+    fn plans(runs: &[&str]) -> Vec<Result<Plan, String>> {
+        let mut text = String::from("[tracks.wet]\nbase = \"wet\"\n");
+        for (i, r) in runs.iter().enumerate() {
+            text += &format!("[[run]]\nname = \"r{i}\"\ntrack = \"wet\"\n{r}\n");
+        }
+        let path = std::env::temp_dir().join(format!("hils-rig-plan-{}.toml", std::process::id()));
+        std::fs::write(&path, text).unwrap();
+        let (_, runs) = load(&path, FrictionArg::Variable).unwrap();
+        std::fs::remove_file(&path).unwrap();
+        runs.into_iter().map(|r| r.plan).collect()
+    }
+
+    #[test]
+    fn a_speed_or_deceleration_the_frames_cannot_carry_is_not_run_on_the_rig() {
+        let p = plans(&[
+            "speed_kmh = 60.0\ndemand = \"service:0.8\"",
+            "speed_kmh = 123.45\ndemand = \"service:1.234\"",
+            "speed_kmh = 60.004\ndemand = \"emergency\"",
+            "speed_kmh = 60.0\ndemand = \"service:0.0004\"",
+            "speed_kmh = 60.0\ndemand = \"service:0.8005\"",
+        ]);
+        assert!(p[0].is_ok() && p[1].is_ok(), "{:?} {:?}", p[0], p[1]);
+        let why = |k: usize| p[k].as_ref().map(|_| ()).unwrap_err().clone();
+        assert!(
+            why(2).contains("speed 60.004") && why(2).contains("0.01"),
+            "{}",
+            why(2)
+        );
+        // 0.0004 m/s^2 is 0 in the frame: the board would run no brake at all.
+        assert!(why(3).contains("would run 0 m/s^2"), "{}", why(3));
+        assert!(why(4).contains("service deceleration"), "{}", why(4));
     }
 }

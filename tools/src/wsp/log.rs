@@ -86,18 +86,81 @@ pub fn judge_log(path: &Path, run: &Run, criteria: &Criteria) -> Result<Outcome>
 /// Judges a run log read as `run` ([`judge_log`]).
 pub fn judge_run_log(log: &RunLog, run: &Run, criteria: &Criteria) -> Result<Outcome> {
     let path = &log.path;
+    crate::diagnose::plausible::check_speed_units(&run.file.plant, log)
+        .map_err(|e| anyhow!("{}: not judged: {e}", path.display()))?;
     let t_brake = brake_command_s(log)?;
     let mut trace = trace_of_log(log, &run.file, t_brake)?;
+    check_pressure_units(&trace, &run.file)
+        .map_err(|e| anyhow!("{}: not judged: {e}", path.display()))?;
     check_log_is_run(log, run, trace.v_mps[0])
         .map_err(|e| anyhow!("{}: not run `{}`: {e}", path.display(), run.name))?;
     trace.speed_resolution_mps = match log.metadata.number("speed_resolution_kmh", path) {
         Ok(r) => r.unwrap_or(0.0).max(0.0) / KMH_PER_MPS,
         Err(e) => bail!("{e}"),
     };
+    check_vents_lower_pressure(&trace)
+        .map_err(|e| anyhow!("{}: not judged: {e}", path.display()))?;
     if !(0..WHEELSETS).all(|j| trace.venting[j].len() == trace.t_s.len()) {
         estimate_vents(&mut trace);
     }
     Ok(judge_trace(run.clone(), trace, criteria))
+}
+
+/// Every run of a programme brakes: a logged cylinder pressure that never reaches Eq (1)'s
+/// release threshold K_r / A_c (below it the pads apply no force) from the brake command
+/// on measures no brake at all. It is in another unit (kPa or bar under `p_cyl*_pa`) or
+/// from a dead transducer, and its falls would give the air consumption a thousandth of
+/// what it was: refused, naming the column.
+fn check_pressure_units(trace: &Trace, file: &ParamFile) -> Result<()> {
+    let b = &file.plant.brake;
+    let release_pa = b.retaining_spring_force / b.piston_area;
+    for (j, p) in trace.p_cyl_pa.iter().enumerate() {
+        let peak = p.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if !p.is_empty() && peak < release_pa {
+            bail!(
+                "`p_cyl{}_pa` peaks at {} Pa in a braked run, below Eq (1)'s release threshold of {} Pa (no pad force at all): a unit error (kPa or bar logged as Pa?) or a dead transducer",
+                j + 1,
+                crate::figures::round_sig(peak, 3),
+                crate::figures::round_sig(release_pa, 3)
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Largest rise of a cylinder pressure while its logged dump valve acts, Pa (0.5 bar: far
+/// above the transducer noise of a few hundred Pa; a valve open to the atmosphere only
+/// lowers the pressure).
+pub const VENT_RISE_MAX_PA: f64 = 5.0e4;
+
+/// A dump valve venting (its coil logged energised, acting one dead time later) while the
+/// cylinder pressure rises by more than [`VENT_RISE_MAX_PA`] is no vent: the valve input is
+/// stuck or miswired (a `wsp` column stuck at 1 gave 0.0 l of air and a timer action per
+/// wheelset, judged as the unit's). Refused, naming the column and the time.
+fn check_vents_lower_pressure(trace: &Trace) -> Result<()> {
+    for j in 0..WHEELSETS {
+        let (vent, p) = (&trace.acting_vent[j], &trace.p_cyl_pa[j]);
+        if vent.len() != trace.t_s.len() || p.len() != vent.len() {
+            continue;
+        }
+        let mut start: Option<usize> = None;
+        for k in 0..vent.len() {
+            match (vent[k], start) {
+                (true, None) => start = Some(k),
+                (false, Some(_)) => start = None,
+                (true, Some(k0)) if p[k] - p[k0] > VENT_RISE_MAX_PA => bail!(
+                    "`wsp{}` has the dump valve venting from {:.3} s (from the brake command) while `p_cyl{}_pa` rises by {} kPa by {:.3} s: a venting valve only lowers it; a stuck or miswired valve input",
+                    j + 1,
+                    trace.t_s[k0],
+                    j + 1,
+                    crate::figures::round_sig((p[k] - p[k0]) / 1e3, 3),
+                    trace.t_s[k]
+                ),
+                _ => {}
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The time of the brake command, s (module doc).

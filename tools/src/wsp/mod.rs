@@ -16,7 +16,7 @@ pub use log::{
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{Result, anyhow};
+use anyhow::{Result, anyhow, bail};
 use clap::Args;
 use hils_brake_unit::Valve;
 use hils_plant::{Surface, WHEELSETS};
@@ -211,7 +211,11 @@ pub fn peak_memory_mb() -> f64 {
 }
 
 pub fn main(args: WspTestArgs) -> Result<()> {
-    let out = args.out.check()?;
+    let mut inputs = vec![("--programme", args.programme.as_path())];
+    inputs.extend(args.log.as_deref().map(|l| ("--log", l)));
+    inputs.extend(args.params.as_deref().map(|p| ("--params", p)));
+    inputs.extend(args.map.as_deref().map(|p| ("--map", p)));
+    let out = args.out.check()?.not_over(&inputs)?;
     let file = params_or_default(args.params.as_deref())?;
     let programme = Programme::load(&args.programme)?;
     let runs = programme.runs(&file)?;
@@ -245,7 +249,19 @@ fn judge_one_log(
 ) -> Result<()> {
     let map = crate::measured::load_map(args.map.as_deref())?;
     let log = crate::measured::read_run_log_with(log, map.as_ref()).map_err(|e| anyhow!("{e}"))?;
-    let named = log.metadata.get("run").map(str::to_string);
+    let named = log.metadata.get("run").map(|n| n.trim().to_string());
+    // `--run` names the run of another programme's log; the log of one of this programme's
+    // runs is not judged as another of its runs (the checks of speed, track and demand do
+    // not see a vehicle variant).
+    if let (Some(run), Some(logged)) = (&args.run, &named) {
+        if run != logged && runs.iter().any(|r| &r.name == logged) {
+            bail!(
+                "{}: `# run: {logged}` is a run of {} and --run names `{run}`: a log is judged as the run it recorded",
+                log.path.display(),
+                args.programme.display()
+            );
+        }
+    }
     let name = args.run.clone().or(named).ok_or_else(|| {
         anyhow!(
             "{}: no `# run:` metadata; name the run with --run",
