@@ -187,15 +187,19 @@ impl IoConfig {
     }
 
     /// Whether the configuration is consistent: every value in its item's range, the
-    /// release duty below the full duty, the transducer's zero below its full scale and
-    /// the full scale within the stage's reach ([`LoadConfig::fits`]); the error names the
-    /// first item that is not.
+    /// release duty below the full duty, the controller's full service deceleration within
+    /// the PWM's full scale (above it the service steps could not be told apart), the
+    /// transducer's zero below its full scale and the full scale within the stage's reach
+    /// ([`LoadConfig::fits`]); the error names the first item that is not.
     pub fn check(&self) -> Result<(), IoConfigError> {
         if let Some(&item) = IoItem::ALL.iter().find(|&&i| !i.accepts(self.value(i))) {
             return Err(IoConfigError(item));
         }
         if self.demand.duty_release_permille >= self.demand.duty_full_permille {
             return Err(IoConfigError(IoItem::DutyRelease));
+        }
+        if self.value(IoItem::FullService) > self.value(IoItem::DemandFullScale) {
+            return Err(IoConfigError(IoItem::FullService));
         }
         if !self.load.fits() {
             return Err(IoConfigError(IoItem::LoadFull));
@@ -205,14 +209,16 @@ impl IoConfig {
 
     /// The items that make this configuration from the default, in an order every
     /// configuration accepts one by one (the signal's bounds widened first, then narrowed).
-    pub fn items(&self) -> [(IoItem, u16); 17] {
+    pub fn items(&self) -> [(IoItem, u16); 18] {
         use IoItem::*;
         let v = |i| (i, self.value(i));
         [
-            // Duty and transducer bounds first to their widest, so no intermediate state
-            // is inconsistent whatever the order of the old and new values.
+            // Duty, full scale and transducer bounds first to their widest, so no
+            // intermediate state is inconsistent whatever the order of the old and new
+            // values.
             (DutyRelease, 10),
             (DutyFull, 990),
+            (DemandFullScale, IoItem::DemandFullScale.range().1),
             (LoadStageGain, 10_000),
             (LoadZero, 0),
             v(LoadFull),
@@ -222,9 +228,9 @@ impl IoConfig {
             v(DutyRelease),
             v(ValveWiring),
             v(PwmFrequency),
-            v(DemandFullScale),
             v(ServiceSteps),
             v(FullService),
+            v(DemandFullScale),
             v(LoadFullScale),
             v(AirSpringArea),
             v(DemandFrame),
@@ -322,6 +328,9 @@ mod tests {
         target.load.zero_mv = 4000;
         target.load.full_mv = 9000;
         target.load.stage_gain_permille = 3000;
+        // A narrower PWM full scale and a higher full service, each within the other.
+        target.demand.full_scale_mps2 = 1.2;
+        target.demand.full_service_mps2 = 1.2;
         let mut c = IoConfig::DEFAULT;
         for (item, v) in target.items() {
             c.set(item, v).unwrap_or_else(|e| panic!("{e:?} = {v}"));
@@ -346,6 +355,16 @@ mod tests {
         assert_eq!(
             c.set(IoItem::PwmFrequency, 0),
             Err(IoConfigError(IoItem::PwmFrequency))
+        );
+        // A full service deceleration above the PWM's full scale (1.5 m/s^2), and a full
+        // scale below the full service (1.0 m/s^2).
+        assert_eq!(
+            c.set(IoItem::FullService, 1600),
+            Err(IoConfigError(IoItem::FullService))
+        );
+        assert_eq!(
+            c.set(IoItem::DemandFullScale, 900),
+            Err(IoConfigError(IoItem::DemandFullScale))
         );
         assert_eq!(c, IoConfig::DEFAULT);
     }

@@ -281,6 +281,10 @@ mod tests {
             err("[demand]\nduty_release_percent = 95\n")
         );
         assert!(err("[load]\nfull_v = 9.0\n").contains("load"));
+        // The controller's full service above the PWM's full scale: its top steps would
+        // all read as the full scale.
+        let e = err("[demand]\nfull_scale_mps2 = 0.5\nfull_service_mps2 = 1.0\n");
+        assert!(e.contains("demand.full_service_mps2"), "{e}");
         assert!(err("[load]\nvolts = 1\n").contains("volts"));
         // Off the item's grid: refused, not rounded; a wheelset twice: refused.
         for (text, key) in [
