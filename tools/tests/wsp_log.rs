@@ -171,18 +171,11 @@ fn without_valve_columns(log: &str) -> String {
     out
 }
 
-/// A simulated log has the vent flags (`wsp1..4`) and the pressures, not the hold states:
-/// its air is measured, its WSP timer is not (it was "passed" with 0).
-#[test]
-fn a_metric_the_log_does_not_measure_is_not_judged() {
-    let dir = temp_dir("wsp-log-measured");
-    std::fs::write(
-        dir.join("p.toml"),
-        short_programme(&run_table("dry-eb-40", 40.0, "emergency", "dry")),
-    )
-    .unwrap();
+/// `hils simulate` of a 40 km/h EB on the dry rail into `dir/sim` (its log `sim/run.csv`),
+/// returning the log's text.
+fn simulate_dry_40(dir: &Path) -> String {
     hils_ok(
-        &dir,
+        dir,
         args![
             "simulate",
             "--no-plots",
@@ -194,6 +187,20 @@ fn a_metric_the_log_does_not_measure_is_not_judged() {
             "sim"
         ],
     );
+    std::fs::read_to_string(dir.join("sim/run.csv")).unwrap()
+}
+
+/// A simulated log has the vent flags (`wsp1..4`) and the pressures, not the hold states:
+/// its air is measured, its WSP timer is not (it was "passed" with 0).
+#[test]
+fn a_metric_the_log_does_not_measure_is_not_judged() {
+    let dir = temp_dir("wsp-log-measured");
+    std::fs::write(
+        dir.join("p.toml"),
+        short_programme(&run_table("dry-eb-40", 40.0, "emergency", "dry")),
+    )
+    .unwrap();
+    simulate_dry_40(&dir);
     hils_ok(
         &dir,
         args![
@@ -248,20 +255,7 @@ fn a_log_is_not_judged_as_another_run_of_its_programme_nor_overwritten() {
         + "vehicle = \"tare\"\n";
     let programme = short_programme(&runs) + "[vehicles.tare]\ncarbody_mass = 26000.0\n";
     std::fs::write(dir.join("p.toml"), programme).unwrap();
-    hils_ok(
-        &dir,
-        args![
-            "simulate",
-            "--no-plots",
-            "--speed-kmh",
-            "40",
-            "--rail",
-            "dry",
-            "--out",
-            "sim"
-        ],
-    );
-    let text = std::fs::read_to_string(dir.join("sim/run.csv")).unwrap();
+    let text = simulate_dry_40(&dir);
     std::fs::write(dir.join("run.csv"), format!("# run: dry-eb-40\n{text}")).unwrap();
     let judge = |run: &str, json: &str, ok: bool| {
         let a = [
@@ -337,20 +331,7 @@ fn a_log_in_wrong_units_is_not_judged() {
         short_programme(&run_table("dry-eb-40", 40.0, "emergency", "dry")),
     )
     .unwrap();
-    hils_ok(
-        &dir,
-        args![
-            "simulate",
-            "--no-plots",
-            "--speed-kmh",
-            "40",
-            "--rail",
-            "dry",
-            "--out",
-            "sim"
-        ],
-    );
-    let text = std::fs::read_to_string(dir.join("sim/run.csv")).unwrap();
+    let text = simulate_dry_40(&dir);
     let rpm = 60.0 / std::f64::consts::TAU;
     let cases: [(&str, &str, fn(f64, f64) -> f64, &[&str]); 4] = [
         ("sim/run.csv", "", |x, _| x, &[]),

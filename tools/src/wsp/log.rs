@@ -86,20 +86,18 @@ pub fn judge_log(path: &Path, run: &Run, criteria: &Criteria) -> Result<Outcome>
 /// Judges a run log read as `run` ([`judge_log`]).
 pub fn judge_run_log(log: &RunLog, run: &Run, criteria: &Criteria) -> Result<Outcome> {
     let path = &log.path;
-    crate::diagnose::plausible::check_speed_units(&run.file.plant, log)
-        .map_err(|e| anyhow!("{}: not judged: {e}", path.display()))?;
+    let not_judged = |e: String| anyhow!("{}: not judged: {e}", path.display());
+    crate::diagnose::plausible::check_speed_units(&run.file.plant, log).map_err(not_judged)?;
     let t_brake = brake_command_s(log)?;
     let mut trace = trace_of_log(log, &run.file, t_brake)?;
-    check_pressure_units(&trace, &run.file)
-        .map_err(|e| anyhow!("{}: not judged: {e}", path.display()))?;
+    check_pressure_units(&trace, &run.file).map_err(|e| not_judged(e.to_string()))?;
     check_log_is_run(log, run, trace.v_mps[0])
         .map_err(|e| anyhow!("{}: not run `{}`: {e}", path.display(), run.name))?;
     trace.speed_resolution_mps = match log.metadata.number("speed_resolution_kmh", path) {
         Ok(r) => r.unwrap_or(0.0).max(0.0) / KMH_PER_MPS,
         Err(e) => bail!("{e}"),
     };
-    check_vents_lower_pressure(&trace)
-        .map_err(|e| anyhow!("{}: not judged: {e}", path.display()))?;
+    check_vents_lower_pressure(&trace).map_err(|e| not_judged(e.to_string()))?;
     if !(0..WHEELSETS).all(|j| trace.venting[j].len() == trace.t_s.len()) {
         estimate_vents(&mut trace);
     }
